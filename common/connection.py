@@ -1,0 +1,76 @@
+"""How every Lunaris process reaches Zenoh: one set of options, one Config builder.
+
+``--connect ENDPOINT`` / ``--listen ENDPOINT`` or ``LUNARIS_ZENOH_CONFIG`` naming
+a Zenoh JSON5 file (credentials, TLS). Whatever the source, multicast scouting
+is switched off (SPEC §11: endpoints are always explicit) and timestamping is
+on (the advanced publishers' caches need it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import zenoh
+
+__all__ = ["DEFAULT_ENDPOINT", "add_connection_args", "make_config"]
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+CONFIG_ENV = "LUNARIS_ZENOH_CONFIG"
+
+
+def add_connection_args(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("connection")
+    group.add_argument("--connect", action="append", metavar="ENDPOINT",
+                       help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})")
+    group.add_argument("--listen", action="append", metavar="ENDPOINT",
+                       help="endpoint to listen on")
+    group.add_argument("--config", metavar="FILE",
+                       help=f"Zenoh JSON5 configuration (default: ${CONFIG_ENV})")
+
+
+def make_config(
+    mode: str = "client",
+    connect: list[str] | None = None,
+    listen: list[str] | None = None,
+    config_file: str | os.PathLike | None = None,
+) -> zenoh.Config:
+    """A Zenoh configuration for a Lunaris process.
+
+    ``config_file`` (or ``$LUNARIS_ZENOH_CONFIG``) is the base; explicit ``connect``
+    and ``listen`` endpoints override its endpoints. A client with no endpoint at all
+    connects to :data:`DEFAULT_ENDPOINT`.
+    """
+    config_file = config_file or os.environ.get(CONFIG_ENV) or None
+    if config_file:
+        path = Path(config_file)
+        if not path.is_file():
+            raise ValueError(f"Zenoh configuration {str(path)!r} does not exist")
+        conf = zenoh.Config.from_file(str(path))
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(mode))
+        if mode == "client" and not connect:
+            connect = [DEFAULT_ENDPOINT]
+    if config_file and mode == "router":
+        conf.insert_json5("mode", json.dumps(mode))
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen is not None:
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    elif not config_file and mode == "client":
+        conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")
+    if mode == "client":
+        # Wait for a router that is not up yet, and keep retrying after it goes away.
+        conf.insert_json5("connect/timeout_ms", "-1")
+        conf.insert_json5("connect/exit_on_failure", "false")
+    return conf
+
+
+def config_from_args(args: argparse.Namespace, mode: str = "client") -> zenoh.Config:
+    return make_config(mode, connect=args.connect, listen=args.listen, config_file=args.config)

@@ -1,0 +1,218 @@
+"""Payloads of SPEC §5: one msgspec Struct per message, one JSON codec.
+
+Telemetry Structs are what the services publish. Input and command Structs are
+decoded strictly at the service boundary: unknown fields, wrong types, NaN,
+infinity and out-of-range values raise :class:`BadInput` with a message that
+names the field. A payload with one parameter may also be a bare JSON number
+(``60`` for ``input/sun_angle``), see :func:`decode_input`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, TypeVar
+
+import msgspec
+
+__all__ = [
+    "BadInput",
+    "BatteryState",
+    "Clock",
+    "ClockControl",
+    "Event",
+    "LoadPower",
+    "PowerSummary",
+    "RadioLink",
+    "RadioPosition",
+    "RailCommand",
+    "RailState",
+    "SolarPower",
+    "SunAngle",
+    "UmbilicalInput",
+    "UmbilicalState",
+    "decode",
+    "decode_input",
+    "encode",
+]
+
+T = TypeVar("T", bound=msgspec.Struct)
+
+Finite = Annotated[float, msgspec.Meta(ge=-1e12, le=1e12)]  # also rejects NaN and infinity
+Severity = Literal["info", "warning", "critical"]
+RailStateName = Literal["on", "off", "tripped", "shed", "failed"]
+
+
+class _Msg(msgspec.Struct, omit_defaults=False):
+    pass
+
+
+# -- telemetry ----------------------------------------------------------------------------
+
+
+class Clock(_Msg):
+    t_s: float
+    dt_s: float
+    seq: int
+    time_scale: float
+    paused: bool
+
+
+class BatteryState(_Msg):
+    t_s: float
+    energy_j: float
+    capacity_j: float
+    soc: float
+    ocv_v: float
+    voltage_v: float
+    current_a: float  # positive when discharging
+    power_w: float  # at the terminals, positive when discharging
+    temperature_c: float
+    operational: bool
+    fault_code: int
+    faults: list[str]
+    time_to_empty_s: float | None  # null while charging or idle
+    heat_w: float = 0.0
+
+
+class LoadPower(_Msg):
+    t_s: float
+    power_w: float
+    rail: str
+    on: bool
+    faults: list[str]
+
+
+class RailState(_Msg):
+    t_s: float
+    voltage_v: float
+    current_a: float
+    power_w: float
+    current_limit_a: float | None
+    state: RailStateName
+    reason: str = ""
+
+
+class PowerSummary(_Msg):
+    t_s: float
+    load_power_w: float
+    bus_power_w: float
+    generation_w: float
+    net_battery_power_w: float
+    bus_voltage_v: float = 0.0
+
+
+class SolarPower(_Msg):
+    t_s: float
+    power_w: float
+    sun_angle_deg: float
+    dust: float
+    faults: list[str] = []
+
+
+class UmbilicalState(_Msg):
+    t_s: float
+    connected: bool
+    power_w: float
+
+
+class RadioLink(_Msg):
+    t_s: float
+    in_range: bool
+    x_m: float
+    y_m: float
+    faults: list[str] = []
+
+
+class Event(_Msg):
+    t_s: float
+    severity: Severity
+    source: str
+    kind: str
+    key: str
+    message: str
+    params: dict[str, Any] | None = None
+
+
+# -- inputs and commands (decoded strictly) -----------------------------------------------
+
+
+class _Input(msgspec.Struct, forbid_unknown_fields=True):
+    pass
+
+
+class ClockControl(_Input):
+    time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=10000.0)] | None = None
+    paused: bool | None = None
+
+
+class SunAngle(_Input):
+    angle_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
+
+
+class RadioPosition(_Input):
+    distance_m: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+    angle_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
+
+
+class UmbilicalInput(_Input):
+    connected: bool
+
+
+class RailCommand(_Input):
+    on: bool | None = None
+    reset: bool | None = None
+
+
+# -- codec --------------------------------------------------------------------------------
+
+_encoder = msgspec.json.Encoder()
+_decoders: dict[type, msgspec.json.Decoder] = {}
+
+
+class BadInput(ValueError):
+    """An input that is rejected; the message says why, in words a person understands."""
+
+
+def encode(msg: msgspec.Struct) -> bytes:
+    return _encoder.encode(msg)
+
+
+def decode(payload: bytes, typ: type[T]) -> T:
+    """Decode a telemetry payload (trusted: written by :func:`encode`)."""
+    dec = _decoders.get(typ)
+    if dec is None:
+        dec = _decoders[typ] = msgspec.json.Decoder(typ)
+    return dec.decode(payload)
+
+
+def decode_input(payload: bytes, typ: type[T], *, bare: str | None = None) -> T:
+    """Decode an input strictly, raising :class:`BadInput` naming the problem.
+
+    ``bare`` names the field a bare JSON number (or boolean) stands for. An empty
+    payload decodes to the Struct's defaults when every field has one.
+    """
+    text = bytes(payload).strip()
+    if not text:
+        try:
+            return typ()
+        except TypeError:
+            raise BadInput("empty payload; expected a JSON object") from None
+    try:
+        raw = msgspec.json.decode(text)
+    except msgspec.DecodeError as exc:
+        raise BadInput(f"malformed JSON: {exc}") from None
+    if bare is not None and not isinstance(raw, dict | list | str) and raw is not None:
+        raw = {bare: raw}
+    if not isinstance(raw, dict):
+        raise BadInput(f"expected a JSON object, got {type(raw).__name__}")
+    _reject_non_finite(raw)
+    try:
+        return msgspec.convert(raw, typ)
+    except msgspec.ValidationError as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _reject_non_finite(raw: dict) -> None:
+    for name, value in raw.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            raise BadInput(f"{value} is not a finite number - at `$.{name}`")

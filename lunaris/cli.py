@@ -1,0 +1,49 @@
+"""The ``lunaris`` command line (SPEC §8).
+
+Each command is a module of this package with ``add_arguments(parser)`` and
+``main(args) -> int``; they are imported only when used, so ``lunaris check``
+does not pay for Zenoh and ``lunaris watch`` does not pay for the services.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+__all__ = ["COMMANDS", "main"]
+
+# command -> (module, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "up": ("lunaris.up", "embedded router + every service for the given rovers, supervised"),
+    "router": ("lunaris.router", "a standalone embedded Zenoh router"),
+    "run": ("lunaris.run", "run one service (what a container runs)"),
+    "check": ("lunaris.check", "validate rover definitions and print every problem"),
+    "watch": ("lunaris.watch", "live terminal view of a rover or the fleet"),
+    "pdm": ("lunaris.pdm", "print the PDM device distribution as the dashboard shows it"),
+    "fault": ("lunaris.fault", "inject, clear and list faults"),
+    "record": ("lunaris.record", "record every lunaris key to an MCAP file"),
+    "report": ("lunaris.report", "draw a recorded session for the debrief"),
+    "scenario": ("lunaris.scenario", "play a scripted training scenario"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = argparse.ArgumentParser(
+        prog="lunaris", description="Lunaris: digital twin of a lunar rover's power and radio.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    chosen = argv[0] if argv and argv[0] in COMMANDS else None
+    for name, (module, help_text) in COMMANDS.items():
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        if name == chosen:  # only the chosen command's module is imported
+            importlib.import_module(module).add_arguments(p)
+    args = parser.parse_args(argv)
+    try:
+        return int(importlib.import_module(COMMANDS[args.command][0]).main(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

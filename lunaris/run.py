@@ -1,0 +1,59 @@
+"""``lunaris run SERVICE --rover FILE``: one service, as a container runs it."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from common.config import ConfigError, Rover, load_rover
+from common.connection import add_connection_args, config_from_args
+from common.runtime import Runtime
+
+__all__ = ["SERVICES", "add_arguments", "load_rovers", "main"]
+
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("service", choices=SERVICES)
+    p.add_argument("--rover", action="append", required=True, metavar="FILE",
+                   help="rover definition (repeat for a fleet)")
+    p.add_argument("--state-dir", metavar="DIR", help="where persisted state is kept")
+    p.add_argument("--seed", type=int, default=None, help="random seed (loads)")
+    p.add_argument("--bridge-config", metavar="FILE", default=None,
+                   help="bridge mapping (bridge service only)")
+    add_connection_args(p)
+
+
+def load_rovers(paths: list[str]) -> list[Rover]:
+    """Load every rover file; print every problem of every file and exit 2 if any."""
+    rovers, failed = [], False
+    for path in paths:
+        try:
+            rovers.append(load_rover(path))
+        except ConfigError as exc:
+            print(exc, file=sys.stderr)
+            failed = True
+    ids = [r.id for r in rovers]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        print(f"rover id used by more than one file: {', '.join(dup)}", file=sys.stderr)
+        failed = True
+    if failed:
+        raise SystemExit(2)
+    return rovers
+
+
+def main(args: argparse.Namespace) -> int:
+    rovers = load_rovers(args.rover)
+    module = importlib.import_module(f"services.{args.service}.service")
+    rt = Runtime(args.service, [r.id for r in rovers], config_from_args(args), args.state_dir)
+    rt.open()
+    options = {"seed": args.seed}
+    if args.service == "bridge":
+        options["mapping_file"] = args.bridge_config
+    module.serve(rt, rovers, **options)
+    print(f"lunaris {args.service}: serving {', '.join(r.id for r in rovers)}", flush=True)
+    rt.run()
+    return 0

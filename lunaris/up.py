@@ -1,0 +1,208 @@
+"""``lunaris up``: an embedded router and every service for the given rovers, supervised.
+
+Each service runs in its own process (``lunaris run``), connected as a client to
+the router this process opens. A service that dies is restarted (with a growing
+back-off if it keeps dying) and resumes from its persisted state. A compact
+status line per rover is shown; Ctrl-C stops everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from common import keys
+from common.connection import DEFAULT_ENDPOINT, make_config
+from common.messages import BatteryState, RailState, decode
+from lunaris.run import SERVICES, load_rovers
+
+__all__ = ["Supervisor", "add_arguments", "main"]
+
+DEFAULT_ROVER = "config/rovers/mapp.yaml"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--rover", action="append", metavar="FILE",
+                   help=f"rover definition, repeat for a fleet (default {DEFAULT_ROVER})")
+    p.add_argument("--listen", action="append", metavar="ENDPOINT",
+                   help=f"router endpoint (default {DEFAULT_ENDPOINT})")
+    p.add_argument("--state-dir", metavar="DIR",
+                   help="persisted state (default: a fresh temporary folder per session)")
+    p.add_argument("--services", default=",".join(SERVICES),
+                   help="comma-separated services to run (default: all)")
+    p.add_argument("--seed", type=int, default=None, help="random seed for the loads")
+    p.add_argument("--no-status", action="store_true", help="no live status display")
+
+
+class Supervisor:
+    """Starts the services and restarts any that exit while it runs."""
+
+    def __init__(self, services: list[str], rover_files: list[str], endpoint: str,
+                 state_dir: Path, seed: int | None):
+        self.services = services
+        self.rover_files = rover_files
+        self.endpoint = endpoint
+        self.state_dir = state_dir
+        self.seed = seed
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.restarts: dict[str, int] = dict.fromkeys(services, 0)
+        self._next_start: dict[str, float] = {}
+
+    def command(self, service: str) -> list[str]:
+        cmd = [sys.executable, "-m", "lunaris.cli", "run", service, "--connect", self.endpoint,
+               "--state-dir", str(self.state_dir)]
+        for f in self.rover_files:
+            cmd += ["--rover", f]
+        if self.seed is not None:
+            cmd += ["--seed", str(self.seed)]
+        return cmd
+
+    def start(self, service: str) -> None:
+        proc = subprocess.Popen(self.command(service), stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+        self.procs[service] = proc
+        print(f"[up] {service} started (pid {proc.pid})", flush=True)
+
+    def start_all(self) -> None:
+        for service in self.services:
+            self.start(service)
+
+    def poll(self) -> None:
+        """Restart the services that have exited, backing off when one keeps failing."""
+        now = time.monotonic()
+        for service, proc in list(self.procs.items()):
+            code = proc.poll()
+            if code is None:
+                continue
+            due = self._next_start.get(service)
+            if due is None:
+                self.restarts[service] += 1
+                delay = min(5.0, 0.2 * 2 ** min(self.restarts[service] - 1, 5))
+                self._next_start[service] = now + delay
+                print(f"[up] {service} (pid {proc.pid}) exited with {code}; "
+                      f"restarting in {delay:.1f} s", flush=True)
+            elif now >= due:
+                del self._next_start[service]
+                self.start(service)
+
+    def stop_all(self, timeout_s: float = 5.0) -> None:
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + timeout_s
+        for proc in self.procs.values():
+            try:
+                proc.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+class _Status:
+    """What the status line needs, kept up to date by subscriptions on the router session."""
+
+    def __init__(self, session: zenoh.Session, rover_ids: list[str]):
+        self.battery: dict[str, BatteryState] = {}
+        self.rails: dict[str, dict[str, str]] = {r: {} for r in rover_ids}
+        self.services: dict[str, set[str]] = {r: set() for r in rover_ids}
+        self._subs = [
+            session.declare_subscriber(f"{keys.ROOT}/*/battery/state", self._on_battery),
+            session.declare_subscriber(f"{keys.ROOT}/*/rail/*/state", self._on_rail),
+            session.liveliness().declare_subscriber(f"{keys.ROOT}/*/service/*", self._on_token,
+                                                    history=True),
+        ]
+
+    def _on_battery(self, s: zenoh.Sample) -> None:
+        rover, _ = keys.split(str(s.key_expr))
+        self.battery[rover] = decode(s.payload.to_bytes(), BatteryState)
+
+    def _on_rail(self, s: zenoh.Sample) -> None:
+        rover, parts = keys.split(str(s.key_expr))
+        if rover in self.rails:
+            self.rails[rover][parts[1]] = decode(s.payload.to_bytes(), RailState).state
+
+    def _on_token(self, s: zenoh.Sample) -> None:
+        rover, parts = keys.split(str(s.key_expr))
+        live = self.services.setdefault(rover, set())
+        (live.add if s.kind == zenoh.SampleKind.PUT else live.discard)(parts[-1])
+
+    def lines(self, expected: int) -> list[str]:
+        out = []
+        for rover in self.rails:
+            b = self.battery.get(rover)
+            rails = self.rails[rover]
+            on = sum(1 for s in rails.values() if s == "on")
+            svc = f"services {len(self.services.get(rover, ()))}/{expected}"
+            if b is None:
+                out.append(f"{rover:<12} waiting for the battery ...  {svc}")
+                continue
+            faults = ",".join(b.faults) or "nominal"
+            out.append(
+                f"{rover:<12} t={b.t_s:9.1f}s  soc={b.soc * 100:6.2f}%  {b.voltage_v:6.2f} V  "
+                f"{b.current_a:7.2f} A  {b.temperature_c:5.1f} C  rails on {on}/{len(rails)}  "
+                f"{svc}  [{faults}]")
+        return out
+
+
+def main(args: argparse.Namespace) -> int:
+    rover_files = args.rover or [DEFAULT_ROVER]
+    rovers = load_rovers(rover_files)
+    services = [s.strip() for s in args.services.split(",") if s.strip()]
+    unknown = sorted(set(services) - set(SERVICES))
+    if unknown:
+        print(f"unknown service(s): {', '.join(unknown)} (known: {', '.join(SERVICES)})",
+              file=sys.stderr)
+        return 2
+    listen = args.listen or [DEFAULT_ENDPOINT]
+    temp_state = args.state_dir is None
+    state_dir = Path(tempfile.mkdtemp(prefix="lunaris-")) if temp_state else Path(args.state_dir)
+    state_dir.mkdir(parents=True, exist_ok=True)
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+
+    router = zenoh.open(make_config("router", listen=listen))
+    print(f"[up] router listening on {', '.join(listen)}; rovers: "
+          f"{', '.join(r.id for r in rovers)}; state in {state_dir}", flush=True)
+    sup = Supervisor(services, [os.path.abspath(f) for f in rover_files], listen[0], state_dir,
+                     args.seed)
+    status = _Status(router, [r.id for r in rovers])
+    tty = sys.stdout.isatty() and not args.no_status
+    try:
+        sup.start_all()
+        last_print = 0.0
+        shown = 0
+        while not stop.wait(0.2):
+            sup.poll()
+            now = time.monotonic()
+            if args.no_status:
+                continue
+            if tty and now - last_print >= 1.0:
+                lines = status.lines(len(services))
+                if shown:
+                    sys.stdout.write(f"\x1b[{shown}F")
+                sys.stdout.write("".join(f"\x1b[2K{line}\n" for line in lines))
+                sys.stdout.flush()
+                shown, last_print = len(lines), now
+            elif not tty and now - last_print >= 10.0:
+                print("\n".join(status.lines(len(services))), flush=True)
+                last_print = now
+    finally:
+        print("[up] stopping ...", flush=True)
+        sup.stop_all()
+        router.close()
+        if temp_state:
+            shutil.rmtree(state_dir, ignore_errors=True)
+        print("[up] stopped", flush=True)
+    return 0

@@ -1,0 +1,81 @@
+"""Loads: each draws a noisy power around its nominal value, or what a fault dictates.
+
+Every tick a load draws ``clip(N(nominal_w, std_w), 0, max_w)`` [W]. It draws
+nothing while its rail is off. Faults (SPEC §6) override the sample: ``short``
+draws ``V_rail^2 / R``, ``open`` nothing, ``stuck`` a constant power.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.config import Rover
+
+__all__ = ["LoadsModel", "sample_power"]
+
+
+def sample_power(rng: np.random.Generator, nominal_w: np.ndarray, std_w: np.ndarray,
+                 max_w: np.ndarray) -> np.ndarray:
+    """One draw per load [W]: normal around ``nominal_w`` with ``std_w``, clipped to [0, max_w]."""
+    return np.clip(rng.normal(nominal_w, std_w), 0.0, max_w)
+
+
+class LoadsModel:
+    """The loads of one rover, vectorised."""
+
+    def __init__(self, rover: Rover, seed: int | None = None):
+        self.names = [ld.name for ld in rover.loads]
+        self.index = {n: i for i, n in enumerate(self.names)}
+        self.rails = [ld.rail for ld in rover.loads]
+        self.rail_voltage_v = {r.name: r.voltage_v for r in rover.rails}
+        self.nominal_w = np.array([ld.nominal_w for ld in rover.loads], dtype=float)
+        self.std_w = np.array([ld.std_w for ld in rover.loads], dtype=float)
+        self.max_w = np.array([ld.max_w for ld in rover.loads], dtype=float)
+        self.sampled_w = self.nominal_w.copy()
+        self.rail_on = {r.name: r.initially_on for r in rover.rails}
+        self.faults: dict[str, dict[str, dict]] = {}  # load -> {kind: params}
+        self.rng = np.random.default_rng(seed)
+
+    def sample(self) -> None:
+        """Draw a new noisy sample for every load (one tick)."""
+        if len(self.names):
+            self.sampled_w = sample_power(self.rng, self.nominal_w, self.std_w, self.max_w)
+
+    def set_rail(self, rail: str, on: bool) -> bool:
+        """Record a rail's state; True when it changed."""
+        changed = self.rail_on.get(rail) != on
+        self.rail_on[rail] = on
+        return changed
+
+    def power(self, name: str) -> tuple[float, bool]:
+        """Power drawn by one load [W] and whether its rail is on."""
+        i = self.index[name]
+        rail = self.rails[i]
+        on = self.rail_on.get(rail, False)
+        if not on:
+            return 0.0, False
+        faults = self.faults.get(name)
+        if not faults:
+            return float(self.sampled_w[i]), True
+        # Several faults on one load: a short dominates, then an open circuit, then stuck.
+        if "short" in faults:
+            return self.rail_voltage_v[rail] ** 2 / faults["short"]["resistance_ohm"], True
+        if "open" in faults:
+            return 0.0, True
+        return float(faults["stuck"]["power_w"]), True
+
+    def set_fault(self, name: str, kind: str, params: dict | None) -> None:
+        """Inject (``params``) or clear (None) one fault of one load."""
+        faults = self.faults.setdefault(name, {})
+        if params is None:
+            faults.pop(kind, None)
+        else:
+            faults[kind] = params
+
+    def powers(self) -> list[tuple[str, float, str, bool]]:
+        """``(load, power_w, rail, on)`` for every load."""
+        out = []
+        for name, rail in zip(self.names, self.rails, strict=True):
+            power_w, on = self.power(name)
+            out.append((name, power_w, rail, on))
+        return out

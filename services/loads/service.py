@@ -1,0 +1,45 @@
+"""Loads service: samples every load on the clock and publishes each one's power."""
+
+from __future__ import annotations
+
+from common import keys
+from common.config import Rover
+from common.faults import FaultKey
+from common.messages import Clock, LoadPower, RailState, decode
+from common.runtime import Runtime, Sample
+from services.loads.model import LoadsModel
+
+__all__ = ["serve"]
+
+
+def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
+    models = {r.id: LoadsModel(r, seed) for r in rovers}
+
+    def publish(rover: str, only: set[str] | None = None) -> None:
+        m = models[rover]
+        for name, power_w, rail, on in m.powers():
+            if only is None or name in only:
+                rt.publish(keys.load_power(rover, name), LoadPower(
+                    t_s=rt.now[rover], power_w=power_w, rail=rail, on=on,
+                    faults=sorted(m.faults.get(name, {}))))
+
+    def on_clock(s: Sample) -> None:
+        tick = decode(s.payload, Clock)
+        if tick.dt_s > 0.0:  # a paused clock holds every load where it is
+            models[s.rover].sample()
+        publish(s.rover)
+
+    def on_rail(s: Sample) -> None:
+        rail = s.parts[1]
+        m = models[s.rover]
+        if rail in m.rail_on and m.set_rail(rail, decode(s.payload, RailState).state == "on"):
+            publish(s.rover, {n for n, r in zip(m.names, m.rails, strict=True) if r == rail})
+
+    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
+        models[rover].set_fault(fk.name, fk.kind, params)
+        publish(rover, {fk.name})
+
+    rt.subscribe(f"{keys.ROOT}/*/clock", on_clock)
+    rt.subscribe(f"{keys.ROOT}/*/rail/*/state", on_rail)
+    rt.handle_faults("load", lambda rover: models[rover].names, apply_fault)
+    rt.restore_faults()

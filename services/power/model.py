@@ -1,0 +1,167 @@
+"""Power distribution (the PDM): rails as converters from the battery bus.
+
+A rail with load power ``P_r`` [W] at ``voltage_v`` carries ``I_r = P_r / V_r``
+[A] and draws ``P_r / efficiency`` from the bus. A rail whose current exceeds
+``current_limit_a`` trips and stays off until reset. Protection: every rail
+goes off while the battery is non-operational; a rail with ``shed_below_soc``
+is shed below it and restored at ``restore_above_soc`` (hysteresis). Solar
+generation reaches the bus through the solar rail's efficiency; net battery
+power is rail draw minus generation.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from common.config import Rail, Rover
+
+__all__ = ["PowerModel", "RailReading", "RailSwitch", "Summary"]
+
+
+class RailReading(NamedTuple):
+    name: str
+    voltage_v: float
+    current_a: float
+    power_w: float
+    current_limit_a: float | None
+    state: str  # on, off, tripped, shed, failed
+    reason: str
+
+
+class Summary(NamedTuple):
+    load_power_w: float
+    bus_power_w: float
+    generation_w: float
+    net_battery_power_w: float
+    bus_voltage_v: float
+
+
+class RailSwitch:
+    """The switching state of one rail; ``state`` resolves it by precedence."""
+
+    def __init__(self, cfg: Rail):
+        self.cfg = cfg
+        self.commanded_on = cfg.initially_on
+        self.tripped = False
+        self.failed = False
+        self.shed = False
+        self.trip_current_a = 0.0
+
+    @property
+    def restore_soc(self) -> float | None:
+        c = self.cfg
+        if c.shed_below_soc is None:
+            return None
+        return c.restore_above_soc if c.restore_above_soc is not None else c.shed_below_soc + 0.05
+
+    def state(self, battery_ok: bool) -> tuple[str, str]:
+        if self.failed:
+            return "failed", "converter failed"
+        if self.tripped:
+            return "tripped", f"over-current {self.trip_current_a:.2f} A > {self.cfg.current_limit_a} A"
+        if not battery_ok:
+            return "off", "battery non-operational"
+        if self.shed:
+            return "shed", f"state of charge below {self.cfg.shed_below_soc}"
+        if not self.commanded_on:
+            return "off", "commanded off"
+        return "on", ""
+
+
+class PowerModel:
+    """The PDM of one rover. Inputs are set as they arrive; :meth:`compute` resolves them."""
+
+    def __init__(self, rover: Rover):
+        self.rover = rover
+        self.switches = {r.name: RailSwitch(r) for r in rover.rails}
+        self.load_rail = {ld.name: ld.rail for ld in rover.loads}
+        self.load_power_w = {ld.name: 0.0 for ld in rover.loads}
+        self.panel_power_w = {p.name: 0.0 for p in rover.solar.panels}
+        self.umbilical_w = 0.0
+        self.solar_failed = False
+        self.battery_ok = True
+        self.battery_soc = 1.0
+        self.bus_voltage_v = 0.0
+
+    @property
+    def solar_rail(self):
+        return self.rover.solar.rail
+
+    def rail_names(self) -> list[str]:
+        return list(self.switches) + [self.solar_rail.name]
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def set_battery(self, soc: float, operational: bool, voltage_v: float) -> None:
+        """Battery state in; applies shedding with hysteresis."""
+        self.battery_soc = soc
+        self.battery_ok = operational
+        self.bus_voltage_v = voltage_v
+        for sw in self.switches.values():
+            shed_below = sw.cfg.shed_below_soc
+            if shed_below is None:
+                continue
+            if not sw.shed and soc < shed_below:
+                sw.shed = True
+            elif sw.shed and soc >= sw.restore_soc:
+                sw.shed = False
+
+    def command(self, rail: str, on: bool | None = None, reset: bool = False) -> None:
+        sw = self.switches[rail]
+        if reset:
+            sw.tripped = False
+            sw.trip_current_a = 0.0
+        if on is not None:
+            sw.commanded_on = on
+
+    # -- resolution -------------------------------------------------------------------------
+
+    def compute(self) -> tuple[list[RailReading], Summary]:
+        """Rail readings and bus totals; trips any rail over its limit (latched)."""
+        per_rail = {name: 0.0 for name in self.switches}
+        for load, power_w in self.load_power_w.items():
+            per_rail[self.load_rail[load]] += power_w
+        readings: list[RailReading] = []
+        load_total = bus_total = 0.0
+        for name, sw in self.switches.items():
+            cfg = sw.cfg
+            state, _ = sw.state(self.battery_ok)
+            if state == "on":
+                current = per_rail[name] / cfg.voltage_v
+                if current > cfg.current_limit_a:
+                    sw.tripped = True
+                    sw.trip_current_a = current
+            state, reason = sw.state(self.battery_ok)
+            if state == "on":
+                power_w = per_rail[name]
+                readings.append(RailReading(name, cfg.voltage_v, power_w / cfg.voltage_v,
+                                            power_w, cfg.current_limit_a, state, reason))
+                load_total += power_w
+                bus_total += power_w / cfg.efficiency
+            else:
+                readings.append(RailReading(name, 0.0, 0.0, 0.0, cfg.current_limit_a, state, reason))
+        sr = self.solar_rail
+        panels_w = 0.0 if self.solar_failed else sum(self.panel_power_w.values())
+        readings.append(RailReading(
+            sr.name, sr.voltage_v if panels_w > 0.0 else 0.0, panels_w / sr.voltage_v, panels_w,
+            sr.current_limit_a, "failed" if self.solar_failed else "on",
+            "converter failed" if self.solar_failed else "",
+        ))
+        generation = panels_w * sr.efficiency + self.umbilical_w
+        summary = Summary(load_total, bus_total, generation, bus_total - generation,
+                          self.bus_voltage_v)
+        return readings, summary
+
+    def derived_faults(self, rail: str) -> dict[str, tuple[str, str]]:
+        """Faults a rail raises itself: name -> (severity, message)."""
+        sw = self.switches.get(rail)
+        if sw is None:
+            return {}
+        out: dict[str, tuple[str, str]] = {}
+        if sw.tripped:
+            out["tripped"] = ("critical", f"rail {rail} tripped: {sw.trip_current_a:.2f} A over "
+                              f"its {sw.cfg.current_limit_a} A limit")
+        if sw.shed and self.battery_ok:
+            out["shed"] = ("warning", f"rail {rail} shed: state of charge "
+                           f"{self.battery_soc:.3f} below {sw.cfg.shed_below_soc}")
+        return out

@@ -1,0 +1,115 @@
+"""Power service: the PDM. Folds load, battery and solar updates into rail states and totals."""
+
+from __future__ import annotations
+
+from common import keys
+from common.config import Rover
+from common.faults import FaultKey
+from common.messages import (
+    BadInput,
+    BatteryState,
+    LoadPower,
+    PowerSummary,
+    RailCommand,
+    RailState,
+    SolarPower,
+    UmbilicalState,
+    decode,
+    decode_input,
+)
+from common.runtime import Runtime, Sample
+from services.power.model import PowerModel
+
+__all__ = ["serve"]
+
+
+def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
+    models = {r.id: PowerModel(r) for r in rovers}
+    dirty: set[str] = set()
+    last_state: dict[tuple[str, str], str] = {}
+
+    def publish(rover: str) -> None:
+        m = models[rover]
+        readings, summary = m.compute()
+        t = rt.now[rover]
+        for r in readings:
+            rt.publish(keys.rail_state(rover, r.name), RailState(
+                t_s=t, voltage_v=r.voltage_v, current_a=r.current_a, power_w=r.power_w,
+                current_limit_a=r.current_limit_a, state=r.state, reason=r.reason))
+            if last_state.get((rover, r.name)) != r.state:
+                last_state[(rover, r.name)] = r.state
+                rt.sync_derived(rover, f"rail/{r.name}", m.derived_faults(r.name))
+        rt.publish(keys.power_summary(rover), PowerSummary(t, *summary))
+
+    def flush() -> None:
+        for rover in sorted(dirty):
+            publish(rover)
+        dirty.clear()
+
+    def on_clock(s: Sample) -> None:
+        dirty.add(s.rover)
+
+    def on_load(s: Sample) -> None:
+        m = models[s.rover]
+        name = s.parts[1]
+        if name in m.load_power_w:
+            m.load_power_w[name] = decode(s.payload, LoadPower).power_w
+            dirty.add(s.rover)
+
+    def on_battery(s: Sample) -> None:
+        b = decode(s.payload, BatteryState)
+        m = models[s.rover]
+        before = (m.battery_ok, [sw.shed for sw in m.switches.values()])
+        m.set_battery(b.soc, b.operational, b.voltage_v)
+        if before != (m.battery_ok, [sw.shed for sw in m.switches.values()]):
+            dirty.add(s.rover)
+
+    def on_solar(s: Sample) -> None:
+        m = models[s.rover]
+        if s.parts[1] in m.panel_power_w:
+            m.panel_power_w[s.parts[1]] = decode(s.payload, SolarPower).power_w
+            dirty.add(s.rover)
+
+    def on_umbilical(s: Sample) -> None:
+        models[s.rover].umbilical_w = decode(s.payload, UmbilicalState).power_w
+        dirty.add(s.rover)
+
+    def on_command(s: Sample) -> None:
+        m = models[s.rover]
+        rail = s.parts[2] if len(s.parts) == 3 else ""
+        if rail not in m.switches:
+            if rail == m.solar_rail.name:
+                raise BadInput(f"the solar rail {rail} cannot be switched")
+            raise BadInput(f"rover {s.rover} has no rail {rail!r} "
+                           f"(rails: {', '.join(m.switches)})")
+        if s.deleted:
+            raise BadInput("a rail command is a put, not a delete")
+        cmd = decode_input(s.payload, RailCommand, bare="on")
+        if cmd.on is None and not cmd.reset:
+            raise BadInput('give {"on": true|false} or {"reset": true}')
+        m.command(rail, on=cmd.on, reset=bool(cmd.reset))
+        what = ", ".join(w for w in (None if cmd.on is None else f"on={cmd.on}".lower(),
+                                     "reset" if cmd.reset else None) if w)
+        rt.event(s.rover, "info", "command", s.key, f"rail {rail}: {what}")
+        publish(s.rover)  # at once: the loads follow the new rail state
+
+    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
+        m = models[rover]
+        if fk.name == m.solar_rail.name:
+            m.solar_failed = params is not None
+        else:
+            m.switches[fk.name].failed = params is not None
+        publish(rover)
+
+    root = keys.ROOT
+    rt.subscribe(f"{root}/*/clock", on_clock)
+    rt.subscribe(f"{root}/*/load/*/power", on_load)
+    rt.subscribe(f"{root}/*/battery/state", on_battery)
+    rt.subscribe(f"{root}/*/solar/*/power", on_solar)
+    rt.subscribe(f"{root}/*/umbilical/state", on_umbilical)
+    rt.subscribe(f"{root}/*/cmd/rail/**", on_command)
+    rt.handle_faults("rail", lambda rover: models[rover].rail_names(), apply_fault)
+    rt.restore_faults()
+    rt.after_batch(flush)
+    for rover in models:
+        publish(rover)

@@ -1,0 +1,54 @@
+"""Radio link: the rover is in range inside an offset ellipse around the radio.
+
+The rover's position relative to the radio arrives as a distance ``d`` [m] and
+an angle [deg]: ``x = d cos(angle)``, ``y = d sin(angle)``. It is in range when
+``((x - offset_x) / a)^2 + ((y - offset_y) / b)^2 <= 1``; a ``degraded`` fault
+scales both axes, a ``failure`` means never in range.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+from common.config import Radio
+
+__all__ = ["Link", "RadioModel", "in_range", "position_xy"]
+
+
+class Link(NamedTuple):
+    in_range: bool
+    x_m: float
+    y_m: float
+
+
+def position_xy(distance_m: float, angle_deg: float) -> tuple[float, float]:
+    a = math.radians(angle_deg)
+    return distance_m * math.cos(a), distance_m * math.sin(a)
+
+
+def in_range(x_m: float, y_m: float, a_m: float, b_m: float,
+             offset_x_m: float = 0.0, offset_y_m: float = 0.0) -> bool:
+    """Inside or on the ellipse; an ellipse with a zero axis contains nothing."""
+    if a_m <= 0.0 or b_m <= 0.0:
+        return False
+    return ((x_m - offset_x_m) / a_m) ** 2 + ((y_m - offset_y_m) / b_m) ** 2 <= 1.0
+
+
+class RadioModel:
+    def __init__(self, cfg: Radio):
+        self.cfg = cfg
+        self.distance_m = 0.0
+        self.angle_deg = 0.0
+        self.failed = False
+        self.range_scale = 1.0
+
+    def faults(self) -> list[str]:
+        return (["failure"] if self.failed else []) + (
+            ["degraded"] if self.range_scale < 1.0 else [])
+
+    def link(self) -> Link:
+        x, y = position_xy(self.distance_m, self.angle_deg)
+        c, s = self.cfg, self.range_scale
+        ok = not self.failed and in_range(x, y, c.a_m * s, c.b_m * s, c.offset_x_m, c.offset_y_m)
+        return Link(ok, x, y)

@@ -1,0 +1,61 @@
+"""Radio service: link in range or not, published on change and at least once a second."""
+
+from __future__ import annotations
+
+import time
+
+from common import keys
+from common.config import Rover
+from common.faults import FaultKey
+from common.messages import BadInput, RadioLink, RadioPosition, decode_input
+from common.runtime import Runtime, Sample
+from services.radio.model import RadioModel
+
+__all__ = ["serve"]
+
+HEARTBEAT_S = 1.0
+
+
+def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
+    radios = {r.id: {c.name: RadioModel(c) for c in r.radios} for r in rovers}
+    last: dict[tuple[str, str], tuple[bool, float]] = {}  # -> (in_range, wall time published)
+
+    def publish(rover: str, name: str, force: bool = False) -> None:
+        m = radios[rover][name]
+        link = m.link()
+        prev = last.get((rover, name))
+        now = time.monotonic()
+        if force or prev is None or prev[0] != link.in_range or now - prev[1] >= HEARTBEAT_S:
+            last[(rover, name)] = (link.in_range, now)
+            rt.publish(keys.radio_link(rover, name), RadioLink(
+                t_s=rt.now[rover], in_range=link.in_range, x_m=link.x_m, y_m=link.y_m,
+                faults=m.faults()))
+
+    def heartbeat() -> None:
+        for rover, named in radios.items():
+            for name in named:
+                publish(rover, name)
+
+    def on_position(s: Sample) -> None:
+        name = s.parts[2] if len(s.parts) == 4 else ""
+        if name not in radios[s.rover]:
+            known = ", ".join(radios[s.rover]) or "none"
+            raise BadInput(f"rover {s.rover} has no radio {name!r} (radios: {known})")
+        pos = decode_input(s.payload, RadioPosition)
+        m = radios[s.rover][name]
+        m.distance_m, m.angle_deg = pos.distance_m, pos.angle_deg
+        publish(s.rover, name, force=True)
+
+    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
+        m = radios[rover][fk.name]
+        if fk.kind == "failure":
+            m.failed = params is not None
+        else:
+            m.range_scale = params["range_scale"] if params else 1.0
+        publish(rover, fk.name, force=True)
+
+    rt.subscribe(f"{keys.ROOT}/*/input/radio/**", on_position)
+    rt.handle_faults("radio", lambda rover: radios[rover], apply_fault)
+    rt.restore_faults()
+    rt.every(0.2, heartbeat)
+    heartbeat()

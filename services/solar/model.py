@@ -1,0 +1,56 @@
+"""Solar panels and the umbilical.
+
+Panel power [W] = ``irradiance * area * efficiency * max(0, cos(angle)) *
+(1 - dust) * (1 - degradation)``; a disconnected panel gives nothing. The
+umbilical, when connected, can supply up to its ``power_w``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from common.config import Rover
+
+__all__ = ["SolarModel", "panel_power"]
+
+
+def panel_power(irradiance_w_per_m2: float, area_m2: float, efficiency: float,
+                sun_angle_deg: float, dust: float = 0.0, degradation: float = 0.0) -> float:
+    """Electrical output of one panel [W]; zero when the sun is behind it (|angle| >= 90 deg)."""
+    cos = max(0.0, math.cos(math.radians(sun_angle_deg)))
+    return irradiance_w_per_m2 * area_m2 * efficiency * cos * (1.0 - dust) * (1.0 - degradation)
+
+
+class SolarModel:
+    def __init__(self, rover: Rover):
+        self.cfg = rover.solar
+        self.umbilical_cfg = rover.umbilical
+        self.sun_angle_deg = rover.solar.sun_angle_deg
+        self.dust = {p.name: 0.0 for p in rover.solar.panels}
+        self.disconnected: set[str] = set()
+        self.umbilical_plugged = rover.umbilical.connected
+        self.umbilical_fault = False
+
+    def panel_names(self) -> list[str]:
+        return [p.name for p in self.cfg.panels]
+
+    def panels(self) -> list[tuple[str, float, float, list[str]]]:
+        """``(panel, power_w, dust, faults)`` for every panel."""
+        out = []
+        for p in self.cfg.panels:
+            dust = self.dust[p.name]
+            faults = (["dust"] if dust > 0.0 else []) + (
+                ["disconnect"] if p.name in self.disconnected else [])
+            power = 0.0 if p.name in self.disconnected else panel_power(
+                self.cfg.irradiance_w_per_m2, p.area_m2, p.efficiency, self.sun_angle_deg,
+                dust, p.degradation)
+            out.append((p.name, power, dust, faults))
+        return out
+
+    @property
+    def umbilical_connected(self) -> bool:
+        return self.umbilical_plugged and not self.umbilical_fault
+
+    @property
+    def umbilical_power_w(self) -> float:
+        return self.umbilical_cfg.power_w if self.umbilical_connected else 0.0

@@ -1,0 +1,54 @@
+"""Fixtures shared by every test layer (see tests/harness.py)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from tests.harness import ROVERS, Probe, Twin, free_endpoint, open_router
+
+# Tests never read an operator's Zenoh configuration.
+os.environ.pop("LUNARIS_ZENOH_CONFIG", None)
+
+
+@pytest.fixture
+def router():
+    """An embedded Zenoh router on a free loopback port; yields its endpoint."""
+    endpoint = free_endpoint()
+    session = open_router(endpoint)
+    try:
+        yield endpoint
+    finally:
+        session.close()
+
+
+@pytest.fixture
+def probe(router):
+    with Probe(router) as p:
+        yield p
+
+
+@pytest.fixture
+def mapp_file() -> Path:
+    return ROVERS / "mapp.yaml"
+
+
+@pytest.fixture
+def twin_factory(router, tmp_path):
+    """Start services for rover files; every twin is stopped at teardown, pass or fail."""
+    twins: list[Twin] = []
+
+    def start(rover_files, services=None, **kw) -> Twin:
+        kw.setdefault("state_dir", tmp_path / f"state{len(twins)}")
+        twin = Twin(router, list(rover_files), **kw) if services is None else Twin(
+            router, list(rover_files), services=tuple(services), **kw)
+        twins.append(twin)
+        return twin.__enter__()
+
+    try:
+        yield start
+    finally:
+        for twin in twins:
+            twin.stop()

@@ -1,0 +1,134 @@
+"""docker-compose.yml as docker-compose itself resolves it (`docker-compose config`).
+
+No Docker engine runs here (SPEC §11): the file is validated and its services, profile
+and mounts are checked, with every mounted file looked up in the repository.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+import pytest
+import yaml
+
+from tests.deploy.conftest import REPO
+
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
+STATE_DIR = "/var/lib/lunaris"
+DOCKER_COMPOSE = shutil.which("docker-compose")
+
+pytestmark = pytest.mark.timeout(60)
+
+
+@pytest.fixture(scope="module")
+def compose(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    if DOCKER_COMPOSE is None:
+        pytest.skip("docker-compose is not installed (apt-get install docker-compose)")
+    result = subprocess.run(
+        [DOCKER_COMPOSE, "-f", "docker-compose.yml", "config"],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+        # The defaults of the file, not whatever ZENOH_VERSION or DOCKER_HOST say here.
+        env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+             "HOME": str(tmp_path_factory.mktemp("home"))},
+    )
+    assert result.returncode == 0, result.stderr
+    return yaml.safe_load(result.stdout)
+
+
+def _mounts(service: dict[str, Any]) -> dict[str, str]:
+    """Container path -> host path (or volume name) of a resolved service."""
+    mounts = {}
+    for volume in service.get("volumes", []):
+        if isinstance(volume, str):  # "source:target[:mode]"
+            source, target = volume.split(":")[:2]
+        else:
+            source, target = volume["source"], volume["target"]
+        mounts[target] = source
+    return mounts
+
+
+def _host_path(mounts: dict[str, str], container_path: str, workdir: str) -> Path:
+    """Where a path seen inside the container comes from on the host."""
+    path = PurePosixPath(workdir) / container_path
+    for target, source in sorted(mounts.items(), key=lambda m: -len(m[0])):
+        if path == PurePosixPath(target) or PurePosixPath(target) in path.parents:
+            return Path(source) / path.relative_to(target)
+    raise AssertionError(f"{path} is not mounted from the host")
+
+
+def test_the_router_is_zenohd_with_the_deploy_configuration(compose: dict[str, Any]) -> None:
+    router = compose["services"]["router"]
+    assert router["image"].startswith("eclipse/zenoh:")
+    assert router["restart"] == "unless-stopped"
+    assert [p["target"] for p in router["ports"]] == [7447]
+    mounts = _mounts(router)
+    command = router["command"]
+    config = command[command.index("-c") + 1]
+    assert Path(mounts[config]) == REPO / "deploy/zenohd.json5"
+    assert Path(mounts["/etc/zenoh/credentials.txt"]) == REPO / "deploy/credentials.txt"
+    assert "/etc/zenoh/credentials.txt" in (REPO / "deploy/zenohd.json5").read_text()
+
+
+@pytest.mark.parametrize("name", SERVICES)
+def test_each_service_runs_from_the_one_image(compose: dict[str, Any], name: str) -> None:
+    service = compose["services"][name]
+    assert service["build"]["dockerfile"] == "deploy/Dockerfile"
+    assert Path(service["build"]["context"]) == REPO
+    assert service["image"] == compose["services"]["clock"]["image"]
+    assert service["restart"] == "unless-stopped"
+    assert "router" in service["depends_on"]
+
+    command = service["command"]
+    assert command[:2] == ["run", name]
+    mounts = _mounts(service)
+    workdir = "/opt/lunaris"  # deploy/Dockerfile's WORKDIR
+    rovers = [command[i + 1] for i, arg in enumerate(command) if arg == "--rover"]
+    assert rovers, "no --rover"
+    for rover in rovers:
+        assert _host_path(mounts, rover, workdir).is_file(), rover
+    if "--bridge-config" in command:
+        mapping = command[command.index("--bridge-config") + 1]
+        assert _host_path(mounts, mapping, workdir).parent.is_dir(), mapping
+
+    zenoh_config = service["environment"]["LUNARIS_ZENOH_CONFIG"]
+    assert Path(mounts[zenoh_config]) == REPO / "deploy/client-service.json5"
+
+    assert command[command.index("--state-dir") + 1] == STATE_DIR
+    assert mounts[STATE_DIR] in compose["volumes"], "state is not on a named volume"
+
+
+def test_the_ros2dds_bridge_is_an_optional_profile(compose: dict[str, Any]) -> None:
+    profiled = {n for n, s in compose["services"].items() if s.get("profiles")}
+    assert profiled == {"zenoh-bridge-ros2dds"}
+    bridge = compose["services"]["zenoh-bridge-ros2dds"]
+    assert bridge["profiles"] == ["ros2dds"]
+    assert bridge["image"].startswith("eclipse/zenoh-bridge-ros2dds:")
+    assert "router" in bridge["depends_on"]
+    command = bridge["command"]
+    config = command[command.index("-c") + 1]
+    assert Path(_mounts(bridge)[config]) == REPO / "deploy/zenoh-bridge-ros2dds.json5"
+
+
+def test_every_mounted_host_file_is_in_the_repository(compose: dict[str, Any]) -> None:
+    for name, service in compose["services"].items():
+        for target, source in _mounts(service).items():
+            if source in compose.get("volumes", {}):
+                continue
+            assert Path(source).exists(), f"{name}: {source} (for {target}) does not exist"
+            assert REPO in Path(source).parents, f"{name}: {source} is outside the repository"
+
+
+def test_the_image_installs_the_package_and_runs_lunaris() -> None:
+    dockerfile = (REPO / "deploy/Dockerfile").read_text()
+    instructions = [line.split(None, 1) for line in dockerfile.splitlines()
+                    if line.strip() and not line.lstrip().startswith("#")]
+    first = [i for i in instructions if i[0].isupper()]
+    assert first[0] == ["FROM", "python:3.11-slim"]
+    assert ["ENTRYPOINT", '["lunaris"]'] in first
+    assert any(i[0] == "USER" and i[1] != "root" for i in first), "runs as root"
+    assert ["VOLUME", f'["{STATE_DIR}"]'] in first
+    assert any(i[0] == "RUN" and "pip install ." in i[1] for i in first)

@@ -1,0 +1,209 @@
+"""Test harness for real multi-process tests: a router, the services, a probe.
+
+- :func:`free_endpoint` picks a free loopback TCP port.
+- :class:`Twin` starts services as ``lunaris run`` subprocesses connected to a
+  router, waits for their liveliness tokens, and stops them (SIGINT, then kill)
+  even when the test fails.
+- :class:`Probe` is a client session that keeps the latest sample of every key
+  it watches and waits on conditions with a deadline, never on fixed sleeps.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from common import keys
+from common.connection import make_config
+
+ROOT = Path(__file__).resolve().parent.parent
+ROVERS = ROOT / "config" / "rovers"
+ALL_SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
+
+
+def free_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def wait_for(predicate: Callable[[], Any], timeout_s: float = 10.0, what: str = "condition",
+             poll_s: float = 0.01) -> Any:
+    """Poll ``predicate`` until it returns something truthy; fail with ``what`` on timeout."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+def lunaris_cmd(*args: str) -> list[str]:
+    return [sys.executable, "-m", "lunaris.cli", *args]
+
+
+def stop_process(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
+    """SIGINT (what Ctrl-C sends), then kill if it does not go."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+class Twin:
+    """Services for some rovers as subprocesses on a router at ``endpoint``."""
+
+    def __init__(self, endpoint: str, rover_files: list[str | Path], state_dir: Path,
+                 services: tuple[str, ...] = ALL_SERVICES, seed: int = 1,
+                 extra: dict[str, list[str]] | None = None):
+        self.endpoint = endpoint
+        self.rover_files = [str(f) for f in rover_files]
+        self.state_dir = state_dir
+        self.services = services
+        self.seed = seed
+        self.extra = extra or {}
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.logs: dict[str, Path] = {}
+
+    def start(self, service: str) -> subprocess.Popen:
+        args = ["run", service, "--connect", self.endpoint, "--state-dir", str(self.state_dir),
+                "--seed", str(self.seed)]
+        for f in self.rover_files:
+            args += ["--rover", f]
+        args += self.extra.get(service, [])
+        log = self.state_dir / f"{service}.log"
+        self.logs[service] = log
+        with open(log, "ab") as out:
+            proc = subprocess.Popen(lunaris_cmd(*args), stdout=out, stderr=subprocess.STDOUT,
+                                    stdin=subprocess.DEVNULL, cwd=ROOT)
+        self.procs[service] = proc
+        return proc
+
+    def __enter__(self) -> Twin:
+        self.state_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            for service in self.services:
+                self.start(service)
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+    def stop(self) -> None:
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+        for proc in self.procs.values():
+            stop_process(proc)
+
+    def log(self, service: str) -> str:
+        path = self.logs.get(service)
+        return path.read_text(errors="replace") if path and path.exists() else ""
+
+
+class Probe:
+    """A test's own client session: watch keys, put, delete, get; wait on conditions."""
+
+    def __init__(self, endpoint: str):
+        self.session = zenoh.open(make_config("client", connect=[endpoint]))
+        self.latest: dict[str, Any] = {}
+        self.history: dict[str, list[Any]] = {}
+        self._lock = threading.Lock()
+        self._subs: list[Any] = []
+
+    def close(self) -> None:
+        self._subs.clear()
+        self.session.close()
+
+    def __enter__(self) -> Probe:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def watch(self, keyexpr: str) -> None:
+        """Keep the latest JSON value and the history of every key matching ``keyexpr``."""
+        def on_sample(s: zenoh.Sample) -> None:
+            key = str(s.key_expr)
+            raw = s.payload.to_bytes()
+            try:
+                value = json.loads(raw) if raw else None
+            except ValueError:
+                value = raw
+            with self._lock:
+                self.latest[key] = value
+                self.history.setdefault(key, []).append(value)
+        self._subs.append(self.session.declare_subscriber(keyexpr, on_sample))
+
+    def value(self, key: str) -> Any:
+        with self._lock:
+            return self.latest.get(key)
+
+    def samples(self, key: str) -> list[Any]:
+        with self._lock:
+            return list(self.history.get(key, []))
+
+    def wait_value(self, key: str, predicate: Callable[[Any], bool] = lambda v: True,
+                   timeout_s: float = 10.0) -> Any:
+        """The latest value of ``key`` once it satisfies ``predicate``."""
+        def check() -> Any:
+            v = self.value(key)
+            return (v,) if v is not None and predicate(v) else None
+        return wait_for(check, timeout_s, f"{key} to satisfy the condition "
+                        f"(last: {self.value(key)!r})")[0]
+
+    def wait_event(self, rover: str, predicate: Callable[[dict], bool],
+                   timeout_s: float = 10.0) -> dict:
+        key = keys.event(rover)
+        def check() -> Any:
+            return next((e for e in self.samples(key) if predicate(e)), None)
+        return wait_for(check, timeout_s, f"an event on {key} (seen: {self.samples(key)!r})")
+
+    def wait_services(self, rover: str, services: tuple[str, ...], timeout_s: float = 20.0) -> None:
+        def live() -> bool:
+            names = {str(r.ok.key_expr).rsplit("/", 1)[-1]
+                     for r in self.session.liveliness().get(f"{keys.ROOT}/{rover}/service/*")
+                     if r.ok is not None}
+            return set(services) <= names
+        wait_for(live, timeout_s, f"services {services} of {rover} to be live", poll_s=0.1)
+
+    def put(self, key: str, payload: Any = b"") -> None:
+        if not isinstance(payload, bytes | str):
+            payload = json.dumps(payload)
+        self.session.put(key, payload)
+
+    def delete(self, key: str) -> None:
+        self.session.delete(key)
+
+    def get_json(self, selector: str, timeout_s: float = 5.0) -> list[Any]:
+        replies = self.session.get(selector, timeout=timeout_s)
+        return [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
+
+
+def open_router(endpoint: str) -> zenoh.Session:
+    return zenoh.open(make_config("router", listen=[endpoint]))
+
+
+def env_without_zenoh_config() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("LUNARIS_ZENOH_CONFIG", None)
+    return env
