@@ -237,10 +237,20 @@ class Runtime:
             pub = self._declare_publisher(key, 1)
         pub.put(encode(msg))
 
-    def _declare_publisher(self, key: str, cache: int) -> Any:
+    def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
+                      attachment: bytes | None = None) -> None:
+        """Publish an already encoded payload (CDR for the bridge), with the same last-value
+        cache as :meth:`publish`."""
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._declare_publisher(key, 1, encoding)
+        pub.put(payload, attachment=attachment)
+
+    def _declare_publisher(self, key: str, cache: int,
+                           encoding: zenoh.Encoding = zenoh.Encoding.APPLICATION_JSON) -> Any:
         pub = zext.declare_advanced_publisher(
             self.session, key,
-            encoding=zenoh.Encoding.APPLICATION_JSON,
+            encoding=encoding,
             cache=zext.CacheConfig(max_samples=cache),
             publisher_detection=True,
         )
