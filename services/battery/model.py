@@ -8,7 +8,9 @@ resistance ``R``. For a demanded terminal power ``P`` [W]::
 computed as ``I = 2 P / (V_oc + sqrt(V_oc^2 - 4 R P))`` which is the same
 root, free of cancellation, and reduces to ``P / V_oc`` at ``R = 0``. The pack
 can deliver at most ``V_oc^2 / 4R`` (at ``V = V_oc / 2``); beyond it the bus
-browns out. Negative ``P`` charges the pack.
+browns out. The BMS also limits the discharge current to ``max_discharge_a``: a
+demand that needs more is met only in part (over-current, and a brown-out).
+Negative ``P`` charges the pack, limited to ``max_charge_w``.
 
 Stored energy falls by ``V_oc I dt`` so the ``I^2 R`` loss is paid from the
 store and becomes heat. Temperature follows a lumped model
@@ -32,7 +34,8 @@ class BusPoint(NamedTuple):
     voltage_v: float
     current_a: float  # positive when discharging
     power_w: float  # delivered at the terminals; negative while charging
-    brownout: bool  # the demand exceeded V_oc^2 / 4R
+    brownout: bool  # the demand could not be met (beyond V_oc^2 / 4R or the current limit)
+    current_limited: bool = False  # the BMS held the current at max_discharge_a
 
 
 def ocv(soc: float, curve_soc: list[float], curve_volts: list[float], cells_series: int) -> float:
@@ -139,7 +142,12 @@ class BatteryModel:
                 demand = -min(-demand, self.cfg.max_charge_w)
         if self.disconnected or self.thermal_cutoff:
             return BusPoint(0.0, 0.0, 0.0, False)
-        return solve_bus(self.ocv_v, self.resistance_ohm, demand)
+        point = solve_bus(self.ocv_v, self.resistance_ohm, demand)
+        i_max = self.cfg.max_discharge_a
+        if point.current_a > i_max:
+            voltage = self.ocv_v - i_max * self.resistance_ohm
+            return BusPoint(voltage, i_max, voltage * i_max, True, True)
+        return point
 
     # -- evolution --------------------------------------------------------------------------
 
@@ -200,9 +208,9 @@ class BatteryModel:
         if point.brownout:
             out["brownout"] = ("critical", f"demand {self.demand_w:.1f} W beyond what the pack "
                                f"can deliver ({point.power_w:.1f} W): bus browned out")
-        if point.current_a > cfg.max_discharge_a:
-            out["over_current"] = ("warning", f"discharge {point.current_a:.1f} A above "
-                                   f"{cfg.max_discharge_a} A")
+        if point.current_limited:
+            out["over_current"] = ("critical", f"demand {self.demand_w:.1f} W needs more than "
+                                   f"the {cfg.max_discharge_a} A discharge limit")
         v_min = cfg.cells_series * cfg.ocv_curve.volts[0]
         if point.current_a > 0.0 and point.voltage_v < v_min:
             out["under_voltage"] = ("warning", f"bus at {point.voltage_v:.2f} V below "
@@ -223,8 +231,11 @@ class BatteryModel:
         ) if on]
         drain_w = v_oc * point.current_a
         usable_j = self.energy_j - self.cfg.depleted_soc * self.capacity_j
-        tte = usable_j / drain_w if drain_w > 0.0 and usable_j > 0.0 else (
-            0.0 if drain_w > 0.0 else None)
+        tte: float | None = None  # idle or charging: never empties
+        if drain_w > 0.0:
+            tte = usable_j / drain_w if usable_j > 0.0 else 0.0
+            if not math.isfinite(tte):
+                tte = None  # a vanishing draw: as good as idle
         return BatteryReading(
             energy_j=self.energy_j, capacity_j=self.capacity_j, soc=self.soc,
             ocv_v=v_oc,

@@ -1,0 +1,102 @@
+"""Rover definitions: the shipped rovers load; a broken file lists every problem with its path."""
+
+from __future__ import annotations
+
+import subprocess
+
+import pytest
+
+from common.config import ConfigError, load_rover, parse_rover
+from tests.harness import ROOT, ROVERS, lunaris_cmd
+
+MAPP = (ROVERS / "mapp.yaml").read_text()
+
+
+def broken(text: str, *edits: tuple[str, str]) -> str:
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new, 1)
+    return text
+
+
+BROKEN_MAPP = broken(
+    MAPP,
+    ("4.11, 4.20]", "4.11]"),                                       # curve too short
+    ("cells_series: 4", "cells_series: four"),                       # wrong type
+    ("rail: 5V_CH2,  nominal_w: 3.5", "rail: 5V_CH9,  nominal_w: 3.5"),  # unknown rail
+    ("tick_hz: 10", "tick_hz: 10\nbogus: 1"),                        # unknown field
+    ("initial_soc: 1.0", "initial_soc: 1.5"),                        # out of range
+    ("max_c: 60", "max_c: 80"),                                      # max_c above cutoff_c
+    ("{name: right, area_m2: 0.12", "{name: left, area_m2: 0.12"),   # duplicate panel
+    ("  capacity_j: 5.3e5\n", ""),                                   # missing field
+    ("a_m: 400", "a_m: .nan"),                                       # not finite
+)
+EXPECTED = [
+    "battery.ocv_curve.volts: expected 11 values, got 10",
+    "battery.cells_series: expected an integer, got a string",
+    "loads[4].rail: no rail named '5V_CH9'",
+    "bogus: unknown field",
+    "battery.initial_soc: must be <= 1.0, got 1.5",
+    "battery.thermal: expected min_c < max_c < cutoff_c, got -20, 80, 75",
+    "solar.panels: name 'left' is used more than once",
+    "battery.capacity_j: missing required field",
+    "radios[0].a_m: must be finite, got nan",
+]
+
+
+@pytest.mark.parametrize("name", ["mapp.yaml", "ltv.yaml"])
+def test_shipped_rovers_load(name):
+    rover = load_rover(ROVERS / name)
+    assert rover.battery.capacity_j > 0 and rover.rails and rover.loads
+
+
+def test_mapp_has_the_channels_the_issue_asks_for():
+    rover = load_rover(ROVERS / "mapp.yaml")
+    assert [r.name for r in rover.rails] == ["12V", "5V_CH1", "5V_CH2", "3V3_CH1", "3V3_CH2"]
+    assert isinstance(rover.battery.capacity_j, float)  # 5.3e5 is a number (YAML 1.2 floats)
+
+
+def test_every_problem_is_reported_with_its_path():
+    with pytest.raises(ConfigError) as info:
+        parse_rover(BROKEN_MAPP, "broken.yaml")
+    problems = info.value.problems
+    for want in EXPECTED:
+        assert any(p.startswith(want) for p in problems), (want, problems)
+    assert len(problems) == len(EXPECTED), problems
+
+
+def test_empty_sections_are_allowed():
+    text = broken(MAPP, ("radios:\n", "radios: []\n_x:\n"))
+    text = text.replace("_x:\n", "").split("radios: []")[0] + "radios: []\n"
+    assert parse_rover(text).radios == []
+
+
+def test_not_yaml_and_not_a_mapping():
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        parse_rover("rover: [", "x.yaml")
+    with pytest.raises(ConfigError, match="file: expected a mapping, got a list"):
+        parse_rover("- 1\n- 2\n", "x.yaml")
+
+
+def test_lunaris_check_lists_every_problem_and_exits_non_zero(tmp_path):
+    bad = tmp_path / "broken.yaml"
+    bad.write_text(BROKEN_MAPP)
+    run = subprocess.run(lunaris_cmd("check", str(bad)), capture_output=True, text=True,
+                         cwd=ROOT, timeout=60)
+    assert run.returncode == 1
+    for want in EXPECTED:
+        assert want in run.stderr, want
+    ok = subprocess.run(lunaris_cmd("check", str(ROVERS / "mapp.yaml")), capture_output=True,
+                        text=True, cwd=ROOT, timeout=60)
+    assert ok.returncode == 0 and "mapp-1" in ok.stdout
+
+
+def test_a_service_given_a_broken_file_refuses_to_start_with_the_same_message(tmp_path):
+    bad = tmp_path / "broken.yaml"
+    bad.write_text(BROKEN_MAPP)
+    run = subprocess.run(lunaris_cmd("run", "battery", "--rover", str(bad), "--connect",
+                                     "tcp/127.0.0.1:9"), capture_output=True, text=True,
+                         cwd=ROOT, timeout=60)
+    assert run.returncode == 2
+    for want in EXPECTED:
+        assert want in run.stderr, want

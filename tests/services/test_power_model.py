@@ -1,0 +1,95 @@
+"""The PDM: rail currents and bus draw, trips, switching, protection and shedding."""
+
+from __future__ import annotations
+
+import pytest
+from numpy.testing import assert_allclose
+
+from common.config import load_rover
+from services.power.model import PowerModel
+from tests.harness import ROVERS
+
+
+@pytest.fixture
+def pdm():
+    m = PowerModel(load_rover(ROVERS / "mapp.yaml"))
+    m.set_battery(1.0, True, 16.5)
+    return m
+
+
+def rails(m):
+    readings, summary = m.compute()
+    return {r.name: r for r in readings}, summary
+
+
+def test_rail_current_and_bus_draw_through_efficiency(pdm):
+    pdm.load_power_w.update(drive_motors=48.0, survival_heater=12.0, flight_computer=6.0)
+    r, s = rails(pdm)
+    assert_allclose(r["12V"].current_a, 60.0 / 12.0)
+    assert_allclose(r["12V"].power_w, 60.0)
+    assert_allclose(r["5V_CH1"].current_a, 6.0 / 5.0)
+    assert_allclose(s.load_power_w, 66.0)
+    assert_allclose(s.bus_power_w, 60.0 / 0.93 + 6.0 / 0.90)
+    assert s.bus_voltage_v == 16.5
+
+
+def test_net_battery_power_is_draw_minus_generation_through_the_solar_rail(pdm):
+    pdm.load_power_w.update(drive_motors=93.0)
+    pdm.panel_power_w.update(left=20.0, right=20.0)
+    pdm.umbilical_w = 30.0
+    r, s = rails(pdm)
+    assert_allclose(s.generation_w, 40.0 * 0.95 + 30.0)
+    assert_allclose(s.net_battery_power_w, 93.0 / 0.93 - 68.0)
+    assert_allclose(r["SOLAR"].current_a, 40.0 / 18.0)
+
+
+def test_a_rail_trips_exactly_above_its_limit_and_stays_off_until_reset(pdm):
+    pdm.load_power_w.update(nav_camera=20.0, hazard_cameras=5.0)  # 25 W / 5 V = 5.0 A: at the limit
+    r, _ = rails(pdm)
+    assert r["5V_CH2"].state == "on"
+    pdm.load_power_w.update(hazard_cameras=5.0 + 1e-9)  # a hair over 5 A
+    r, _ = rails(pdm)
+    assert r["5V_CH2"].state == "tripped" and r["5V_CH2"].current_a == 0.0
+    assert "tripped" in pdm.derived_faults("5V_CH2")
+    pdm.load_power_w.update(nav_camera=3.0, hazard_cameras=2.0)  # the load is back to normal ...
+    assert rails(pdm)[0]["5V_CH2"].state == "tripped"  # ... but the trip is latched
+    pdm.command("5V_CH2", reset=True)
+    assert rails(pdm)[0]["5V_CH2"].state == "on"
+
+
+def test_rails_switch_by_command(pdm):
+    pdm.load_power_w.update(imu=1.0)
+    pdm.command("3V3_CH1", on=False)
+    r, s = rails(pdm)
+    assert r["3V3_CH1"].state == "off" and r["3V3_CH1"].power_w == 0.0 and s.load_power_w == 0.0
+    pdm.command("3V3_CH1", on=True)
+    assert rails(pdm)[0]["3V3_CH1"].state == "on"
+
+
+def test_every_rail_goes_off_while_the_battery_is_non_operational(pdm):
+    pdm.load_power_w.update(drive_motors=40.0)
+    pdm.set_battery(0.0, False, 0.0)
+    r, s = rails(pdm)
+    assert {x.state for n, x in r.items() if n != "SOLAR"} == {"off"}
+    assert s.bus_power_w == 0.0
+    pdm.set_battery(0.5, True, 15.0)
+    assert rails(pdm)[0]["12V"].state == "on"
+
+
+def test_shedding_and_restoring_with_hysteresis(pdm):
+    # 5V_CH2 sheds below 0.15 and comes back at 0.15 + 0.05 = 0.20; 3V3_CH2 sheds below 0.25.
+    for soc, ch2, ch3 in [(0.30, "on", "on"), (0.24, "on", "shed"), (0.149, "shed", "shed"),
+                          (0.17, "shed", "shed"), (0.199, "shed", "shed"), (0.20, "on", "shed"),
+                          (0.29, "on", "shed"), (0.30, "on", "on"), (0.26, "on", "on"),
+                          (0.16, "on", "shed")]:
+        pdm.set_battery(soc, True, 15.0)
+        r, _ = rails(pdm)
+        assert (r["5V_CH2"].state, r["3V3_CH2"].state) == (ch2, ch3), soc
+    assert rails(pdm)[0]["12V"].state == "on"  # essential rails are never shed
+
+
+def test_a_failed_converter_gives_zero_volts(pdm):
+    pdm.load_power_w.update(flight_computer=6.0)
+    pdm.switches["5V_CH1"].failed = True
+    r, _ = rails(pdm)
+    assert (r["5V_CH1"].state, r["5V_CH1"].voltage_v, r["5V_CH1"].power_w) == ("failed", 0.0, 0.0)

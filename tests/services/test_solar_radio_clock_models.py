@@ -1,0 +1,89 @@
+"""Solar panels, the radio ellipse and the clock against numbers derived by hand."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from numpy.testing import assert_allclose
+
+from common.config import Radio, load_rover
+from services.clock.model import ClockModel
+from services.radio.model import RadioModel, in_range, position_xy
+from services.solar.model import SolarModel, panel_power
+from tests.harness import ROVERS
+
+
+@pytest.mark.parametrize(("angle", "dust", "degradation", "expected"), [
+    (0.0, 0.0, 0.0, 1361 * 0.12 * 0.29),                    # 47.3628 W facing the sun
+    (60.0, 0.0, 0.0, 1361 * 0.12 * 0.29 * 0.5),             # cos 60 = 1/2
+    (60.0, 0.3, 0.0, 1361 * 0.12 * 0.29 * 0.5 * 0.7),       # dust 0.3 cuts 30 %
+    (35.0, 0.0, 0.1, 1361 * 0.12 * 0.29 * math.cos(math.radians(35)) * 0.9),
+    (-60.0, 0.0, 0.0, 1361 * 0.12 * 0.29 * 0.5),            # symmetric
+    (120.0, 0.0, 0.0, 0.0),                                 # sun behind the panel
+    (180.0, 0.0, 0.0, 0.0),
+])
+def test_panel_power_formula(angle, dust, degradation, expected):
+    assert_allclose(panel_power(1361, 0.12, 0.29, angle, dust, degradation), expected,
+                    rtol=1e-12, atol=1e-12)
+
+
+def test_panel_faults_and_umbilical():
+    m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
+    m.dust["left"] = 0.3
+    m.disconnected.add("right")
+    powers = {name: p for name, p, _, _ in m.panels()}
+    assert_allclose(powers["left"], 1361 * 0.12 * 0.29 * 0.5 * 0.7)
+    assert powers["right"] == 0.0
+    assert (m.umbilical_connected, m.umbilical_power_w) == (False, 0.0)
+    m.umbilical_plugged = True
+    assert m.umbilical_power_w == 120.0
+    m.umbilical_fault = True
+    assert m.umbilical_power_w == 0.0
+
+
+# Ellipse a = 400, b = 250 centred at (100, -50).
+@pytest.mark.parametrize(("x", "y", "inside"), [
+    (100.0, -50.0, True),          # centre
+    (500.0, -50.0, True),          # on the end of the major axis
+    (100.0, 200.0, True),          # on the end of the minor axis
+    (100.0, -300.0, True),
+    (500.0001, -50.0, False),      # just outside
+    (0.0, 0.0, True),              # the radio itself: (-100/400)^2 + (50/250)^2 = 0.1025
+    (400.0, 150.0, False),         # (300/400)^2 + (200/250)^2 = 1.2025
+    (-300.0, -50.0, True),         # on the far end
+])
+def test_points_inside_on_and_outside_an_offset_ellipse(x, y, inside):
+    assert in_range(x, y, 400.0, 250.0, 100.0, -50.0) is inside
+
+
+def test_position_from_distance_and_angle():
+    assert_allclose(position_xy(200.0, 90.0), (0.0, 200.0), atol=1e-12)
+    assert_allclose(position_xy(200.0, 30.0), (200 * math.sqrt(3) / 2, 100.0), rtol=1e-12)
+
+
+def test_radio_faults():
+    m = RadioModel(Radio(name="lander", a_m=400, b_m=250, offset_x_m=100, offset_y_m=0))
+    m.distance_m, m.angle_deg = 450.0, 0.0      # ((450 - 100) / 400)^2 = 0.766: in range
+    assert m.link().in_range
+    m.range_scale = 0.5                          # ((350) / 200)^2 = 3.06: out
+    assert not m.link().in_range
+    m.range_scale = 0.0                          # an ellipse of zero size holds nothing
+    m.distance_m = 100.0
+    assert not m.link().in_range
+    m.range_scale = 1.0
+    m.failed = True
+    assert not m.link().in_range
+
+
+def test_clock_ticks_scales_and_pauses():
+    c = ClockModel(10.0)
+    assert c.tick().dt_s == pytest.approx(0.1)
+    c.set_scale(20.0)
+    t = c.tick()
+    assert (t.dt_s, t.seq) == (pytest.approx(2.0), 2)
+    c.paused = True
+    t = c.tick()
+    assert t.dt_s == 0.0 and t.t_s == pytest.approx(2.1) and t.paused
+    with pytest.raises(ValueError, match="time_scale must be > 0"):
+        c.set_scale(0.0)
