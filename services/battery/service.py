@@ -11,6 +11,8 @@ from services.battery.model import BatteryModel
 
 __all__ = ["serve"]
 
+PERSIST_S = 0.2  # wall time between saves: what a killed battery service can lose
+
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     packs = {r.id: BatteryModel(r.battery) for r in rovers}
@@ -72,7 +74,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(f"{keys.ROOT}/*/power/summary", on_summary)
     rt.handle_faults("battery", None, apply_fault)
     rt.restore_faults()
-    rt.every(1.0, persist)
+    rt.every(PERSIST_S, persist)
     rt.on_exit(persist)
     for rover in packs:
         publish(rover)
