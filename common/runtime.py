@@ -3,7 +3,8 @@
 What it gives a service:
 
 - a Zenoh session from the shared connection options, with a liveliness token
-  ``lunaris/<rover>/service/<name>`` per rover served;
+  ``lunaris/<rover>/service/<name>`` per rover served, declared once the service
+  is set up (a live token means its subscribers are in place);
 - :meth:`Runtime.publish`: JSON on a ``zenoh.ext`` advanced publisher whose cache
   keeps the last sample for late joiners;
 - :meth:`Runtime.subscribe`: samples are queued and handled one at a time on a
@@ -100,8 +101,6 @@ class Runtime:
         # Sim time is tracked on Zenoh's thread, before any handler runs, so that every
         # event and payload of every service carries the rover's current t_s.
         self._keep.append(self.session.declare_subscriber(f"{keys.ROOT}/*/clock", self._on_clock))
-        for rover in sorted(self.rovers):
-            self._keep.append(self.session.liveliness().declare_token(keys.service(rover, self.name)))
         return self
 
     def _on_clock(self, s: zenoh.Sample) -> None:
@@ -121,6 +120,9 @@ class Runtime:
         """Serve until SIGINT or SIGTERM: handle queued samples and timers on this thread."""
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: self.stop())
+        # The tokens go up once every handler is declared: live means listening.
+        for rover in sorted(self.rovers):
+            self._keep.append(self.session.liveliness().declare_token(keys.service(rover, self.name)))
         try:
             self._loop()
         finally:

@@ -52,3 +52,14 @@ def twin_factory(router, tmp_path):
     finally:
         for twin in twins:
             twin.stop()
+            # Shown by pytest only when the test fails: what each service said.
+            for service in twin.services:
+                if log := twin.log(service).strip():
+                    print(f"--- {service} log ---\n{log[-3000:]}")
+
+
+@pytest.fixture
+def probe_solo(router):
+    """A probe for tests that start their own twin (the name keeps it apart from module probes)."""
+    with Probe(router) as p:
+        yield p

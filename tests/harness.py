@@ -38,16 +38,18 @@ def free_endpoint() -> str:
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
-def wait_for(predicate: Callable[[], Any], timeout_s: float = 10.0, what: str = "condition",
-             poll_s: float = 0.01) -> Any:
-    """Poll ``predicate`` until it returns something truthy; fail with ``what`` on timeout."""
+def wait_for(predicate: Callable[[], Any], timeout_s: float = 10.0,
+             what: str | Callable[[], str] = "condition", poll_s: float = 0.01) -> Any:
+    """Poll ``predicate`` until it returns something truthy; fail with ``what`` on timeout
+    (a callable is asked only then, so it can describe the last state seen)."""
     deadline = time.monotonic() + timeout_s
     while True:
         value = predicate()
         if value:
             return value
         if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+            raise AssertionError(f"timed out after {timeout_s} s waiting for "
+                                 f"{what() if callable(what) else what}")
         time.sleep(poll_s)
 
 
@@ -168,15 +170,15 @@ class Probe:
         def check() -> Any:
             v = self.value(key)
             return (v,) if v is not None and predicate(v) else None
-        return wait_for(check, timeout_s, f"{key} to satisfy the condition "
-                        f"(last: {self.value(key)!r})")[0]
+        return wait_for(check, timeout_s,
+                        lambda: f"{key} to satisfy the condition (last: {self.value(key)!r})")[0]
 
     def wait_event(self, rover: str, predicate: Callable[[dict], bool],
                    timeout_s: float = 10.0) -> dict:
         key = keys.event(rover)
         def check() -> Any:
             return next((e for e in self.samples(key) if predicate(e)), None)
-        return wait_for(check, timeout_s, f"an event on {key} (seen: {self.samples(key)!r})")
+        return wait_for(check, timeout_s, lambda: f"an event on {key} (seen: {self.samples(key)!r})")
 
     def wait_services(self, rover: str, services: tuple[str, ...], timeout_s: float = 20.0) -> None:
         def live() -> bool:
