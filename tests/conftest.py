@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.harness import ROVERS, Probe, Twin, free_endpoint, open_router
+from common import keys
+from tests.harness import ALL_SERVICES, ROVERS, Probe, Twin, free_endpoint, open_router
 
 # Tests never read an operator's Zenoh configuration.
 os.environ.pop("LUNARIS_ZENOH_CONFIG", None)
@@ -63,3 +64,20 @@ def probe_solo(router):
     """A probe for tests that start their own twin (the name keeps it apart from module probes)."""
     with Probe(router) as p:
         yield p
+
+
+@pytest.fixture(scope="module")
+def mapp_twin(tmp_path_factory):
+    """(probe, twin): every service for mapp-1 on a router of their own, shared by one module.
+    The probe watches every lunaris key; tests must undo what they change."""
+    endpoint = free_endpoint()
+    router = open_router(endpoint)
+    try:
+        with Twin(endpoint, [ROVERS / "mapp.yaml"], tmp_path_factory.mktemp("twin")) as t, \
+                Probe(endpoint) as p:
+            p.watch("lunaris/**")
+            p.wait_services("mapp-1", ALL_SERVICES)
+            p.wait_value(keys.battery_state("mapp-1"), lambda b: b["current_a"] > 0)
+            yield p, t
+    finally:
+        router.close()

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from tests.harness import ALL_SERVICES, ROVERS, Probe, Twin, free_endpoint, open_router, wait_for
+from tests.harness import ROVERS, Probe, wait_for
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -20,24 +20,9 @@ MAPP = ROVERS / "mapp.yaml"
 PANEL_W = 1361 * 0.12 * 0.29 * 0.5  # 23.68 W at the 60 deg sun of mapp.yaml
 
 
-@pytest.fixture(scope="module")
-def twin(tmp_path_factory):
-    """(probe, twin) on a router of their own, shared by this module's tests."""
-    endpoint = free_endpoint()
-    router = open_router(endpoint)
-    try:
-        with Twin(endpoint, [MAPP], tmp_path_factory.mktemp("faults")) as t, Probe(endpoint) as p:
-            p.watch(f"lunaris/{R}/**")
-            p.wait_services(R, ALL_SERVICES)
-            p.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
-            yield p, t
-    finally:
-        router.close()
-
-
 @pytest.fixture
-def probe(twin):
-    p, _ = twin
+def probe(mapp_twin):
+    p, _ = mapp_twin
     p.history.clear()
     yield p
 
