@@ -19,6 +19,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "router": ("lunaris.router", "a standalone embedded Zenoh router"),
     "run": ("lunaris.run", "run one service (what a container runs)"),
     "check": ("lunaris.check", "validate rover definitions and print every problem"),
+    "sim": ("lunaris.sim", "accelerated power-budget run of the models in one process"),
     "watch": ("lunaris.watch", "live terminal view of a rover or the fleet"),
     "pdm": ("lunaris.pdm", "print the PDM device distribution as the dashboard shows it"),
     "fault": ("lunaris.fault", "inject, clear and list faults"),

@@ -20,10 +20,9 @@ store and becomes heat. Temperature follows a lumped model
 
 from __future__ import annotations
 
+import bisect
 import math
 from typing import NamedTuple
-
-import numpy as np
 
 from common.config import Battery as BatteryConfig
 
@@ -40,8 +39,16 @@ class BusPoint(NamedTuple):
 
 def ocv(soc: float, curve_soc: list[float], curve_volts: list[float], cells_series: int) -> float:
     """Pack open-circuit voltage [V]: ``cells_series`` times the per-cell curve, linearly
-    interpolated, held flat outside [0, 1]."""
-    return cells_series * float(np.interp(soc, curve_soc, curve_volts))
+    interpolated, held flat outside [0, 1]. (Plain Python: for one value it is several
+    times faster than ``numpy.interp``, and it runs every tick.)"""
+    if soc <= curve_soc[0]:
+        return cells_series * curve_volts[0]
+    if soc >= curve_soc[-1]:
+        return cells_series * curve_volts[-1]
+    i = bisect.bisect_right(curve_soc, soc)
+    s0, s1 = curve_soc[i - 1], curve_soc[i]
+    v0, v1 = curve_volts[i - 1], curve_volts[i]
+    return cells_series * (v0 + (v1 - v0) * (soc - s0) / (s1 - s0))
 
 
 def solve_bus(v_oc: float, r_ohm: float, power_w: float) -> BusPoint:
@@ -96,6 +103,7 @@ class BatteryModel:
         self.energy_j = cfg.initial_soc * cfg.capacity_j
         self.temperature_c = cfg.thermal.initial_c
         self.demand_w = 0.0
+        self._ocv_soc, self._ocv = -1.0, 0.0
         # injected faults
         self.capacity_loss = 0.0
         self.resistance_factor = 1.0
@@ -122,8 +130,11 @@ class BatteryModel:
 
     @property
     def ocv_v(self) -> float:
-        c = self.cfg.ocv_curve
-        return ocv(self.soc, c.soc, c.volts, self.cfg.cells_series)
+        soc = self.soc
+        if soc != self._ocv_soc:  # evaluated several times a tick at the same charge
+            c = self.cfg.ocv_curve
+            self._ocv_soc, self._ocv = soc, ocv(soc, c.soc, c.volts, self.cfg.cells_series)
+        return self._ocv
 
     @property
     def operational(self) -> bool:

@@ -79,6 +79,7 @@ __all__ = [
     "BridgeOptions",
     "Mapping",
     "MappingFile",
+    "PLACEHOLDERS",
     "RoverNames",
     "Shape",
     "attachment",
@@ -756,7 +757,9 @@ def battery_state_message(state: BatteryState, battery: Battery, stamp_ns: int,
     - ``power_supply_health`` from the active faults (:data:`HEALTH`): OVERHEAT, DEAD, COLD,
       UNSPEC_FAILURE for any other fault, GOOD with none;
     - ``cell_voltage`` and ``cell_temperature``: one NaN per series cell, the message's way of
-      saying the number of cells is known but not their values.
+      saying the number of cells is known but not their values;
+    - ``present`` is always true: a pack off the bus (``disconnected``) is still in the rover,
+      and says so through its health and status.
     """
     options = options or {}
     c = _constants(distro, "sensor_msgs/msg/BatteryState")

@@ -116,6 +116,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         bindings = expand(mf, [rover_names(r) for r in rovers], source=str(path))
     except ConfigError as exc:
         print(exc, file=sys.stderr, flush=True)
+        rt.close()  # an open session would hold the process at exit
         raise SystemExit(2) from None
     opts = mf.bridge
     rover_cfg = {r.id: r for r in rovers}
@@ -214,10 +215,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         for rover in diag_outlets:
             publish_diagnostics(rover)
 
-    patterns = {shape_of(k.mapping.key)[0].pattern for ol in by_key.values() for k in
-                (o.binding for o in ol)}
-    patterns |= {"/".join([keys.ROOT, "*", *_generic(data_key("x", c))]) for cs in comps.values()
-                 for c in cs}
+    # One subscription per family of keys (lunaris/*/rail/*/state ...); samples are told apart
+    # by their exact key above.
+    patterns = {shape_of(o.binding.mapping.key)[0].pattern for ol in by_key.values() for o in ol}
+    patterns |= {shape_of(data_key("{rover}", c))[0].pattern for cs in comps.values() for c in cs}
     for pattern in sorted(patterns):
         rt.subscribe(pattern, on_twin, history=True)
     if diag_outlets:
@@ -271,8 +272,3 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     for rover in diag_outlets:
         diag_dirty.add(rover)
 
-
-def _generic(key: str) -> list[str]:
-    """``lunaris/x/rail/12V/state`` -> ``["rail", "*", "state"]``: the component chunk as ``*``."""
-    _, parts = keys.split(key)
-    return ["*" if i == 1 and len(parts) == 3 else p for i, p in enumerate(parts)]

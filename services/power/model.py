@@ -125,13 +125,13 @@ class PowerModel:
         load_total = bus_total = 0.0
         for name, sw in self.switches.items():
             cfg = sw.cfg
-            state, _ = sw.state(self.battery_ok)
+            state, reason = sw.state(self.battery_ok)
             if state == "on":
                 current = per_rail[name] / cfg.voltage_v
                 if current > cfg.current_limit_a:
                     sw.tripped = True
                     sw.trip_current_a = current
-            state, reason = sw.state(self.battery_ok)
+                    state, reason = sw.state(self.battery_ok)
             if state == "on":
                 power_w = per_rail[name]
                 readings.append(RailReading(name, cfg.voltage_v, power_w / cfg.voltage_v,

@@ -1,0 +1,53 @@
+"""What every benchmark shares: the machine it ran on, percentiles, a twin to measure."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import tempfile
+from contextlib import contextmanager
+from importlib.metadata import version
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router  # noqa: E402
+
+__all__ = ["ROOT", "machine", "percentiles", "running_twin"]
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{cpu}, {os.cpu_count()} cores, {platform.system()} {platform.release()}, "
+            f"Python {platform.python_version()}, eclipse-zenoh {version('eclipse-zenoh')}")
+
+
+def percentiles(samples_ms: list[float]) -> str:
+    s = sorted(samples_ms)
+    def q(p: float) -> float:
+        return s[min(len(s) - 1, int(round(p * (len(s) - 1))))]
+    return (f"n={len(s)}  p50={q(0.50):.2f} ms  p90={q(0.90):.2f} ms  p99={q(0.99):.2f} ms  "
+            f"max={s[-1]:.2f} ms")
+
+
+@contextmanager
+def running_twin(rover_files: list[str | Path], services=ALL_SERVICES, extra=None):
+    """A router, the services as processes, and a probe: (probe, twin, endpoint)."""
+    endpoint = free_endpoint()
+    router = open_router(endpoint)
+    try:
+        with tempfile.TemporaryDirectory(prefix="lunaris-bench-") as tmp, \
+                Twin(endpoint, list(rover_files), Path(tmp), services=tuple(services),
+                     extra=extra) as twin, Probe(endpoint) as probe:
+            yield probe, twin, endpoint
+    finally:
+        router.close()

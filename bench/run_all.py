@@ -1,0 +1,14 @@
+"""Every benchmark, one after the other; each prints its own figures."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+for script in ("sim_8h.py", "fleet.py", "fault_latency.py"):
+    print(f"$ python bench/{script}", flush=True)
+    subprocess.run([sys.executable, str(HERE / script)], cwd=HERE, check=True)
+    print(flush=True)
