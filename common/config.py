@@ -32,6 +32,8 @@ __all__ = [
     "SolarRail",
     "Thermal",
     "Umbilical",
+    "YamlLoader",
+    "check_structure",
     "load_rover",
     "parse_rover",
 ]
@@ -180,11 +182,11 @@ def load_rover(path: str | Path) -> Rover:
 def parse_rover(text: str, source: str = "<rover>") -> Rover:
     """Validate rover YAML text; raise :class:`ConfigError` listing every problem."""
     try:
-        data = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
+        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         raise ConfigError(source, [f"not valid YAML: {exc}"]) from None
     problems: list[str] = []
-    _check(data, mi.type_info(Rover), "", problems)
+    check_structure(data, Rover, problems)
     if isinstance(data, dict):
         problems.extend(_semantic_problems(data))
     if problems:
@@ -192,11 +194,21 @@ def parse_rover(text: str, source: str = "<rover>") -> Rover:
     return msgspec.convert(data, Rover)
 
 
-class _Loader(yaml.SafeLoader):
-    """SafeLoader with YAML 1.2 floats: ``5.3e5`` is a number, not the string YAML 1.1 makes it."""
+class YamlLoader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 scalars, for every Lunaris data file: ``5.3e5`` is a number
+    (YAML 1.1 makes it a string) and only ``true``/``false`` are booleans (YAML 1.1 also
+    reads ``on``, ``off``, ``yes``, ``no`` as booleans, which would turn a key ``on:`` into
+    ``True:``)."""
 
 
-_Loader.add_implicit_resolver(
+_BOOL = "tag:yaml.org,2002:bool"
+YamlLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag != _BOOL]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+YamlLoader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+                                 list("tTfF"))
+YamlLoader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(
         r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
@@ -234,6 +246,12 @@ def _check_bounds(value: float, t: Any, path: str, problems: list[str]) -> None:
         problems.append(f"{where}: must be <= {t.le}, got {value}")
     if t.lt is not None and value >= t.lt:
         problems.append(f"{where}: must be < {t.lt}, got {value}")
+
+
+def check_structure(data: Any, struct: type[msgspec.Struct], problems: list[str]) -> None:
+    """Check parsed YAML against a Struct's annotations (types, ranges, name patterns,
+    unknown and missing fields), appending every problem with its path to ``problems``."""
+    _check(data, mi.type_info(struct), "", problems)
 
 
 def _check(value: Any, t: Any, path: str, problems: list[str]) -> None:

@@ -41,9 +41,7 @@ import yaml
 from rosbags.typesys import Stores, get_typestore
 
 from common import keys
-from common.config import Battery, ConfigError, Rover
-from common.config import _check as _check_structure  # the one annotation-driven YAML checker
-from common.config import _Loader as _YamlLoader  # YAML 1.2 floats (5.3e5 is a number)
+from common.config import Battery, ConfigError, Rover, YamlLoader, check_structure
 from common.messages import (
     BadInput,
     BatteryState,
@@ -318,11 +316,11 @@ def load_mapping(path: str | Path) -> MappingFile:
 def parse_mapping(text: str, source: str = "<mapping>") -> MappingFile:
     """Validate mapping YAML text; raise :class:`ConfigError` listing every problem."""
     try:
-        data = yaml.load(text, Loader=_YamlLoader)  # noqa: S506 - a SafeLoader subclass
+        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         raise ConfigError(source, [f"not valid YAML: {exc}"]) from None
     problems: list[str] = []
-    _check_structure(data, mi.type_info(MappingFile), "", problems)
+    check_structure(data, MappingFile, problems)
     if not isinstance(data, dict):
         raise ConfigError(source, problems)
     options = _convert(data.get("bridge", {}), BridgeOptions)

@@ -130,12 +130,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     by_key: dict[str, list[_Outlet]] = {}  # twin key -> its outlets
     payload_type: dict[str, type[msgspec.Struct]] = {}
     diag_outlets: dict[str, list[_Outlet]] = {}  # rover -> DiagnosticArray outlets
-    inbound: list[Binding] = []
-    entity_id = 0
-    for b in bindings:
-        entity_id += 1
+    # rmw_zenoh entity ids: the node is 0, each binding its position in the list from 1
+    for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction == "in":
-            inbound.append(b)
             continue
         outlet = _Outlet(rt, b, mf, zid, entity_id)
         if b.mapping.convert == "diagnostics":
@@ -251,9 +248,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
                 rt.call_soon(on_inbound, b, flavour, str(s.key_expr), s.payload.to_bytes())
         rt.keep(rt.session.declare_subscriber(keyexpr, on_sample))
 
-    entity_id = 0
-    for b in bindings:
-        entity_id += 1
+    for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction != "in":
             continue
         bare = b.topic.strip("/")

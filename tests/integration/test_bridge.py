@@ -1,0 +1,491 @@
+"""The dashboard bridge as a real process beside the twin (SPEC §7).
+
+Every output is read back with the independent decoder of tests/rosmsg.py (mcap-ros2-support
+against the .msg definitions in tests/msgdefs/) and checked against the twin's own keys, for
+each flavour and each message type of the default mapping. Expected topics, units and
+conversions are written out here from the rover definition, not taken from the bridge.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import threading
+import time
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import pytest
+import zenoh
+
+from common import keys
+from common.config import load_rover
+from tests import rosmsg
+from tests.harness import ALL_SERVICES, ROOT, ROVERS, lunaris_cmd, stop_process, wait_for
+
+pytestmark = pytest.mark.timeout(60)
+
+R = "mapp-1"
+SERVICES = (*ALL_SERVICES, "bridge")
+FLAVOURS = ("ros2dds", "rmw_zenoh", "json")
+MAPP = load_rover(ROVERS / "mapp.yaml")
+RAILS = [r.name for r in MAPP.rails] + [MAPP.solar.rail.name]
+LOADS = [ld.name for ld in MAPP.loads]
+# Published: the REP-2016 type hash of std_msgs/msg/Bool.
+BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9"
+RMW_KEY = re.compile(
+    r"^0/(?P<topic>.+)/(?P<pkg>\w+)::msg::dds_::(?P<name>\w+)_/(?P<hash>RIHS01_[0-9a-f]{64})$")
+
+BOOL, INT32, FLOAT32 = "std_msgs/msg/Bool", "std_msgs/msg/Int32", "std_msgs/msg/Float32"
+BATTERY, DIAGNOSTICS = "sensor_msgs/msg/BatteryState", "diagnostic_msgs/msg/DiagnosticArray"
+MULTI = "std_msgs/msg/Float64MultiArray"
+
+
+def expected_topics() -> dict[str, str]:
+    """Every outbound topic of the default mapping for the MAPP rover -> its message type."""
+    out = {"/final_comms_radio_bool": BOOL, "/battery_state": BATTERY, "/diagnostics": DIAGNOSTICS,
+           "/pdm/sys_bus_voltage_mv": INT32, "/pdm/battery_voltage_mv": INT32,
+           "/pdm/battery_current_ma": INT32, "/pdm/battery_power_mw": INT32}
+    out |= {f"/load_{load}_power_w": FLOAT32 for load in LOADS}
+    for rail in RAILS:
+        out |= {f"/pdm/rail_{rail}_{v}": INT32 for v in ("voltage_mv", "current_ma", "power_mw")}
+        if rail != "SOLAR":  # the MAPP solar rail has no current limit: nothing is published
+            out[f"/pdm/rail_{rail}_current_limit_ma"] = INT32
+    return out
+
+
+TOPICS = expected_topics()
+
+
+def milli(x: float) -> int:
+    """x * 1000 rounded half away from zero, as the dashboard's integer mV, mA and mW."""
+    return int(math.copysign(math.floor(abs(x) * 1000 + 0.5), x))
+
+
+def nominal_voltage_v() -> float:
+    """The pack's mean open-circuit voltage over its charge (trapezoid rule), for Ah."""
+    soc, volts = MAPP.battery.ocv_curve.soc, MAPP.battery.ocv_curve.volts
+    area = sum((soc[i + 1] - soc[i]) * (volts[i] + volts[i + 1]) / 2 for i in range(len(soc) - 1))
+    return MAPP.battery.cells_series * area
+
+
+class Raw(NamedTuple):
+    payload: bytes
+    attachment: bytes | None
+    encoding: str
+    t_mono: float
+
+
+class Tap:
+    """Every sample under ``**`` as raw bytes, with its attachment and arrival time."""
+
+    def __init__(self, session: zenoh.Session):
+        self.samples: dict[str, list[Raw]] = {}
+        self._lock = threading.Lock()
+        self._sub = session.declare_subscriber("**", self._on)
+
+    def _on(self, s: zenoh.Sample) -> None:
+        raw = Raw(s.payload.to_bytes(), s.attachment.to_bytes() if s.attachment else None,
+                  str(s.encoding), time.monotonic())
+        with self._lock:
+            self.samples.setdefault(str(s.key_expr), []).append(raw)
+
+    def keys(self) -> list[str]:
+        with self._lock:
+            return list(self.samples)
+
+    def history(self, key: str) -> list[Raw]:
+        with self._lock:
+            return list(self.samples.get(key, []))
+
+    def latest(self, key: str) -> Raw | None:
+        with self._lock:
+            got = self.samples.get(key)
+            return got[-1] if got else None
+
+    def rmw_key(self, topic: str) -> str | None:
+        bare = topic.strip("/")
+        return next((k for k in self.keys() if (m := RMW_KEY.match(k)) and m["topic"] == bare), None)
+
+    def key(self, flavour: str, topic: str) -> str | None:
+        if flavour == "ros2dds":
+            return topic.strip("/")
+        if flavour == "json":
+            return "json/" + topic.strip("/")
+        return self.rmw_key(topic)
+
+    def message(self, flavour: str, topic: str, after: float = 0.0) -> dict | None:
+        """The latest message on a topic (arrived after ``after``), decoded independently."""
+        key = self.key(flavour, topic)
+        raw = self.latest(key) if key else None
+        if raw is None or raw.t_mono < after:
+            return None
+        if flavour == "json":
+            return json.loads(raw.payload)
+        return as_dict(rosmsg.decode(TOPICS.get(topic, MULTI), raw.payload))
+
+
+def as_dict(value: Any) -> Any:
+    """A decoded message (namespaces with ``__slots__``) as plain dicts and lists."""
+    if isinstance(value, list | tuple):
+        return [as_dict(v) for v in value]
+    slots = getattr(type(value), "__slots__", None)
+    if slots is not None:
+        return {k: as_dict(getattr(value, k)) for k in slots}
+    return value
+
+
+def settle(check, timeout_s: float = 15.0, what: str = "outputs to match the twin") -> None:
+    """Wait until ``check()`` returns no mismatch; fail naming the last ones."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        problems = check()
+        if not problems:
+            return
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}: "
+                                 + "; ".join(problems[:12]))
+        time.sleep(0.05)
+
+
+def close(a: float | None, b: float, rel: float = 2e-6, abs_: float = 1e-5) -> bool:
+    return a is not None and math.isclose(a, b, rel_tol=rel, abs_tol=abs_)
+
+
+@pytest.fixture
+def dashboard(probe, twin_factory, mapp_file):
+    """The twin and the bridge, with a tap that was listening before the bridge started."""
+    tap = Tap(probe.session)
+    probe.watch(f"lunaris/{R}/**")
+    twin = twin_factory([mapp_file], services=SERVICES)
+    probe.wait_services(R, SERVICES)
+    return twin, tap
+
+
+def pause(probe) -> None:
+    """Hold the clock: the loads keep their values and the battery stops moving, so the
+    bridge's outputs and the twin's keys can be compared exactly."""
+    probe.put(keys.clock_control(R), {"paused": True})
+    probe.wait_value(keys.clock(R), lambda c: c["paused"])
+
+
+# -- values -------------------------------------------------------------------------------------
+
+
+def mismatches(tap: Tap, probe, flavour: str) -> list[str]:
+    """Every outbound topic of the default mapping against the twin's current keys."""
+    twin = {k: probe.value(k) for k in (keys.battery_state(R), keys.power_summary(R),
+                                        keys.radio_link(R, "lander"))}
+    if any(v is None for v in twin.values()):
+        return ["twin keys not there yet"]
+    bad: list[str] = []
+
+    def msg(topic: str) -> dict | None:
+        m = tap.message(flavour, topic)
+        if m is None:
+            bad.append(f"no {topic}")
+        return m
+
+    in_range = twin[keys.radio_link(R, "lander")]["in_range"]
+    if (m := msg("/final_comms_radio_bool")) is not None and m["data"] != in_range:
+        bad.append(f"final_comms_radio_bool {m['data']} vs {in_range}")
+    for load in LOADS:
+        lp = probe.value(keys.load_power(R, load))
+        m = msg(f"/load_{load}_power_w")
+        if m is not None and (lp is None or not close(m["data"], lp["power_w"])):
+            bad.append(f"load {load}: {m['data']} vs {lp and lp['power_w']}")
+    b, s = twin[keys.battery_state(R)], twin[keys.power_summary(R)]
+    pdm = {"/pdm/sys_bus_voltage_mv": s["bus_voltage_v"], "/pdm/battery_voltage_mv": b["voltage_v"],
+           "/pdm/battery_current_ma": b["current_a"], "/pdm/battery_power_mw": b["power_w"]}
+    for rail in RAILS:
+        rs = probe.value(keys.rail_state(R, rail))
+        if rs is None:
+            bad.append(f"twin rail {rail}")
+            continue
+        pdm |= {f"/pdm/rail_{rail}_voltage_mv": rs["voltage_v"],
+                f"/pdm/rail_{rail}_current_ma": rs["current_a"],
+                f"/pdm/rail_{rail}_power_mw": rs["power_w"]}
+        if rs["current_limit_a"] is not None:
+            pdm[f"/pdm/rail_{rail}_current_limit_ma"] = rs["current_limit_a"]
+    for topic, value in pdm.items():
+        m = msg(topic)
+        if m is not None and (m["data"] != milli(value) or not isinstance(m["data"], int)):
+            bad.append(f"{topic}: {m['data']} vs {milli(value)}")
+    if tap.key(flavour, "/pdm/rail_SOLAR_current_limit_ma") in tap.keys():
+        bad.append("a null current limit was published")
+
+    if (m := msg("/battery_state")) is not None:
+        v_nom = nominal_voltage_v()
+        want = {"voltage": b["voltage_v"], "temperature": b["temperature_c"],
+                "current": -b["current_a"],  # ROS: negative while discharging
+                "charge": b["energy_j"] / v_nom / 3600, "capacity": b["capacity_j"] / v_nom / 3600,
+                "design_capacity": MAPP.battery.capacity_j / v_nom / 3600, "percentage": b["soc"]}
+        for name, value in want.items():
+            if not close(m[name], value, rel=1e-6):
+                bad.append(f"battery_state.{name}: {m[name]} vs {value}")
+        status = 2 if b["current_a"] > 1e-3 else (1 if b["current_a"] < -1e-3 else None)
+        codes = (m["power_supply_health"], m["power_supply_technology"], m["present"])
+        if codes != (1, 2, True) or (status and m["power_supply_status"] != status):
+            bad.append(f"battery_state status/health/technology {m['power_supply_status']} {codes}")
+        cells = m["cell_voltage"]  # one NaN per cell (JSON: null)
+        if len(cells) != MAPP.battery.cells_series or any(c is not None and not math.isnan(c)
+                                                            for c in cells):
+            bad.append(f"battery_state.cell_voltage {cells}")
+        if abs(m["header"]["stamp"]["sec"] - time.time()) > 60:
+            bad.append(f"battery_state stamp {m['header']['stamp']}")
+
+    if (m := msg("/diagnostics")) is not None:
+        want_names = {f"{R}/{c}" for c in ["battery", "umbilical", *(f"rail/{r}" for r in RAILS),
+                                           *(f"load/{ld}" for ld in LOADS),
+                                           *(f"solar/{p.name}" for p in MAPP.solar.panels),
+                                           *(f"radio/{r.name}" for r in MAPP.radios)]}
+        got = {st["name"]: st for st in m["status"]}
+        if set(got) != want_names:
+            bad.append(f"diagnostics names {sorted(set(got) ^ want_names)}")
+        not_ok = [(n, st["level"], st["message"]) for n, st in got.items() if st["level"] != 0]
+        if not_ok:
+            bad.append(f"diagnostics not OK: {not_ok}")
+    return bad
+
+
+@pytest.mark.parametrize("flavour", FLAVOURS)
+def test_every_default_topic_carries_the_twin_values(dashboard, probe, flavour):
+    twin, tap = dashboard
+    pause(probe)
+    settle(lambda: mismatches(tap, probe, flavour))
+    # CDR flavours carry the encapsulation header (little endian), json the ROS fields.
+    key = tap.key(flavour, "/battery_state")
+    raw = tap.latest(key)
+    if flavour == "json":
+        assert raw.encoding.startswith("application/json")
+    else:
+        assert raw.payload[:4] == b"\x00\x01\x00\x00" and raw.encoding.startswith("application/cdr")
+
+
+def test_rmw_zenoh_keys_attachments_and_liveliness(dashboard, probe):
+    twin, tap = dashboard
+    settle(lambda: [t for t in TOPICS if tap.rmw_key(t) is None], what="every rmw_zenoh topic")
+    bool_key = f"0/final_comms_radio_bool/std_msgs::msg::dds_::Bool_/{BOOL_HASH}"
+    assert bool_key in tap.keys()
+    gids: dict[str, bytes] = {}
+    for topic, typename in TOPICS.items():
+        key = tap.rmw_key(topic)
+        m = RMW_KEY.match(key)
+        pkg, _, name = typename.split("/")
+        assert (m["pkg"], m["name"]) == (pkg, name), key
+        # a few more samples so that every publisher shows a run of sequence numbers
+        wait_for(lambda k=key: len(tap.history(k)) >= 3, 10, f"samples on {key}")
+        history = tap.history(key)
+        atts = [rosmsg.parse_attachment(r.attachment) for r in history]
+        assert atts[0].sequence == 1, f"{key}: first sequence {atts[0].sequence}"
+        assert [a.sequence for a in atts] == list(range(1, len(atts) + 1)), key
+        assert len({a.gid for a in atts}) == 1, f"{key}: the GID changed"
+        stamps = [a.timestamp_ns for a in atts]
+        assert stamps == sorted(stamps) and abs(stamps[-1] / 1e9 - time.time()) < 60, key
+        gids[topic] = atts[0].gid
+    assert len(set(gids.values())) == len(gids), "two publishers share a GID"
+
+    tokens = [str(r.ok.key_expr) for r in probe.session.liveliness().get("@ros2_lv/0/**", timeout=5)
+              if r.ok is not None]
+    nodes = [t for t in tokens if "/NN/" in t]
+    assert len(nodes) == 1 and nodes[0].endswith("/NN/%/%/lunaris_bridge"), nodes
+    zid = nodes[0].split("/")[2]
+    publishers = {}
+    for t in tokens:
+        parts = t.split("/")
+        if parts[5] == "MP":
+            assert parts[2] == zid and parts[8] == "lunaris_bridge", t
+            publishers[parts[9].replace("%", "/")] = (parts[10], parts[11], parts[12])
+    # what `ros2 topic list` shows: every outbound topic with its type and hash (the solar
+    # rail's current limit too: it has a publisher, which never publishes a null limit)
+    assert set(publishers) == set(TOPICS) | {"/pdm/rail_SOLAR_current_limit_ma"}
+    assert publishers["/final_comms_radio_bool"][:2] == ("std_msgs::msg::dds_::Bool_", BOOL_HASH)
+    assert publishers["/battery_state"][0] == "sensor_msgs::msg::dds_::BatteryState_"
+    assert publishers["/diagnostics"][0] == "diagnostic_msgs::msg::dds_::DiagnosticArray_"
+    for topic, (_, type_hash, qos) in publishers.items():
+        assert topic not in TOPICS or type_hash == tap.rmw_key(topic).rsplit("/", 1)[1]
+        assert qos == ":1:,1:,:,:,,", qos  # TRANSIENT_LOCAL, KEEP_LAST 1
+    subs = [t.split("/") for t in tokens if "/MS/" in t]
+    assert [(p[9], p[10]) for p in subs] == [
+        ("%curr_to_receiving_radio_m", "std_msgs::msg::dds_::Float64MultiArray_")]
+
+
+# -- inbound -------------------------------------------------------------------------------------
+
+
+def _put_position(probe, tap: Tap, flavour: str, distance_m: float, angle_deg: float) -> None:
+    msg = {"layout": {"dim": [], "data_offset": 0}, "data": [distance_m, angle_deg]}
+    if flavour == "json":
+        probe.session.put("json/curr_to_receiving_radio_m", json.dumps(msg))
+        return
+    cdr = rosmsg.encode(MULTI, msg)
+    if flavour == "ros2dds":
+        probe.session.put("curr_to_receiving_radio_m", cdr)
+        return
+    # As a ROS 2 node on rmw_zenoh would: the key from the advertised type, an attachment.
+    token = next(str(r.ok.key_expr) for r in probe.session.liveliness().get("@ros2_lv/0/**")
+                 if r.ok is not None and "/MS/" in str(r.ok.key_expr))
+    parts = token.split("/")
+    key = f"0/curr_to_receiving_radio_m/{parts[10]}/{parts[11]}"
+    seq = getattr(tap, "inbound_seq", 0) + 1
+    tap.inbound_seq = seq
+    att = seq.to_bytes(8, "little") + time.time_ns().to_bytes(8, "little") + b"\x10" + bytes(16)
+    probe.session.put(key, cdr, attachment=att)
+
+
+@pytest.mark.parametrize("flavour", FLAVOURS)
+def test_the_dashboard_position_moves_the_radio_and_back(dashboard, probe, flavour):
+    twin, tap = dashboard
+    link = keys.radio_link(R, "lander")
+    for distance_m, in_range in ((1000.0, False), (100.0, True), (380.0, True), (0.0, True),
+                                 (300.0, False)):
+        angle_deg = 90.0 if distance_m == 300.0 else 0.0  # along the 250 m minor axis: out
+        sent = time.monotonic()
+        _put_position(probe, tap, flavour, distance_m, angle_deg)
+        probe.wait_value(link, lambda v, d=distance_m, r=in_range: v["in_range"] is r and
+                         math.isclose(math.hypot(v["x_m"], v["y_m"]), d, abs_tol=1e-6))
+        settle(lambda w=in_range, t0=sent: [] if (m := tap.message(
+            flavour, "/final_comms_radio_bool", after=t0)) is not None and m["data"] == w
+            else ["final_comms_radio_bool"], what=f"final_comms_radio_bool {in_range}")
+
+
+def test_a_bad_dashboard_message_is_rejected(dashboard, probe):
+    twin, tap = dashboard
+    probe.session.put("curr_to_receiving_radio_m", b"\x00\x01\x00\x00\xff")
+    probe.wait_event(R, lambda e: e["kind"] == "rejected" and e["key"] == "curr_to_receiving_radio_m"
+                     and "not a CDR std_msgs/msg/Float64MultiArray" in e["message"])
+    probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [1.0]}))
+    probe.wait_event(R, lambda e: e["kind"] == "rejected" and "expected 2 values" in e["message"])
+    probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [-5.0, 0.0]}))
+    probe.wait_event(R, lambda e: e["kind"] == "rejected" and e["source"] == "radio"
+                     and "distance_m" in e["message"])
+
+
+# -- faults ---------------------------------------------------------------------------------------
+
+
+def _status(tap: Tap, flavour: str, component: str, after: float = 0.0) -> dict | None:
+    m = tap.message(flavour, "/diagnostics", after=after)
+    return next((s for s in m["status"] if s["name"] == f"{R}/{component}"), None) if m else None
+
+
+def _first(tap: Tap, flavour: str, topic: str, since: float, predicate) -> float | None:
+    """Arrival time of the first sample on a topic after ``since`` that satisfies ``predicate``."""
+    for raw in tap.history(tap.key(flavour, topic) or ""):
+        if raw.t_mono >= since:
+            msg = (json.loads(raw.payload) if flavour == "json"
+                   else as_dict(rosmsg.decode(TOPICS[topic], raw.payload)))
+            if predicate(msg):
+                return raw.t_mono
+    return None
+
+
+def test_an_injected_fault_reaches_the_dashboard(dashboard, probe):
+    twin, tap = dashboard
+    settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
+    fault = keys.fault(R, "rail/5V_CH2", "fail")
+
+    def failed_rail(msg: dict) -> bool:
+        st = next(s for s in msg["status"] if s["name"] == f"{R}/rail/5V_CH2")
+        return st["level"] == 1 and [v["key"] for v in st["values"]] == ["fail"]
+
+    t0 = time.monotonic()
+    probe.put(fault)
+    latency = {}
+    for flavour in FLAVOURS:
+        settle(lambda f=flavour: [] if _first(tap, f, "/diagnostics", t0, failed_rail) else ["diag"],
+               what=f"{flavour} DiagnosticArray to show the failed rail")
+        settle(lambda f=flavour: [] if _first(tap, f, "/pdm/rail_5V_CH2_voltage_mv", t0,
+                                              lambda m: m["data"] == 0) else ["0 mV"],
+               what=f"{flavour} rail voltage to read 0 mV")
+        latency[flavour] = (_first(tap, flavour, "/diagnostics", t0, failed_rail) - t0,
+                            _first(tap, flavour, "/pdm/rail_5V_CH2_voltage_mv", t0,
+                                   lambda m: m["data"] == 0) - t0)
+    print("fault -> dashboard latency [ms] (diagnostics, pdm): "
+          + ", ".join(f"{f} {d * 1e3:.1f} / {p * 1e3:.1f}" for f, (d, p) in latency.items()))
+    assert _status(tap, "json", "load/nav_camera")["level"] == 0
+
+    t1 = time.monotonic()
+    probe.delete(fault)
+    settle(lambda: [] if (st := _status(tap, "ros2dds", "rail/5V_CH2", t1)) is not None and st["level"] == 0
+           and st["values"] == [] else ["rail OK"], what="the rail back to OK")
+    settle(lambda: [] if (m := tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t1))
+           and m["data"] == 5000 else ["5000 mV"], what="the rail back at 5000 mV")
+
+
+def test_a_short_trips_the_rail_to_error(dashboard, probe):
+    twin, tap = dashboard
+    settle(lambda: [] if tap.message("ros2dds", "/diagnostics") else ["diag"])
+    probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
+    settle(lambda: [] if (st := _status(tap, "rmw_zenoh", "rail/5V_CH2")) is not None and st["level"] == 2
+           and "tripped" in [v["key"] for v in st["values"]] else ["ERROR"],
+           what="the tripped rail as ERROR")
+    cam = _status(tap, "rmw_zenoh", "load/nav_camera")
+    assert cam["level"] == 1 and cam["message"] == "short"
+    settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_current_ma")["data"] == 0
+           else ["0 mA"], what="the tripped rail at 0 mA")
+
+
+def test_a_silent_component_goes_stale(dashboard, probe):
+    twin, tap = dashboard
+    settle(lambda: [] if (st := _status(tap, "ros2dds", "load/imu")) is not None and st["level"] == 0
+           else ["OK"])
+    stop_process(twin.procs["loads"])
+    settle(lambda: [] if (st := _status(tap, "ros2dds", "load/imu")) is not None and st["level"] == 3
+           else ["STALE"], timeout_s=10, what="the loads to go STALE")
+    assert _status(tap, "ros2dds", "battery")["level"] == 0
+    twin.start("loads")
+    settle(lambda: [] if (st := _status(tap, "ros2dds", "load/imu")) is not None and st["level"] == 0
+           else ["OK"], what="the loads back to OK")
+
+
+# -- start-up and the PDM view ----------------------------------------------------------------------
+
+
+def test_a_bad_mapping_stops_the_bridge_naming_every_problem(router, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("mappings:\n"
+                   "  - {topic: /a, type: std_msgs/msg/Int32, key: 'lunaris/{rover}/battery/state',"
+                   " field: volts}\n"
+                   "  - {topic: b, type: std_msgs/msg/Nope, key: 'lunaris/{rover}/battery/state'}\n")
+    proc = subprocess.run(lunaris_cmd("run", "bridge", "--rover", str(ROVERS / "mapp.yaml"),
+                                      "--bridge-config", str(bad), "--connect", router),
+                          capture_output=True, text=True, timeout=30, cwd=ROOT)
+    assert proc.returncode == 2, proc.stderr
+    for want in (f"{bad}: ", "mappings[0].field: BatteryState has no field 'volts'",
+                 "mappings[1].topic: 'b' must start with '/'",
+                 "mappings[1].type: unknown ROS 2 message type 'std_msgs/msg/Nope'"):
+        assert want in proc.stderr, proc.stderr
+
+
+def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, router, tmp_path):
+    pause(probe)
+    settle(lambda: [] if all(probe.value(keys.rail_state(R, r)) for r in RAILS) else ["rails"])
+    proc = subprocess.run(lunaris_cmd("pdm", "--once", "--rover", R, "--connect", router),
+                          capture_output=True, text=True, timeout=30, cwd=Path(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert lines[0].startswith(f"PDM device distribution - {R}")
+    table = {}
+    for line in lines[1:]:
+        m = re.fullmatch(r"\s+(.+?)\s+(-?\d+|-)\s+(mV|mA|mW)", line)
+        assert m, f"not 'name value unit': {line!r}"
+        table[m[1]] = (None if m[2] == "-" else int(m[2]), m[3])
+    b, s = probe.value(keys.battery_state(R)), probe.value(keys.power_summary(R))
+    want = {"System bus voltage": (milli(s["bus_voltage_v"]), "mV"),
+            "Battery voltage": (milli(b["voltage_v"]), "mV"),
+            "Battery current": (milli(b["current_a"]), "mA"),
+            "Battery power": (milli(b["power_w"]), "mW")}
+    for rail in RAILS:
+        rs = probe.value(keys.rail_state(R, rail))
+        limit = rs["current_limit_a"]
+        want |= {f"{rail} voltage": (milli(rs["voltage_v"]), "mV"),
+                 f"{rail} current": (milli(rs["current_a"]), "mA"),
+                 f"{rail} power": (milli(rs["power_w"]), "mW"),
+                 f"{rail} current limit": (None if limit is None else milli(limit), "mA")}
+    assert table == want
+    # one rail's values together, in the dashboard's order
+    i = list(table).index("12V voltage")
+    assert list(table)[i:i + 4] == ["12V voltage", "12V current", "12V power", "12V current limit"]

@@ -1,0 +1,425 @@
+"""The bridge model: mapping validation, values, ROS 2 messages read back by an independent
+decoder (tests/rosmsg.py), and rmw_zenoh names checked against published facts."""
+
+from __future__ import annotations
+
+import math
+import struct
+from pathlib import Path
+
+import pytest
+from numpy.testing import assert_allclose
+
+from common.config import ConfigError, load_rover
+from common.messages import BadInput, BatteryState, LoadPower, PowerSummary, RailState
+from common.runtime import ActiveFault
+from services.bridge import model as bm
+from tests import rosmsg
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT = ROOT / "config" / "bridge" / "default.yaml"
+MAPP = load_rover(ROOT / "config" / "rovers" / "mapp.yaml")
+LTV = load_rover(ROOT / "config" / "rovers" / "ltv.yaml")
+
+# Published facts: std_msgs/msg/Bool's REP-2016 hash, and rmw_zenoh's design document
+# (docs/design.md) examples of a topic key and of liveliness tokens.
+BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9"
+STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+
+
+def mapping(text: str) -> bm.MappingFile:
+    return bm.parse_mapping(text, source="test.yaml")
+
+
+def one(extra: str = "", **fields: str) -> str:
+    """A mapping file of one mapping; ``fields`` override the defaults."""
+    base = {"topic": "/x", "type": "std_msgs/msg/Int32", "key": "lunaris/{rover}/battery/state",
+            "field": "voltage_v", "scale": "1000"}
+    base.update(fields)
+    lines = "".join(f"    {k}: {v}\n" for k, v in base.items() if v is not None)
+    return f"{extra}mappings:\n  -\n{lines}"
+
+
+def battery_state(**kw) -> BatteryState:
+    base = dict(t_s=1.0, energy_j=2.65e5, capacity_j=5.3e5, soc=0.5, ocv_v=15.4, voltage_v=15.2,
+                current_a=3.0, power_w=45.6, temperature_c=25.0, operational=True, fault_code=0,
+                faults=[], time_to_empty_s=1000.0)
+    base.update(kw)
+    return BatteryState(**base)
+
+
+# -- the mapping file -----------------------------------------------------------------------------
+
+
+def test_default_mapping_covers_what_the_dashboard_uses():
+    mf = bm.load_mapping(DEFAULT)
+    bindings = bm.expand(mf, [bm.rover_names(MAPP)])
+    out = {b.topic: b for b in bindings if b.mapping.direction == "out"}
+    inbound = {b.topic: b for b in bindings if b.mapping.direction == "in"}
+    assert out["/final_comms_radio_bool"].mapping.type == "std_msgs/msg/Bool"
+    assert out["/final_comms_radio_bool"].key == "lunaris/mapp-1/radio/lander/link"
+    assert inbound["/curr_to_receiving_radio_m"].key == "lunaris/mapp-1/input/radio/lander/position"
+    assert inbound["/curr_to_receiving_radio_m"].mapping.fields == ["distance_m", "angle_deg"]
+    assert out["/battery_state"].mapping.type == "sensor_msgs/msg/BatteryState"
+    assert out["/diagnostics"].mapping.type == "diagnostic_msgs/msg/DiagnosticArray"
+    for load in MAPP.loads:
+        assert out[f"/load_{load.name}_power_w"].key == f"lunaris/mapp-1/load/{load.name}/power"
+    pdm = {t: b for t, b in out.items() if b.mapping.group == "pdm"}
+    assert {"/pdm/sys_bus_voltage_mv", "/pdm/battery_voltage_mv", "/pdm/battery_current_ma",
+            "/pdm/battery_power_mw"} <= set(pdm)
+    for rail in [r.name for r in MAPP.rails] + [MAPP.solar.rail.name]:
+        for value, unit in (("voltage", "mv"), ("current", "ma"), ("power", "mw"),
+                            ("current_limit", "ma")):
+            b = pdm[f"/pdm/rail_{rail}_{value}_{unit}"]
+            assert b.key == f"lunaris/mapp-1/rail/{rail}/state"
+            assert (b.mapping.type, b.mapping.scale) == ("std_msgs/msg/Int32", 1000.0)
+    assert {b.mapping.unit for b in pdm.values()} == {"mV", "mA", "mW"}
+
+
+def test_a_fleet_gets_prefixed_ros_safe_topics():
+    mf = bm.load_mapping(DEFAULT)
+    bindings = bm.expand(mf, [bm.rover_names(MAPP), bm.rover_names(LTV)])
+    topics = {b.topic for b in bindings}
+    assert "/mapp_1/final_comms_radio_bool" in topics
+    assert "/ltv_1/pdm/rail_TRACTION_400V_voltage_mv" in topics
+    assert "/final_comms_radio_bool" not in topics
+    assert len(topics) == len(bindings)
+
+
+def test_every_problem_of_a_bad_mapping_is_named():
+    text = """
+bridge:
+  ros_distro: iron
+  fleet_topic_prefix: /fleet
+  outputs: {json: {prefix: ""}}
+mappings:
+  - {topic: no_slash, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: voltage_v}
+  - {topic: /a, type: std_msgs/msg/Nope, key: "lunaris/{rover}/battery/state", field: voltage_v}
+  - {topic: /b, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: volts}
+  - {topic: /c, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/oops", field: voltage_v}
+  - {topic: /d, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: voltage_v,
+     scale: 0}
+  - {topic: /e, type: std_msgs/msg/Bool, key: "lunaris/{rover}/battery/state", field: voltage_v}
+  - {topic: /f, type: std_msgs/msg/Int32, key: "lunaris/{rover}/rail/{rail}/state",
+     field: voltage_v}
+  - {topic: /g, type: sensor_msgs/msg/BatteryState, key: "lunaris/{rover}/power/summary",
+     convert: battery_state, scale: 2}
+  - {topic: /h, type: std_msgs/msg/Int32, key: "lunaris/{rover}/input/sun_angle",
+     field: angle_deg}
+  - {topic: /i, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: voltage_v,
+     integer: false}
+  - {topic: /j, type: std_msgs/msg/Float64MultiArray, key: "lunaris/{rover}/input/radio/{radio}/position",
+     direction: in, fields: [distance_m]}
+  - {topic: /k, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: voltage_v,
+     colour: red}
+  - {topic: /b, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: voltage_v}
+  - {topic: /l, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", convert: battery_state}
+  - {topic: /m, type: sensor_msgs/msg/BatteryState, key: "lunaris/{rover}/battery/state"}
+  - {topic: /n, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", convert: magic}
+"""
+    with pytest.raises(ConfigError) as err:
+        mapping(text)
+    problems = err.value.problems
+    expected = [
+        "bridge.ros_distro: expected jazzy or humble, got 'iron'",
+        "bridge.fleet_topic_prefix: must contain {rover}",
+        "bridge.outputs.json.prefix: the json and ros2dds outputs would share",
+        "mappings[0].topic: 'no_slash' must start with '/'",
+        "mappings[1].type: unknown ROS 2 message type 'std_msgs/msg/Nope'",
+        "mappings[2].field: BatteryState has no field 'volts'",
+        "mappings[3].key: 'lunaris/{rover}/battery/oops' is not a twin key",
+        "mappings[4].scale: must be a finite non-zero number, got 0",
+        "mappings[5].field: BatteryState.voltage_v is not a boolean",
+        "mappings[6].topic: must contain {rail}",
+        "mappings[7].key: the battery_state converter reads lunaris/{rover}/battery/state",
+        "mappings[7].scale: not used with convert",
+        "mappings[8].direction: lunaris/{rover}/input/sun_angle is an input, so the direction is in",
+        "mappings[9].integer: std_msgs/msg/Int32 holds integers",
+        "mappings[10].fields: the input RadioPosition needs angle_deg",
+        "mappings[10].topic: must contain {radio}",
+        "mappings[11].colour: unknown field",
+        "mappings[12].topic: /b is already mapped by mappings[2]",
+        "mappings[13].type: the battery_state converter makes sensor_msgs/msg/BatteryState, not "
+        "std_msgs/msg/Int32",
+        "mappings[14].type: sensor_msgs/msg/BatteryState needs a converter",
+        "mappings[15].convert: unknown converter 'magic' (known: battery_state, diagnostics)",
+    ]
+    for want in expected:
+        assert any(p.startswith(want) for p in problems), f"{want!r} not in {problems}"
+    assert str(err.value).startswith("test.yaml: ")
+
+
+def test_mapping_files_are_found_from_anywhere(tmp_path, monkeypatch):
+    from services.bridge.service import DEFAULT_MAPPING, resolve_mapping
+
+    assert resolve_mapping(None) == DEFAULT == DEFAULT_MAPPING
+    monkeypatch.chdir(tmp_path)
+    assert resolve_mapping("config/bridge/default.yaml") == DEFAULT  # relative to the repository
+    (tmp_path / "mine.yaml").write_text("")
+    assert resolve_mapping("mine.yaml") == Path("mine.yaml")  # relative to the working directory
+    with pytest.raises(ConfigError, match="cannot read file"):
+        bm.load_mapping(tmp_path / "missing.yaml")
+
+
+def test_outputs_and_distro_options():
+    mf = mapping(one('bridge:\n  ros_distro: humble\n  outputs: {ros2dds: {enabled: false},'
+                     ' json: {prefix: ""}, rmw_zenoh: {domain_id: 7, node: dash}}\n'))
+    out = mf.bridge.outputs
+    assert (out.ros2dds.enabled, out.json.prefix, out.rmw_zenoh.domain_id) == (False, "", 7)
+    with pytest.raises(ConfigError) as err:
+        mapping(one("bridge:\n  outputs: {ros2dds: {enabled: false}, json: {enabled: false},"
+                    " rmw_zenoh: {enabled: false, domain_id: 300, node: 9lives}}\n"))
+    text = "\n".join(err.value.problems)
+    assert "bridge.outputs: every output is disabled" in text
+    assert "bridge.outputs.rmw_zenoh.domain_id: expected 0..232, got 300" in text
+    assert "bridge.outputs.rmw_zenoh.node: '9lives' is not a ROS 2 node name" in text
+
+
+def test_expansion_names_components_a_rover_lacks_and_bad_ros_names():
+    mf = mapping("""
+mappings:
+  - {topic: /link, type: std_msgs/msg/Bool, key: "lunaris/{rover}/radio/hls_relay/link", field: in_range}
+  - {topic: "/{rail}_mv", type: std_msgs/msg/Int32, key: "lunaris/{rover}/rail/{rail}/state",
+     field: voltage_v, scale: 1000}
+""")
+    with pytest.raises(ConfigError) as err:
+        bm.expand(mf, [bm.rover_names(MAPP)], source="m.yaml")
+    text = "\n".join(err.value.problems)
+    assert "rover mapp-1 has no radio 'hls_relay' (radios: lander)" in text
+    assert "'/12V_mv' (rover mapp-1) is not a ROS 2 name" in text
+    link_only = bm.MappingFile(mappings=mf.mappings[:1])
+    assert bm.expand(link_only, [bm.rover_names(LTV)])[0].key == "lunaris/ltv-1/radio/hls_relay/link"
+
+
+def test_placeholders_in_topics_become_ros_safe():
+    assert bm.ros_name("mapp-1") == "mapp_1"
+    assert bm.ros_name("cam.left-2") == "cam_left_2"
+    mf = mapping("""
+bridge: {topic_prefix: "/{rover}"}
+mappings:
+  - {topic: "/load/{load}", type: std_msgs/msg/Float32, key: "lunaris/{rover}/load/{load}/power",
+     field: power_w, label: "{load} on {rover}"}
+""")
+    b = bm.expand(mf, [bm.rover_names(MAPP)])[0]
+    assert (b.topic, b.label) == ("/mapp_1/load/drive_motors", "drive_motors on mapp-1")
+
+
+# -- values ------------------------------------------------------------------------------------------
+
+
+def test_scale_rounds_half_away_from_zero_and_clamps():
+    m = mapping(one()).mappings[0]
+    rail = RailState(t_s=0, voltage_v=12.0, current_a=0.0, power_w=0.0, current_limit_a=None,
+                     state="on")
+    assert bm.out_value(m, rail) == 12000
+    for volts, mv in ((0.0125, 13), (-0.0125, -13), (0.0124, 12), (2.5e-4, 0), (5e-4, 1),
+                      (1e9, 2**31 - 1), (-1e9, -(2**31))):
+        assert bm.out_value(m, battery_state(voltage_v=volts)) == mv, volts
+    assert isinstance(bm.out_value(m, battery_state()), int)
+
+
+def test_a_null_field_publishes_nothing_unless_a_default_is_given():
+    rail = RailState(t_s=0, voltage_v=18.0, current_a=1.0, power_w=18.0, current_limit_a=None,
+                     state="on")
+    plain = mapping(one(key="lunaris/{rover}/rail/SOLAR/state", field="current_limit_a")).mappings[0]
+    assert bm.out_message(plain, rail) is None
+    with_default = mapping(one(key="lunaris/{rover}/rail/SOLAR/state", field="current_limit_a",
+                               default="-1")).mappings[0]
+    assert bm.out_message(with_default, rail) == {"data": -1000}
+
+
+def test_float_and_bool_values():
+    load = LoadPower(t_s=0, power_w=3.25, rail="5V", on=True, faults=[])
+    m = mapping(one(type="std_msgs/msg/Float32", key="lunaris/{rover}/load/x/power",
+                    field="power_w", scale=None)).mappings[0]
+    assert bm.out_message(m, load) == {"data": 3.25}
+    rounded = mapping(one(type="std_msgs/msg/Float32", key="lunaris/{rover}/load/x/power",
+                          field="power_w", integer="true")).mappings[0]
+    assert bm.out_value(rounded, load) == 3250.0
+    summary = PowerSummary(t_s=0, load_power_w=1, bus_power_w=1, generation_w=0,
+                           net_battery_power_w=1, bus_voltage_v=16.7)
+    m = mapping(one(key="lunaris/{rover}/power/summary", field="bus_voltage_v")).mappings[0]
+    assert bm.out_message(m, summary) == {"data": 16700}
+
+
+def test_inbound_values():
+    m = bm.load_mapping(DEFAULT).mappings[1]
+    assert m.direction == "in"
+    assert bm.in_payload(m, {"data": [1200.0, 45.0]}) == {"distance_m": 1200.0, "angle_deg": 45.0}
+    with pytest.raises(BadInput, match="expected 2 values"):
+        bm.in_payload(m, {"data": [1.0]})
+    with pytest.raises(BadInput, match="not a finite number"):
+        bm.in_payload(m, {"data": [math.nan, 0.0]})
+    with pytest.raises(BadInput, match="expected a number"):
+        bm.in_payload(m, {"data": ["far", 0.0]})
+    km = mapping(one(topic="/km", type="std_msgs/msg/Float64MultiArray",
+                     key="lunaris/{rover}/input/radio/lander/position", direction="in",
+                     field=None, fields="[distance_m, angle_deg]", scale="1000")).mappings[0]
+    assert bm.in_payload(km, {"data": [1.5, 0.01]}) == {"distance_m": 1500.0, "angle_deg": 10.0}
+
+
+# -- BatteryState: ROS conventions ---------------------------------------------------------------
+
+
+def test_battery_state_follows_ros_conventions():
+    # Mean of the MAPP per-cell curve by the trapezoid rule on its 0.1 steps:
+    # 0.1 * (sum of the 11 points - (first + last) / 2) = 0.1 * (42.64 - 3.90) = 3.874 V.
+    v_nom = MAPP.battery.cells_series * 3.874
+    assert_allclose(bm.nominal_voltage_v(MAPP.battery), v_nom, rtol=1e-4)
+    msg = bm.battery_state_message(battery_state(), MAPP.battery, 1_700_000_000_123_456_789,
+                                   frame_id="base", options={"location": "bay 1"})
+    assert msg["header"] == {"stamp": {"sec": 1_700_000_000, "nanosec": 123_456_789},
+                             "frame_id": "base"}
+    assert msg["current"] == -3.0  # discharging: negative
+    assert_allclose(msg["charge"], 2.65e5 / v_nom / 3600, rtol=1e-4)
+    assert_allclose(msg["capacity"], 5.3e5 / v_nom / 3600, rtol=1e-4)
+    assert_allclose(msg["design_capacity"], MAPP.battery.capacity_j / v_nom / 3600, rtol=1e-4)
+    assert (msg["percentage"], msg["voltage"], msg["temperature"]) == (0.5, 15.2, 25.0)
+    assert (msg["power_supply_status"], msg["power_supply_health"],
+            msg["power_supply_technology"]) == (2, 1, 2)  # DISCHARGING, GOOD, LION
+    assert len(msg["cell_voltage"]) == 4 and all(math.isnan(v) for v in msg["cell_voltage"])
+    assert msg["location"] == "bay 1"
+
+
+@pytest.mark.parametrize(("kw", "status", "health"), [
+    ({"current_a": -2.0}, 1, 1),  # CHARGING, GOOD
+    ({"current_a": 0.0, "soc": 1.0}, 4, 1),  # FULL
+    ({"current_a": 0.0}, 3, 1),  # NOT_CHARGING
+    ({"faults": ["over_temperature"]}, 2, 2),  # OVERHEAT
+    ({"faults": ["thermal_cutoff"], "operational": False}, 3, 2),
+    ({"faults": ["depleted"], "operational": False, "current_a": 0.0}, 3, 3),  # DEAD
+    ({"faults": ["under_temperature"]}, 2, 6),  # COLD
+    ({"faults": ["disconnected"], "operational": False}, 3, 5),  # UNSPEC_FAILURE
+    ({"faults": ["capacity_loss", "over_temperature"]}, 2, 2),
+])
+def test_battery_status_and_health_codes(kw, status, health):
+    msg = bm.battery_state_message(battery_state(**kw), MAPP.battery, 0)
+    assert (msg["power_supply_status"], msg["power_supply_health"]) == (status, health)
+
+
+# -- DiagnosticArray -----------------------------------------------------------------------------------
+
+
+def test_diagnostic_levels_follow_faults_and_staleness():
+    comps = bm.components(MAPP)
+    assert comps[:2] == ["battery", "rail/12V"] and "rail/SOLAR" in comps
+    assert "load/nav_camera" in comps and "radio/lander" in comps and "umbilical" in comps
+    active = [
+        ActiveFault("lunaris/mapp-1/fault/load/nav_camera/short", {"resistance_ohm": 0.05}, 3.0,
+                    "injected", "warning"),
+        ActiveFault("lunaris/mapp-1/rail/5V_CH2/tripped", {}, 3.1, "derived", "critical"),
+    ]
+    ages = dict.fromkeys(comps, 0.1)
+    ages["radio/lander"] = 5.0
+    ages["umbilical"] = None
+    statuses = {s["name"]: s for s in bm.diagnostic_statuses("mapp-1", comps, active, ages, 3.0)}
+    assert list(statuses) == [f"mapp-1/{c}" for c in comps]
+    cam = statuses["mapp-1/load/nav_camera"]
+    assert (cam["level"], cam["message"], cam["hardware_id"]) == (bm.DIAG_WARN, "short", "mapp-1")
+    assert cam["values"][0]["key"] == "short"
+    assert '"resistance_ohm":0.05' in cam["values"][0]["value"]
+    assert statuses["mapp-1/rail/5V_CH2"]["level"] == bm.DIAG_ERROR
+    assert statuses["mapp-1/radio/lander"]["level"] == bm.DIAG_STALE
+    assert statuses["mapp-1/radio/lander"]["message"] == "no data for 5.0 s"
+    assert statuses["mapp-1/umbilical"]["level"] == bm.DIAG_STALE
+    assert statuses["mapp-1/battery"] == {"level": bm.DIAG_OK, "name": "mapp-1/battery",
+                                          "message": "OK", "hardware_id": "mapp-1", "values": []}
+    assert [bm.level_name(x) for x in range(4)] == ["OK", "WARN", "ERROR", "STALE"]
+
+
+def test_fault_component_from_either_key_form():
+    assert bm.component_of_fault("lunaris/r/fault/load/cam/short") == ("load/cam", "short")
+    assert bm.component_of_fault("lunaris/r/fault/battery/heating") == ("battery", "heating")
+    assert bm.component_of_fault("lunaris/r/rail/12V/tripped") == ("rail/12V", "tripped")
+    assert bm.component_of_fault("lunaris/r/battery/depleted") == ("battery", "depleted")
+
+
+# -- CDR, read back by the independent decoder ----------------------------------------------------
+
+
+def test_cdr_of_every_default_type_reads_back_independently():
+    battery = bm.battery_state_message(battery_state(), MAPP.battery, 12_000_000_034, "f")
+    diag = bm.diagnostic_array_message(bm.diagnostic_statuses(
+        "mapp-1", ["battery"], [ActiveFault("lunaris/mapp-1/fault/battery/heating",
+                                            {"heat_w": 5.0}, 1.0, "injected", "warning")],
+        {}, 3.0), 12_000_000_034, "f")
+    cases = {
+        "std_msgs/msg/Bool": {"data": True},
+        "std_msgs/msg/Int32": {"data": -123456},
+        "std_msgs/msg/Float32": {"data": 3.25},
+        "std_msgs/msg/Float64MultiArray": bm._multi_array(["distance_m", "angle_deg"], [1.5, -2.0]),
+        "sensor_msgs/msg/BatteryState": battery,
+        "diagnostic_msgs/msg/DiagnosticArray": diag,
+    }
+    for typename, msg in cases.items():
+        cdr = bm.encode_cdr(typename, msg)
+        assert cdr[:4] == b"\x00\x01\x00\x00", typename  # CDR little endian encapsulation
+        got = rosmsg.decode(typename, cdr)
+        if typename == "sensor_msgs/msg/BatteryState":
+            assert (got.header.stamp.sec, got.header.stamp.nanosec, got.header.frame_id) == (
+                12, 34, "f")
+            for name in ("voltage", "temperature", "current", "charge", "capacity",
+                         "design_capacity", "percentage"):
+                assert_allclose(getattr(got, name), msg[name], rtol=1e-6, err_msg=name)
+            assert (got.power_supply_status, got.power_supply_health, got.present) == (2, 1, True)
+            assert len(got.cell_voltage) == 4 and all(math.isnan(v) for v in got.cell_voltage)
+        elif typename == "diagnostic_msgs/msg/DiagnosticArray":
+            assert got.header.stamp.sec == 12
+            (status,) = got.status
+            assert (status.level, status.name, status.message) == (1, "mapp-1/battery", "heating")
+            assert (status.values[0].key, status.hardware_id) == ("heating", "mapp-1")
+        elif typename == "std_msgs/msg/Float64MultiArray":
+            assert list(got.data) == [1.5, -2.0]
+            assert got.layout.dim[0].label == "distance_m,angle_deg"
+            assert (got.layout.dim[0].size, got.layout.dim[0].stride) == (2, 2)
+        else:
+            assert got.data == msg["data"], typename
+
+
+def test_inbound_cdr_from_an_independent_encoder_and_garbage():
+    cdr = rosmsg.encode("std_msgs/msg/Float64MultiArray",
+                        {"layout": {"dim": [], "data_offset": 0}, "data": [250.0, 30.0]})
+    msg = bm.decode_cdr("std_msgs/msg/Float64MultiArray", cdr)
+    assert msg["data"] == [250.0, 30.0]
+    with pytest.raises(BadInput, match="not a CDR std_msgs/msg/Float64MultiArray"):
+        bm.decode_cdr("std_msgs/msg/Float64MultiArray", b"\x00\x01\x00\x00\xff")
+
+
+# -- rmw_zenoh names -----------------------------------------------------------------------------------
+
+
+def test_rmw_zenoh_topic_key_and_published_type_hashes():
+    assert bm.type_hash("std_msgs/msg/Bool") == BOOL_HASH
+    assert bm.type_hash("std_msgs/msg/String") == STRING_HASH
+    assert bm.rmw_topic_key(0, "/final_comms_radio_bool", "std_msgs/msg/Bool") == (
+        f"0/final_comms_radio_bool/std_msgs::msg::dds_::Bool_/{BOOL_HASH}")
+    assert bm.rmw_topic_key(0, "/robot1/chatter", "std_msgs/msg/String") == (
+        f"0/robot1/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}")
+    assert bm.rmw_topic_key(2, "/x", "std_msgs/msg/Bool", "humble") == (
+        "2/x/std_msgs::msg::dds_::Bool_/TypeHashNotSupported")
+    assert bm.type_hash("sensor_msgs/msg/BatteryState").startswith("RIHS01_")
+
+
+def test_liveliness_tokens_match_the_rmw_zenoh_design_examples():
+    assert bm.node_token(2, "aac3178e146ba6f1fc6e6a4085e77f21", 0, "/", "listener") == (
+        "@ros2_lv/2/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener")
+    talker = bm.entity_token(2, "8b20917502ee955ac4476e0266340d5c", 0, 10, "MP", "/", "talker",
+                             "/chatter", "std_msgs/msg/String", bm.qos_keyexpr(False, 7))
+    assert talker == ("@ros2_lv/2/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/"
+                      f"std_msgs::msg::dds_::String_/{STRING_HASH}/::,7:,:,:,,")
+    assert bm.qos_keyexpr(True, 1) == ":1:,1:,:,:,,"  # TRANSIENT_LOCAL, KEEP_LAST 1
+    assert bm.qos_keyexpr(False, 42) == "::,:,:,:,,"  # every rmw_zenoh default
+    assert bm.mangle("/pdm/rail_12V_voltage_mv") == "%pdm%rail_12V_voltage_mv"
+    assert bm.mangle("/") == "%"
+
+
+def test_attachment_layout():
+    gid = bm.gid_of("@ros2_lv/0/z/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::Bool_/h/q")
+    assert len(gid) == 16 and gid != bm.gid_of("@ros2_lv/0/z/0/2/MP/%/%/n/%t/x/h/q")
+    raw = bm.attachment(1, 1_700_000_000_000_000_001, gid)
+    assert len(raw) == bm.ATTACHMENT_LEN == 33
+    assert struct.unpack("<qqB", raw[:17]) == (1, 1_700_000_000_000_000_001, 16)
+    assert raw[17:] == gid
+    assert rosmsg.parse_attachment(raw) == (1, 1_700_000_000_000_000_001, gid)
+    with pytest.raises(ValueError, match="gid must be 16 bytes"):
+        bm.attachment(1, 0, b"short")
