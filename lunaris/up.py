@@ -68,8 +68,9 @@ class Supervisor:
         return cmd
 
     def start(self, service: str) -> None:
+        # The service's own banner would scroll the status lines away; errors still show.
         proc = subprocess.Popen(self.command(service), stdin=subprocess.DEVNULL,
-                                start_new_session=True)
+                                stdout=subprocess.DEVNULL, start_new_session=True)
         self.procs[service] = proc
         print(f"[up] {service} started (pid {proc.pid})", flush=True)
 
@@ -148,7 +149,7 @@ class _Status:
                 continue
             faults = ",".join(b.faults) or "nominal"
             out.append(
-                f"{rover:<12} t={b.t_s:9.1f}s  soc={b.soc * 100:6.2f}%  {b.voltage_v:6.2f} V  "
+                f"{rover:<12} t={b.t_s:9.1f}s  soc={b.soc * 100:7.3f}%  {b.voltage_v:6.2f} V  "
                 f"{b.current_a:7.2f} A  {b.temperature_c:5.1f} C  rails on {on}/{len(rails)}  "
                 f"{svc}  [{faults}]")
         return out

@@ -1,0 +1,130 @@
+"""``lunaris fault`` against a running twin: the confirming event, the exit status, credentials."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from common import keys
+from tests.deploy.conftest import DEPLOY, running_router
+from tests.harness import Probe, Twin, wait_for
+from tests.lunaris.conftest import MAPP, R, run_tool
+
+pytestmark = pytest.mark.timeout(90)
+
+
+def test_inject_list_and_clear_are_confirmed_by_the_twin(live):
+    p, ep = live.probe, live.endpoint
+    done = run_tool("fault", "inject", R, "solar/left", "dust", "0.4", "--connect", ep)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("accepted: fault_injected")
+    assert f"{keys.fault(R, 'solar/left', 'dust')}" in done.stdout and '"fraction": 0.4' in done.stdout
+    p.wait_value(keys.solar_power(R, "left"), lambda v: v["dust"] == 0.4)  # the effect, on the key
+
+    listed = run_tool("fault", "list", R, "--journal", "5", "--connect", ep)
+    assert listed.returncode == 0, listed.stderr
+    assert "1 active fault(s)" in listed.stdout
+    row = next(line for line in listed.stdout.splitlines() if "solar/left/dust" in line)
+    assert '{"fraction": 0.4}' in row
+    assert "warning" in row and "injected" in row
+    as_json = json.loads(run_tool("fault", "list", R, "--json", "--connect", ep).stdout)
+    assert [f["key"] for f in as_json["active"]] == [keys.fault(R, "solar/left", "dust")]
+
+    done = run_tool("fault", "clear", R, "solar/left", "dust", "--connect", ep, "--json")
+    assert done.returncode == 0, done.stderr
+    ev = json.loads(done.stdout)
+    assert (ev["kind"], ev["key"], ev["source"]) == (
+        "fault_cleared", keys.fault(R, "solar/left", "dust"), "solar")
+    p.wait_value(keys.solar_power(R, "left"), lambda v: v["dust"] == 0.0)
+    assert "no active faults" in run_tool("fault", "list", R, "--connect", ep).stdout
+
+
+def test_an_injection_with_a_json_object_and_a_replacement(live):
+    ep = live.endpoint
+    try:
+        first = run_tool("fault", "inject", R, "battery", "heating", '{"heat_w": 5}', "--connect", ep)
+        again = run_tool("fault", "inject", R, "battery", "heating", "7.5", "--connect", ep)
+        assert (first.returncode, again.returncode) == (0, 0), first.stderr + again.stderr
+        assert "injected battery/heating" in first.stdout and "replaced battery/heating" in again.stdout
+        live.probe.wait_value(keys.battery_state(R), lambda b: "heating" in b["faults"])
+    finally:
+        assert run_tool("fault", "clear", R, "battery", "heating", "--connect", ep).returncode == 0
+
+
+def test_the_twin_rejecting_is_printed_and_exits_1(live):
+    ep = live.endpoint
+    done = run_tool("fault", "inject", R, "load/no_such_load", "short", "--connect", ep)
+    assert done.returncode == 1
+    assert done.stdout.startswith("rejected: rejected") and "has no load 'no_such_load'" in done.stdout
+    done = run_tool("fault", "clear", R, "umbilical", "disconnect", "--connect", ep)
+    assert done.returncode == 1 and "no active fault umbilical/disconnect to clear" in done.stdout
+    # --no-check sends what the tool would refuse, and the twin refuses it
+    done = run_tool("fault", "inject", R, "battery", "heating", "-3", "--no-check", "--connect", ep)
+    assert done.returncode == 1 and "rejected" in done.stdout and "heat_w" in done.stdout
+
+
+@pytest.mark.parametrize("args, code, message", [
+    (["inject", R, "battery", "heating", "hot"], 1, "VALUE must be a number or a JSON object, got 'hot'"),
+    (["inject", R, "battery", "heating", "[1]"], 1, "VALUE must be a number or a JSON object"),
+    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: Expected `float` >= 0.0"),
+    (["inject", R, "battery", "melt"], 1, "unknown battery fault kind 'melt'"),
+    (["inject", R, "wheel/left", "flat"], 1, "unknown component 'wheel'"),
+    (["inject", R, "battery", "disconnect", "3"], 1, "battery disconnect takes no parameters"),
+    (["inject", "mars-9", "battery", "heating", "3"], 2,
+     "unknown rover 'mars-9': no Lunaris service serves it (live rovers: mapp-1)"),
+    (["clear", "mars-9", "battery", "heating"], 2, "unknown rover 'mars-9'"),
+])
+def test_bad_input_is_refused_before_anything_is_sent(live, args, code, message):
+    done = run_tool("fault", *args, "--connect", live.endpoint)
+    assert done.returncode == code
+    assert message in done.stderr
+    assert done.stdout == ""
+
+
+def test_no_answer_exits_2(router, twin_factory):
+    """Only the faults service runs: nobody owns the battery, so nobody answers."""
+    with Probe(router) as p:
+        twin_factory([MAPP], services=("faults",))
+        p.wait_services(R, ("faults",))
+        done = run_tool("fault", "inject", R, "battery", "heating", "5", "--timeout", "1",
+                        "--connect", router)
+        assert done.returncode == 2
+        assert "no answer within 1 s to the injection of lunaris/mapp-1/fault/battery/heating" in done.stderr
+        done = run_tool("fault", "list", "mars-9", "--timeout", "1", "--connect", router)
+        assert done.returncode == 2 and "no answer from the faults service of 'mars-9'" in done.stderr
+
+
+def test_no_router_exits_2():
+    from tests.harness import free_endpoint
+    done = run_tool("fault", "list", R, "--connect", free_endpoint(), "--wait", "1.5", timeout_s=20)
+    assert done.returncode == 2
+    assert "no Zenoh router answered at tcp/127.0.0.1:" in done.stderr and "within 1.5 s" in done.stderr
+
+
+def test_with_credentials_on_the_deployment_router(tmp_path, monkeypatch):
+    """deploy/zenohd.json5 with access control: the instructor injects, an observer cannot."""
+    with running_router() as router:
+        monkeypatch.setenv("LUNARIS_ZENOH_CONFIG", str(DEPLOY / "client-service.json5"))
+        with Twin(router.endpoint, [MAPP], tmp_path / "state", services=("clock", "solar", "faults")):
+            monkeypatch.delenv("LUNARIS_ZENOH_CONFIG")
+            instructor = ["--config", str(DEPLOY / "client-instructor.json5"), "--connect", router.endpoint]
+            observer = ["--config", str(DEPLOY / "client-observer.json5"), "--connect", router.endpoint]
+
+            def services_up() -> bool:
+                done = run_tool("fault", "list", R, "--timeout", "1", *observer)
+                return done.returncode == 0
+            wait_for(services_up, 30, "the services to log in and answer the observer")
+
+            done = run_tool("fault", "inject", R, "solar/right", "disconnect", *instructor)
+            assert done.returncode == 0, done.stdout + done.stderr
+            assert done.stdout.startswith("accepted: fault_injected")
+            listed = run_tool("fault", "list", R, *observer)
+            assert "solar/right/disconnect" in listed.stdout
+
+            # the router drops an observer's write: no answer, and nothing changed
+            done = run_tool("fault", "clear", R, "solar/right", "disconnect", "--timeout", "1", *observer)
+            assert done.returncode == 2, done.stdout + done.stderr
+            assert "solar/right/disconnect" in run_tool("fault", "list", R, *observer).stdout
+            done = run_tool("fault", "clear", R, "solar/right", "disconnect", *instructor)
+            assert done.returncode == 0 and "fault_cleared" in done.stdout

@@ -1,0 +1,154 @@
+"""Recording and reporting without a twin: key families, schemas, the MCAP layout, the plots."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import msgspec
+import pytest
+from mcap.reader import make_reader
+
+from common.messages import (
+    BatteryState,
+    Clock,
+    Event,
+    LoadPower,
+    PowerSummary,
+    RadioLink,
+    RailState,
+    SolarPower,
+    UmbilicalState,
+    encode,
+)
+from lunaris.record import ENVELOPE, KeyWrite, Recorder, schema_for
+from lunaris.report import draw, load_session
+from lunaris.telemetry import FAMILIES, family_of, json_schema
+
+R = "mapp-1"
+
+
+@pytest.mark.parametrize("parts, family", [
+    (["clock"], "clock"),
+    (["battery", "state"], "battery/state"),
+    (["load", "nav_camera", "power"], "load/*/power"),
+    (["rail", "5V_CH2", "state"], "rail/*/state"),
+    (["power", "summary"], "power/summary"),
+    (["solar", "left", "power"], "solar/*/power"),
+    (["umbilical", "state"], "umbilical/state"),
+    (["radio", "lander", "link"], "radio/*/link"),
+    (["event"], "event"),
+    (["clock", "control"], None),
+    (["fault", "battery", "heating"], None),
+    (["input", "sun_angle"], None),
+    (["cmd", "rail", "12V"], None),
+    (["load", "a", "b", "power"], None),
+])
+def test_every_key_has_one_family_or_none(parts, family):
+    assert family_of(parts) == family
+
+
+@pytest.mark.parametrize("family, struct", list(FAMILIES.items()))
+def test_a_family_schema_is_the_struct_at_the_root(family, struct):
+    schema = json_schema(struct)
+    assert "$ref" not in schema and schema["type"] == "object" and schema["title"] == struct.__name__
+    fields = {f.name for f in msgspec.structs.fields(struct)}
+    assert set(schema["properties"]) == fields
+    assert set(schema["required"]) <= fields and "t_s" in schema["required"]
+    assert schema_for(family.replace("*", "x").split("/"))[0] == f"lunaris.{struct.__name__}"
+    json.dumps(schema)  # plain JSON, as written into the file
+
+
+def test_keys_without_a_struct_share_the_envelope_schema():
+    name, schema = schema_for(["fault", "load", "nav_camera", "short"])
+    assert name == ENVELOPE
+    assert set(schema["properties"]) == {"t_s", "op", "value", "text"}
+    assert schema["properties"]["op"] == {"enum": ["delete", "put"]}
+
+
+def _samples() -> list[tuple[str, bytes, bool, int]]:
+    wall = 1_700_000_000_000_000_000
+    out = []
+    for i in range(5):
+        t = 10.0 + i
+        out += [
+            (f"lunaris/{R}/clock", encode(Clock(t, 0.1, i, 1.0, False)), False, wall + i),
+            (f"lunaris/{R}/battery/state", encode(BatteryState(
+                t, 5e5 - i * 100, 5.3e5, 0.95 - 0.01 * i, 16.6, 16.5, 2.0 + i, 33.0, 20.0 + i, True, 0, [],
+                3600.0)), False, wall + i),
+            (f"lunaris/{R}/load/imu/power", encode(LoadPower(t, 1.0, "3V3_CH1", True, [])), False, wall + i),
+            (f"lunaris/{R}/load/nav_camera/power", encode(LoadPower(t, 3.5, "5V_CH2", True, [])), False,
+             wall + i),
+            (f"lunaris/{R}/rail/12V/state", encode(RailState(t, 12.0, 4.0, 48.0, 10.0, "on")), False,
+             wall + i),
+            (f"lunaris/{R}/power/summary", encode(PowerSummary(t, 70.0, 77.0, 45.0, 32.0, 16.6)), False,
+             wall + i),
+            (f"lunaris/{R}/solar/left/power", encode(SolarPower(t, 23.7, 60.0, 0.0)), False, wall + i),
+            (f"lunaris/{R}/umbilical/state", encode(UmbilicalState(t, False, 0.0)), False, wall + i),
+            (f"lunaris/{R}/radio/lander/link", encode(RadioLink(t, True, 10.0, 0.0)), False, wall + i),
+        ]
+    fault = f"lunaris/{R}/fault/load/nav_camera/short"
+    out += [
+        (fault, b"0.05", False, wall + 10),
+        (f"lunaris/{R}/event", encode(Event(12.0, "warning", "loads", "fault_injected", fault,
+                                            "injected load/nav_camera/short", {"resistance_ohm": 0.05})),
+         False, wall + 11),
+        (fault, b"", True, wall + 12),
+        (f"lunaris/{R}/input/sun_angle", b"sixty", False, wall + 13),  # not JSON: kept as text
+        (f"lunaris/{R}/battery/state", b"garbage", False, wall + 14),  # not JSON telemetry: skipped
+    ]
+    return out
+
+
+def _record(samples) -> bytes:
+    buf = io.BytesIO()
+    rec = Recorder(buf, "test")
+    written = [rec.write(*s) for s in samples]
+    rec.finish()
+    assert written.count(False) == 1 and rec.skipped == 1 and rec.messages == len(samples) - 1
+    return buf.getvalue()
+
+
+def test_a_recording_reads_back_with_channels_schemas_counts_and_both_clocks():
+    data = _record(_samples())
+    reader = make_reader(io.BytesIO(data))
+    summary = reader.get_summary()
+    topics = {c.topic: c for c in summary.channels.values()}
+    assert len(topics) == 12
+    assert summary.statistics.message_count == 5 * 9 + 4
+    assert summary.statistics.channel_message_counts[topics[f"lunaris/{R}/battery/state"].id] == 5
+    for channel in summary.channels.values():
+        schema = summary.schemas[channel.schema_id]
+        assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
+        assert json.loads(schema.data)["type"] == "object"
+    schema_of = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert schema_of[f"lunaris/{R}/load/imu/power"] == "lunaris.LoadPower"
+    assert schema_of[f"lunaris/{R}/fault/load/nav_camera/short"] == ENVELOPE
+    assert len(summary.schemas) == 10  # one per family (9) and the envelope, never per key
+    by_topic: dict[str, list] = {}
+    for _schema, channel, message in reader.iter_messages():
+        by_topic.setdefault(channel.topic, []).append(message)
+    battery = by_topic[f"lunaris/{R}/battery/state"]
+    assert [m.publish_time for m in battery] == [int((10 + i) * 1e9) for i in range(5)]  # sim time
+    assert [m.log_time for m in battery] == [1_700_000_000_000_000_000 + i for i in range(5)]  # wall
+    assert [m.sequence for m in battery] == [1, 2, 3, 4, 5]
+    fault = [msgspec.json.decode(m.data, type=KeyWrite)
+             for m in by_topic[f"lunaris/{R}/fault/load/nav_camera/short"]]
+    assert [(f.op, f.value, f.t_s) for f in fault] == [("put", 0.05, 14.0), ("delete", None, 14.0)]
+    (sun,) = [msgspec.json.decode(m.data) for m in by_topic[f"lunaris/{R}/input/sun_angle"]]
+    assert sun["text"] == "sixty" and sun["value"] is None
+    assert by_topic[f"lunaris/{R}/fault/load/nav_camera/short"][0].publish_time == int(14e9)
+
+
+def test_the_report_draws_a_recording(tmp_path: Path):
+    path = tmp_path / "s.mcap"
+    path.write_bytes(_record(_samples()))
+    sessions = load_session(path)
+    s = sessions[R]
+    assert s.battery["soc"][1][0] == pytest.approx(0.95) and sorted(s.loads) == ["imu", "nav_camera"]
+    assert [e["kind"] for e in s.events] == ["fault_injected"] and s.span_s == (10.0, 14.0)
+    fig = draw(s, "test")
+    assert len(fig.axes) == 6  # five plots and the current's twin axis
+    fig.savefig(tmp_path / "out.png")
+    assert (tmp_path / "out.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -1,0 +1,217 @@
+"""``lunaris scenario run`` against a running twin: every step fires at its time or on its
+condition, and its effect shows on the keys."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import threading
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from tests.harness import ROOT, env_without_zenoh_config, lunaris_cmd, wait_for
+from tests.lunaris.conftest import R, run_tool
+
+pytestmark = pytest.mark.timeout(90)
+
+TICK_S = 0.1  # mapp.yaml: 10 Hz
+SCENARIO = """
+scenario: {name: integration drill}
+rover: mapp-1
+time_scale: 5               # 0.5 s of sim time per tick
+steps:
+  - name: dust
+    at_s: 2
+    inject: {component: solar/left, kind: dust, value: 0.5}
+  - name: sun ramp
+    after_s: 1
+    sun_angle: {from: 60, to: 80, over_s: 4}
+  - name: short once the sun is low
+    after_s: 0
+    when: solar.right.sun_angle_deg >= 79.9
+    timeout_s: 30
+    inject: {component: load/nav_camera, kind: short}
+  - name: tripped
+    after_s: 0
+    when: rail.5V_CH2.state == tripped
+    timeout_s: 5
+    note: the channel tripped
+  - name: clear the short
+    after_s: 1
+    clear: {component: load/nav_camera, kind: short}
+  - name: reset the channel
+    after_s: 0
+    rail: {name: 5V_CH2, reset: true}
+  - name: faster clock
+    at_s: 4
+    clock: {time_scale: 8}
+  - name: drive away
+    at_s: 3
+    position: {radio: lander, distance_m: {from: 100, to: 600, over_s: 6}, angle_deg: 0}
+  - name: lost the lander
+    after_s: 0
+    when: radio.lander.in_range == false
+    timeout_s: 30
+    clear: {component: solar/left, kind: dust}
+  - name: plugged in
+    at_s: 1
+    umbilical: true
+"""
+
+
+def _run(path: Path, *args: str, timeout_s: float = 60) -> tuple[subprocess.CompletedProcess, dict]:
+    summary = path.with_suffix(".json")
+    done = run_tool("scenario", "run", str(path), "--json-summary", str(summary), *args, timeout_s=timeout_s)
+    return done, json.loads(summary.read_text()) if summary.exists() else {}
+
+
+def test_a_scenario_plays_every_step_at_its_time_or_condition(live, tmp_path):
+    p, ep = live.probe, live.endpoint
+    p.history.clear()
+    path = tmp_path / "drill.yaml"
+    path.write_text(SCENARIO)
+    try:
+        done, summary = _run(path, "--connect", ep)
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert summary["ok"] and summary["end_reason"] == "every step has played"
+        steps = {s["label"]: s for s in summary["steps"]}
+        t0 = summary["start_t_s"]
+
+        # times: each step fired on the first tick at or after it was due (ticks of 0.5 or 0.8 s)
+        def fired(label: str) -> float:
+            return steps[label]["fired_t_s"]
+        max_tick = 8 * TICK_S + 1e-6
+        for label, due in (("dust", 2.0), ("plugged in", 1.0), ("drive away", 3.0), ("faster clock", 4.0)):
+            assert due <= fired(label) <= due + max_tick, (label, fired(label))
+        def after(label: str, previous: str, delay_s: float, ticks: int = 1) -> None:
+            lo = fired(previous) + delay_s
+            assert lo <= fired(label) <= lo + ticks * max_tick, (label, fired(label), previous, lo)
+        after("sun ramp", "dust", 1.0)
+        after("short once the sun is low", "sun ramp", 4.0, ticks=2)  # the ramp's end, then the sample
+        after("tripped", "short once the sun is low", 0.0)
+        after("clear the short", "tripped", 1.0)
+        assert fired("reset the channel") == fired("clear the short")
+        # in range up to 400 m along the x axis: 100 -> 600 m in 6 s passes 400 m at 3.6 s
+        after("lost the lander", "drive away", 3.6, ticks=2)
+        outcomes = {label: (s["status"], s["outcome"]) for label, s in steps.items()}
+        assert outcomes == {
+            "dust": ("fired", "accepted"), "sun ramp": ("done", "sent"),
+            "short once the sun is low": ("fired", "accepted"), "tripped": ("fired", "reached"),
+            "clear the short": ("fired", "accepted"), "reset the channel": ("fired", "accepted"),
+            "faster clock": ("fired", "accepted"), "drive away": ("done", "sent"),
+            "lost the lander": ("fired", "accepted"), "plugged in": ("fired", "sent"),
+        }
+
+        # the twin's own journal agrees with the player's times
+        journal = {(e["kind"], e["key"]): e["t_s"] - t0 for e in p.samples(keys.event(R))}
+        for kind, key, label in (
+                ("fault_injected", keys.fault(R, "solar/left", "dust"), "dust"),
+                ("fault_injected", keys.fault(R, "load/nav_camera", "short"), "short once the sun is low"),
+                ("fault_cleared", keys.fault(R, "load/nav_camera", "short"), "clear the short"),
+                ("fault_cleared", keys.fault(R, "solar/left", "dust"), "lost the lander")):
+            assert abs(journal[(kind, key)] - fired(label)) <= max_tick, (kind, key)
+
+        # the effects, on the keys
+        left = p.samples(keys.solar_power(R, "left"))
+        assert any(s["dust"] == 0.5 for s in left) and left[-1]["dust"] == 0.0
+        angles = sorted({round(s["sun_angle_deg"], 3) for s in p.samples(keys.solar_power(R, "right"))})
+        assert angles[0] == 60.0 and angles[-1] == 80.0 and len(angles) >= 6  # a ramp, not a jump
+        states = [s["state"] for s in p.samples(keys.rail_state(R, "5V_CH2"))]
+        assert "tripped" in states and states[-1] == "on"
+        link = p.samples(keys.radio_link(R, "lander"))
+        assert link[-1]["in_range"] is False and link[-1]["x_m"] == pytest.approx(600.0)
+        assert any(s["in_range"] and 100 < s["x_m"] < 400 for s in link)
+        assert p.value(keys.umbilical_state(R))["connected"] is True
+        scales = [c["time_scale"] for c in p.samples(keys.clock(R))]
+        assert {5.0, 8.0} <= set(scales)
+        p.wait_value(keys.clock(R), lambda c: c["time_scale"] == 1.0)  # put back at the end
+        assert "clock of mapp-1 put back to x1" in done.stdout
+        assert "step 4/10 tripped: checkpoint (rail.5V_CH2.state = tripped)" in done.stdout
+        assert "note: the channel tripped" in done.stdout
+        assert "result: every step fired and was accepted" in done.stdout
+    finally:
+        p.put(f"lunaris/{R}/input/umbilical", False)
+        p.put(keys.input_sun_angle(R), 60)
+        p.put(keys.input_radio_position(R, "lander"), {"distance_m": 0, "angle_deg": 0})
+
+
+def test_a_rejected_step_and_a_timeout_fail_the_run(live, tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("""
+scenario: {name: rejected}
+rover: mapp-1
+time_scale: 10
+steps:
+  - at_s: 1
+    clear: {component: umbilical, kind: disconnect}     # not active: the twin refuses
+  - when: battery.soc < 0.01
+    timeout_s: 2
+    note: never
+""")
+    done, summary = _run(path, "--connect", live.endpoint)
+    assert done.returncode == 1
+    assert [(s["status"], s["outcome"]) for s in summary["steps"]] == [
+        ("fired", "rejected"), ("timed out", "")]
+    assert "no active fault umbilical/disconnect to clear" in summary["steps"][0]["detail"]
+    assert "did not hold within 2 s" in summary["steps"][1]["detail"]
+    assert "NOT every step played as planned" in done.stdout
+
+
+def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_path):
+    p, ep = live.probe, live.endpoint
+    p.history.clear()
+    scenario = ROOT / "config" / "scenarios" / "shorted-camera.yaml"
+    summary_path = tmp_path / "summary.json"
+    proc = subprocess.Popen(lunaris_cmd("scenario", "run", str(scenario), "--time-scale", "30",
+                                        "--connect", ep, "--json-summary", str(summary_path),
+                                        "--clear-at-end"),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT,
+                            env=env_without_zenoh_config())
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
+    reader.start()
+    try:
+        # the crew acts on the instructor's notes, as in a session
+        wait_for(lambda: any("step 2/8 5V_CH2 tripped" in line for line in lines), 20, "the trip")
+        p.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "tripped")
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": False, "reset": True})  # the crew safes the channel
+        wait_for(lambda: any("step 5/8 camera lost" in line for line in lines), 10, "the camera isolated")
+        p.wait_value(keys.load_power(R, "nav_camera"), lambda v: "open" in v["faults"])
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})  # ... and restores it
+        proc.wait(40)
+        reader.join(5)
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            proc.wait(10)
+    out = "".join(lines)
+    assert proc.returncode == 0, out
+    summary = json.loads(summary_path.read_text())
+    assert all(s["status"] == "fired" for s in summary["steps"]), summary
+    assert p.value(keys.rail_state(R, "5V_CH2"))["state"] == "on"
+    wait_for(lambda: not p.value(keys.load_power(R, "nav_camera"))["faults"], 5, "the camera repaired")
+
+
+def test_scenario_check_and_start_errors(live, tmp_path):
+    shipped = sorted((ROOT / "config" / "scenarios").glob("*.yaml"))
+    done = run_tool("scenario", "check", *[str(f) for f in shipped])
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count(": ok - ") == 3 and "names checked against" in done.stdout
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("scenario: {name: x}\nrover: mapp-1\nsteps:\n  - {at_s: 1, rail: {name: 9V, on: true}}\n"
+                   "  - {when: battery.sock < 1, note: n}\n")
+    done = run_tool("scenario", "check", str(bad))
+    assert done.returncode == 1
+    assert "steps[0].rail.name: rover mapp-1 has no switchable rail '9V'" in done.stderr
+    assert "steps[1].when: unknown field 'sock' of battery" in done.stderr
+    done = run_tool("scenario", "run", str(bad), "--connect", live.endpoint)
+    assert done.returncode == 1 and "2 problem(s)" in done.stderr
+    done = run_tool("scenario", "check", str(tmp_path / "missing.yaml"))
+    assert done.returncode == 1 and "cannot read file" in done.stderr
+    other = tmp_path / "ltv.yaml"
+    other.write_text("scenario: {name: x}\nrover: ltv-1\nsteps:\n  - {at_s: 1, sun_angle: 50}\n")
+    done = run_tool("scenario", "run", str(other), "--connect", live.endpoint)
+    assert done.returncode == 2 and "unknown rover 'ltv-1'" in done.stderr
