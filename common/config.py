@@ -36,6 +36,8 @@ __all__ = [
     "check_structure",
     "load_rover",
     "parse_rover",
+    "parse_yaml",
+    "read_text",
 ]
 
 # A name becomes a chunk of a key expression: no '/', wildcards or spaces.
@@ -169,24 +171,35 @@ class ConfigError(ValueError):
         super().__init__(f"{source}: {len(problems)} problem(s)\n{lines}")
 
 
+def read_text(path: str | Path, error: type[ConfigError] = ConfigError) -> str:
+    """A data file's text; an unreadable file is a problem like any other."""
+    try:
+        return Path(path).read_text()
+    except OSError as exc:
+        raise error(str(path), [f"cannot read file: {exc.strerror}"]) from None
+
+
+def parse_yaml(text: str, source: str, struct: type[msgspec.Struct],
+               error: type[ConfigError] = ConfigError) -> tuple[Any, list[str]]:
+    """Parse a Lunaris data file (rover, bridge mapping, scenario) and check it against
+    ``struct``: the data and every structural problem found. Invalid YAML raises ``error``."""
+    try:
+        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise error(source, [f"not valid YAML: {exc}"]) from None
+    problems: list[str] = []
+    check_structure(data, struct, problems)
+    return data, problems
+
+
 def load_rover(path: str | Path) -> Rover:
     """Read and validate a rover YAML file; raise :class:`ConfigError` listing every problem."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(str(path), [f"cannot read file: {exc.strerror}"]) from None
-    return parse_rover(text, source=str(path))
+    return parse_rover(read_text(path), source=str(path))
 
 
 def parse_rover(text: str, source: str = "<rover>") -> Rover:
     """Validate rover YAML text; raise :class:`ConfigError` listing every problem."""
-    try:
-        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        raise ConfigError(source, [f"not valid YAML: {exc}"]) from None
-    problems: list[str] = []
-    check_structure(data, Rover, problems)
+    data, problems = parse_yaml(text, source, Rover)
     if isinstance(data, dict):
         problems.extend(_semantic_problems(data))
     if problems:

@@ -15,6 +15,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import msgspec
 
 __all__ = [
+    "KEY_PAYLOADS",
     "BadInput",
     "BatteryState",
     "Clock",
@@ -33,6 +34,7 @@ __all__ = [
     "decode",
     "decode_input",
     "encode",
+    "is_telemetry",
 ]
 
 T = TypeVar("T", bound=msgspec.Struct)
@@ -160,6 +162,34 @@ class UmbilicalInput(_Input):
 class RailCommand(_Input):
     on: bool | None = None
     reset: bool | None = None
+
+
+# -- which payload goes with which key -----------------------------------------------------
+
+# Every key under lunaris/<rover>/ that carries a JSON payload, as its chunks after the rover
+# ("{load}", "{rail}", "{panel}", "{radio}" stand for a component's name), and its Struct.
+# Telemetry Structs are :class:`_Msg`; inputs and commands are :class:`_Input`.
+KEY_PAYLOADS: dict[tuple[str, ...], type[msgspec.Struct]] = {
+    ("clock",): Clock,
+    ("battery", "state"): BatteryState,
+    ("load", "{load}", "power"): LoadPower,
+    ("rail", "{rail}", "state"): RailState,
+    ("power", "summary"): PowerSummary,
+    ("solar", "{panel}", "power"): SolarPower,
+    ("umbilical", "state"): UmbilicalState,
+    ("radio", "{radio}", "link"): RadioLink,
+    ("event",): Event,
+    ("input", "sun_angle"): SunAngle,
+    ("input", "radio", "{radio}", "position"): RadioPosition,
+    ("input", "umbilical"): UmbilicalInput,
+    ("cmd", "rail", "{rail}"): RailCommand,
+    ("clock", "control"): ClockControl,
+}
+
+
+def is_telemetry(struct: type[msgspec.Struct]) -> bool:
+    """Published by the twin (as opposed to an input or command sent to it)."""
+    return issubclass(struct, _Msg)
 
 
 # -- codec --------------------------------------------------------------------------------

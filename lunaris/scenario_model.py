@@ -53,19 +53,9 @@ import msgspec.inspect as mi
 import yaml
 
 from common import keys
-from common.config import Rover, YamlLoader, check_structure
+from common.config import ConfigError, Rover, YamlLoader, parse_yaml, read_text
 from common.faults import FaultKey, parse_fault_key, parse_params
-from common.messages import (
-    BadInput,
-    BatteryState,
-    Clock,
-    LoadPower,
-    PowerSummary,
-    RadioLink,
-    RailState,
-    SolarPower,
-    UmbilicalState,
-)
+from common.messages import KEY_PAYLOADS, BadInput
 
 __all__ = [
     "SOURCES",
@@ -153,30 +143,26 @@ class Scenario(_Strict):
 ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ConfigError):
     """A scenario with problems; ``problems`` lists every one of them."""
-
-    def __init__(self, source: str, problems: list[str]):
-        self.source = source
-        self.problems = problems
-        lines = "\n".join(f"  {p}" for p in problems)
-        super().__init__(f"{source}: {len(problems)} problem(s)\n{lines}")
 
 
 # -- conditions -----------------------------------------------------------------------------
 
 # source -> (key chunks after lunaris/<rover>/ with {name} for a named source, payload Struct)
 SOURCES: dict[str, tuple[tuple[str, ...], type[msgspec.Struct]]] = {
-    "battery": (("battery", "state"), BatteryState),
-    "summary": (("power", "summary"), PowerSummary),
-    "clock": (("clock",), Clock),
-    "umbilical": (("umbilical", "state"), UmbilicalState),
-    "rail": (("rail", "{name}", "state"), RailState),
-    "load": (("load", "{name}", "power"), LoadPower),
-    "solar": (("solar", "{name}", "power"), SolarPower),
-    "radio": (("radio", "{name}", "link"), RadioLink),
+    source: (chunks, KEY_PAYLOADS[chunks]) for source, chunks in (
+        ("battery", ("battery", "state")),
+        ("summary", ("power", "summary")),
+        ("clock", ("clock",)),
+        ("umbilical", ("umbilical", "state")),
+        ("rail", ("rail", "{rail}", "state")),
+        ("load", ("load", "{load}", "power")),
+        ("solar", ("solar", "{panel}", "power")),
+        ("radio", ("radio", "{radio}", "link")),
+    )
 }
-_NAMED = {s for s, (parts, _) in SOURCES.items() if "{name}" in parts}
+_NAMED = {s for s, (parts, _) in SOURCES.items() if any(p.startswith("{") for p in parts)}
 _OPS: dict[str, Callable[[Any, Any], bool]] = {
     "<": operator.lt, "<=": operator.le, ">": operator.gt, ">=": operator.ge,
     "==": operator.eq, "!=": operator.ne,
@@ -215,7 +201,7 @@ class Comparison:
     @property
     def key_parts(self) -> tuple[str, ...]:
         parts = SOURCES[self.source][0]
-        return tuple(self.name if p == "{name}" else p for p in parts)
+        return tuple(self.name if p.startswith("{") else p for p in parts)
 
     @property
     def ref(self) -> str:
@@ -315,12 +301,7 @@ def _comparison(ref: str, op: str, raw: str) -> Comparison:
 
 
 def load_scenario(path: str | Path, rover: Rover | None = None) -> Scenario:
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ScenarioError(str(path), [f"cannot read file: {exc.strerror}"]) from None
-    return parse_scenario(text, source=str(path), rover=rover)
+    return parse_scenario(read_text(path, ScenarioError), source=str(path), rover=rover)
 
 
 def rover_id_of(text: str) -> str | None:
@@ -336,12 +317,7 @@ def rover_id_of(text: str) -> str | None:
 def parse_scenario(text: str, source: str = "<scenario>", rover: Rover | None = None) -> Scenario:
     """Validate scenario YAML; raise :class:`ScenarioError` listing every problem. With
     ``rover`` the names of loads, rails, panels and radios are checked too."""
-    try:
-        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        raise ScenarioError(source, [f"not valid YAML: {exc}"]) from None
-    problems: list[str] = []
-    check_structure(data, Scenario, problems)
+    data, problems = parse_yaml(text, source, Scenario, ScenarioError)
     if isinstance(data, dict):
         if rover is not None and data.get("rover") not in (None, rover.id):
             problems.append(f"rover: the scenario is for {data.get('rover')!r}, "

@@ -14,17 +14,7 @@ from typing import Any
 import msgspec
 
 from common import keys
-from common.messages import (
-    BatteryState,
-    Clock,
-    Event,
-    LoadPower,
-    PowerSummary,
-    RadioLink,
-    RailState,
-    SolarPower,
-    UmbilicalState,
-)
+from common.messages import KEY_PAYLOADS, is_telemetry
 
 __all__ = [
     "FAMILIES",
@@ -36,15 +26,8 @@ __all__ = [
 
 # family pattern (after lunaris/<rover>/) -> payload Struct
 FAMILIES: dict[str, type[msgspec.Struct]] = {
-    "clock": Clock,
-    "battery/state": BatteryState,
-    "load/*/power": LoadPower,
-    "rail/*/state": RailState,
-    "power/summary": PowerSummary,
-    "solar/*/power": SolarPower,
-    "umbilical/state": UmbilicalState,
-    "radio/*/link": RadioLink,
-    "event": Event,
+    "/".join("*" if c.startswith("{") else c for c in chunks): struct
+    for chunks, struct in KEY_PAYLOADS.items() if is_telemetry(struct)
 }
 
 # Keys an instructor writes (SPEC §5): their payloads may be bare numbers, empty or deletes.

@@ -37,27 +37,11 @@ from typing import Any, NamedTuple
 import msgspec
 import msgspec.inspect as mi
 import numpy as np
-import yaml
 from rosbags.typesys import Stores, get_typestore
 
 from common import keys
-from common.config import Battery, ConfigError, Rover, YamlLoader, check_structure
-from common.messages import (
-    BadInput,
-    BatteryState,
-    Clock,
-    Event,
-    LoadPower,
-    PowerSummary,
-    RadioLink,
-    RadioPosition,
-    RailCommand,
-    RailState,
-    SolarPower,
-    SunAngle,
-    UmbilicalInput,
-    UmbilicalState,
-)
+from common.config import Battery, ConfigError, Rover, parse_yaml, read_text
+from common.messages import KEY_PAYLOADS, BadInput, BatteryState, is_telemetry
 from common.runtime import ActiveFault
 
 __all__ = [
@@ -208,20 +192,9 @@ class Shape(NamedTuple):
         return "/".join([keys.ROOT, "*", *("*" if c.startswith("{") else c for c in self.chunks)])
 
 
-SHAPES: tuple[Shape, ...] = (
-    Shape(("battery", "state"), BatteryState, "out"),
-    Shape(("load", "{load}", "power"), LoadPower, "out"),
-    Shape(("rail", "{rail}", "state"), RailState, "out"),
-    Shape(("power", "summary"), PowerSummary, "out"),
-    Shape(("solar", "{panel}", "power"), SolarPower, "out"),
-    Shape(("umbilical", "state"), UmbilicalState, "out"),
-    Shape(("radio", "{radio}", "link"), RadioLink, "out"),
-    Shape(("clock",), Clock, "out"),
-    Shape(("event",), Event, "out"),
-    Shape(("input", "radio", "{radio}", "position"), RadioPosition, "in"),
-    Shape(("input", "sun_angle"), SunAngle, "in"),
-    Shape(("input", "umbilical"), UmbilicalInput, "in"),
-    Shape(("cmd", "rail", "{rail}"), RailCommand, "in"),
+SHAPES: tuple[Shape, ...] = tuple(
+    Shape(chunks, struct, "out" if is_telemetry(struct) else "in")
+    for chunks, struct in KEY_PAYLOADS.items()
 )
 
 
@@ -305,22 +278,12 @@ def ros_name(value: str) -> str:
 
 def load_mapping(path: str | Path) -> MappingFile:
     """Read and validate a mapping file; raise :class:`ConfigError` listing every problem."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(str(path), [f"cannot read file: {exc.strerror}"]) from None
-    return parse_mapping(text, source=str(path))
+    return parse_mapping(read_text(path), source=str(path))
 
 
 def parse_mapping(text: str, source: str = "<mapping>") -> MappingFile:
     """Validate mapping YAML text; raise :class:`ConfigError` listing every problem."""
-    try:
-        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        raise ConfigError(source, [f"not valid YAML: {exc}"]) from None
-    problems: list[str] = []
-    check_structure(data, MappingFile, problems)
+    data, problems = parse_yaml(text, source, MappingFile)
     if not isinstance(data, dict):
         raise ConfigError(source, problems)
     options = _convert(data.get("bridge", {}), BridgeOptions)
