@@ -87,6 +87,7 @@ class Runtime:
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
         self._after_batch: list[Callable[[], None]] = []
+        self.batch_linger_s = 0.0
         self._exit_hooks: list[Callable[[], None]] = []
         self._timers: list[list] = []  # [period_s, due, fn]
         self._publishers: dict[str, Any] = {}
@@ -144,12 +145,17 @@ class Runtime:
                 item = self._queue.get(timeout=timeout)
             except queue.Empty:
                 continue
+            linger_until = time.monotonic() + self.batch_linger_s
             while item is not None:
                 self._guard(*item)
                 try:
                     item = self._queue.get_nowait()
                 except queue.Empty:
-                    item = None
+                    wait = linger_until - time.monotonic() if self._after_batch else 0.0
+                    try:
+                        item = self._queue.get(timeout=wait) if wait > 0 else None
+                    except queue.Empty:
+                        item = None
             for hook in self._after_batch:
                 self._guard(hook)
 
@@ -181,8 +187,12 @@ class Runtime:
 
     # -- scheduling -------------------------------------------------------------------------
 
-    def after_batch(self, fn: Callable[[], None]) -> None:
+    def after_batch(self, fn: Callable[[], None], linger_s: float = 0.0) -> None:
+        """Call ``fn`` once the queue has run dry, having waited up to ``linger_s`` after the
+        first sample of a batch for more to arrive (a burst of samples that each tick sends
+        over a millisecond or so is then folded into one call)."""
         self._after_batch.append(fn)
+        self.batch_linger_s = max(self.batch_linger_s, linger_s)
 
     def every(self, period_s: float, fn: Callable[[], None]) -> None:
         """Call ``fn`` on the worker thread every ``period_s`` of wall time. A timer that

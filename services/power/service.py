@@ -22,6 +22,8 @@ from services.power.model import PowerModel
 
 __all__ = ["serve"]
 
+LINGER_S = 0.002
+
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     models = {r.id: PowerModel(r) for r in rovers}
@@ -46,13 +48,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             publish(rover)
         dirty.clear()
 
-    def on_clock(s: Sample) -> None:
-        dirty.add(s.rover)
-
     def on_load(s: Sample) -> None:
         m = models[s.rover]
         name = s.parts[1]
-        if name in m.load_power_w:
+        if name in m.load_power_w:  # the loads publish every tick: the PDM follows them
             m.load_power_w[name] = decode(s.payload, LoadPower).power_w
             dirty.add(s.rover)
 
@@ -66,13 +65,17 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     def on_solar(s: Sample) -> None:
         m = models[s.rover]
-        if s.parts[1] in m.panel_power_w:
-            m.panel_power_w[s.parts[1]] = decode(s.payload, SolarPower).power_w
+        power_w = decode(s.payload, SolarPower).power_w
+        if m.panel_power_w.get(s.parts[1], power_w) != power_w:
+            m.panel_power_w[s.parts[1]] = power_w
             dirty.add(s.rover)
 
     def on_umbilical(s: Sample) -> None:
-        models[s.rover].umbilical_w = decode(s.payload, UmbilicalState).power_w
-        dirty.add(s.rover)
+        m = models[s.rover]
+        power_w = decode(s.payload, UmbilicalState).power_w
+        if m.umbilical_w != power_w:
+            m.umbilical_w = power_w
+            dirty.add(s.rover)
 
     def on_command(s: Sample) -> None:
         m = models[s.rover]
@@ -102,7 +105,6 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         publish(rover)
 
     root = keys.ROOT
-    rt.subscribe(f"{root}/*/clock", on_clock)
     rt.subscribe(f"{root}/*/load/*/power", on_load)
     rt.subscribe(f"{root}/*/battery/state", on_battery)
     rt.subscribe(f"{root}/*/solar/*/power", on_solar)
@@ -110,6 +112,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(f"{root}/*/cmd/rail/**", on_command)
     rt.handle_faults("rail", lambda rover: models[rover].rail_names(), apply_fault)
     rt.restore_faults()
-    rt.after_batch(flush)
+    # The loads of a rover arrive as a burst each tick: fold it into one recomputation.
+    rt.after_batch(flush, linger_s=LINGER_S)
     for rover in models:
         publish(rover)
