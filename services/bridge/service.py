@@ -65,10 +65,12 @@ JSON = zenoh.Encoding.APPLICATION_JSON
 
 
 def resolve_mapping(mapping_file: str | None) -> Path:
-    """The mapping file: the default one, or a path as given (relative to the working
-    directory) or, failing that, relative to the repository."""
+    """The mapping file: the default one (``config/bridge/default.yaml`` of the working
+    directory, as in the container image, else of the source tree), or a path as given
+    (relative to the working directory) or, failing that, relative to the repository."""
     if mapping_file is None:
-        return DEFAULT_MAPPING
+        local = Path("config/bridge/default.yaml")
+        return local.resolve() if local.is_file() else DEFAULT_MAPPING
     path = Path(mapping_file)
     if not path.is_absolute() and not path.exists() and (REPO / path).exists():
         return REPO / path

@@ -159,6 +159,10 @@ def test_mapping_files_are_found_from_anywhere(tmp_path, monkeypatch):
     assert resolve_mapping("mine.yaml") == Path("mine.yaml")  # relative to the working directory
     with pytest.raises(ConfigError, match="cannot read file"):
         bm.load_mapping(tmp_path / "missing.yaml")
+    # An installed package run from a folder holding config/ (the container image) uses it.
+    (tmp_path / "config/bridge").mkdir(parents=True)
+    (tmp_path / "config/bridge/default.yaml").write_text("")
+    assert resolve_mapping(None) == tmp_path / "config/bridge/default.yaml"
 
 
 def test_outputs_and_distro_options():
