@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import load_rover
@@ -93,3 +97,28 @@ def test_a_failed_converter_gives_zero_volts(pdm):
     pdm.switches["5V_CH1"].failed = True
     r, _ = rails(pdm)
     assert (r["5V_CH1"].state, r["5V_CH1"].voltage_v, r["5V_CH1"].power_w) == ("failed", 0.0, 0.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    powers=st.lists(st.one_of(st.just(0.0), st.floats(0.0, 1e300)), min_size=10, max_size=10),
+    soc=st.floats(0.0, 1.0),
+    operational=st.booleans(),
+    panels=st.lists(st.floats(0.0, 1e12), min_size=2, max_size=2),
+)
+def test_no_input_gives_nan_or_negative_power(powers, soc, operational, panels):
+    m = PowerModel(load_rover(ROVERS / "mapp.yaml"))
+    m.set_battery(soc, operational, 15.0)
+    m.load_power_w.update(zip(m.load_power_w, powers, strict=True))
+    m.panel_power_w.update(left=panels[0], right=panels[1])
+    readings, summary = m.compute()
+    for r in readings:
+        assert all(math.isfinite(v) and v >= 0.0 for v in (r.voltage_v, r.current_a, r.power_w))
+        if r.name != "SOLAR" and r.state == "on":
+            assert r.current_a <= r.current_limit_a  # anything above has tripped
+    assert all(math.isfinite(v) for v in summary)
+    assert summary.bus_power_w >= summary.load_power_w >= 0.0
+    tripped = {n for n, sw in m.switches.items() if sw.tripped}
+    m.load_power_w.update(dict.fromkeys(m.load_power_w, 0.0))
+    m.compute()
+    assert tripped == {n for n, sw in m.switches.items() if sw.tripped}  # latched
