@@ -33,6 +33,7 @@ __all__ = [
     "Thermal",
     "Umbilical",
     "YamlLoader",
+    "budget_warnings",
     "check_structure",
     "load_rover",
     "parse_rover",
@@ -159,6 +160,20 @@ class Rover(_Strict):
 
     def rail(self, name: str) -> Rail:
         return next(r for r in self.rails if r.name == name)
+
+
+def budget_warnings(rover: Rover) -> list[str]:
+    """What is valid but likely wrong: a rail whose loads, all at ``max_w``, draw more than its
+    current limit, so it can trip in normal operation."""
+    warnings = []
+    for rail in rover.rails:
+        peak_w = sum(ld.max_w for ld in rover.loads if ld.rail == rail.name)
+        if peak_w / rail.voltage_v > rail.current_limit_a:
+            warnings.append(
+                f"rails.{rail.name}: its loads can draw {peak_w / rail.voltage_v:.1f} A "
+                f"(sum of max_w {peak_w:g} W at {rail.voltage_v:g} V), above current_limit_a "
+                f"{rail.current_limit_a:g} A: it may trip in normal operation")
+    return warnings
 
 
 class ConfigError(ValueError):

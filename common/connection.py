@@ -47,7 +47,7 @@ def make_config(
     if config_file:
         path = Path(config_file)
         if not path.is_file():
-            raise ValueError(f"Zenoh configuration {str(path)!r} does not exist")
+            raise zenoh.ZError(f"Zenoh configuration {str(path)!r} does not exist")
         conf = zenoh.Config.from_file(str(path))
     else:
         conf = zenoh.Config()

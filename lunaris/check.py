@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from common.config import ConfigError, load_rover
+from common.config import ConfigError, budget_warnings, load_rover
 
 __all__ = ["add_arguments", "main"]
 
@@ -28,4 +28,6 @@ def main(args: argparse.Namespace) -> int:
               f"{len(rover.rails)} rails, {len(rover.loads)} loads, "
               f"{len(rover.solar.panels)} panels, {len(rover.radios)} radios, "
               f"nominal load {sum(ld.nominal_w for ld in rover.loads):.1f} W")
+        for warning in budget_warnings(rover):
+            print(f"{path}: warning: {warning}")
     return status

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
+
+import zenoh
 
 __all__ = ["COMMANDS", "main"]
 
@@ -44,6 +47,14 @@ def main(argv: list[str] | None = None) -> int:
         return int(importlib.import_module(COMMANDS[args.command][0]).main(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except zenoh.ZError as exc:  # a port in use, a bad endpoint or configuration file
+        print(f"lunaris {args.command}: {_zenoh_message(exc)}", file=sys.stderr)
+        return 1
+
+
+def _zenoh_message(exc: Exception) -> str:
+    """Zenoh's error without the Rust source locations it carries."""
+    return re.sub(r"\s+at \S+\.rs:\d+\.?", "", str(exc)).strip()
 
 
 if __name__ == "__main__":

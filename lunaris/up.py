@@ -182,7 +182,8 @@ def main(args: argparse.Namespace) -> int:
     tty = sys.stdout.isatty() and not args.no_status
     try:
         sup.start_all()
-        last_print = 0.0
+        # Not on a terminal: a first report once the services are up, then every 10 s.
+        last_print = time.monotonic() - 7.0
         shown = 0
         while not stop.wait(0.2):
             sup.poll()

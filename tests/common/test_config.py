@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from common.config import ConfigError, load_rover, parse_rover
+from common.config import ConfigError, budget_warnings, load_rover, parse_rover
 from tests.harness import ROOT, ROVERS, lunaris_cmd
 
 MAPP = (ROVERS / "mapp.yaml").read_text()
@@ -100,3 +100,16 @@ def test_a_service_given_a_broken_file_refuses_to_start_with_the_same_message(tm
     assert run.returncode == 2
     for want in EXPECTED:
         assert want in run.stderr, want
+
+
+def test_check_warns_of_a_rail_its_loads_can_trip(tmp_path):
+    # 5V_CH1 carries flight_computer (max 9 W) and uhf_radio (max 8 W): 17 W / 5 V = 3.4 A.
+    tight = tmp_path / "tight.yaml"
+    tight.write_text(broken(MAPP, ("voltage_v: 5.0,  current_limit_a: 5.0,  efficiency: 0.90, essential",
+                                   "voltage_v: 5.0,  current_limit_a: 3.0,  efficiency: 0.90, essential")))
+    run = subprocess.run(lunaris_cmd("check", str(tight)), capture_output=True, text=True,
+                         cwd=ROOT, timeout=60)
+    assert run.returncode == 0  # valid, but ...
+    assert "warning: rails.5V_CH1: its loads can draw 3.4 A" in run.stdout
+    for shipped in ("mapp.yaml", "ltv.yaml"):  # the shipped rovers are sized right
+        assert budget_warnings(load_rover(ROVERS / shipped)) == []

@@ -262,3 +262,24 @@ def test_draining_to_empty_gives_fault_code_5_and_every_rail_off(twin_factory, p
         p.wait_value(keys.rail_state(R, rail), lambda v: v["state"] == "off")
     (faults,) = p.get_json(keys.faults(R))
     assert any(f["key"].endswith("battery/depleted") and f["origin"] == "derived" for f in faults)
+
+
+def test_a_restarted_service_keeps_its_injected_faults(twin_factory, probe_solo, mapp_file):
+    p = probe_solo
+    p.watch(f"lunaris/{R}/**")
+    services = ("clock", "loads", "faults")
+    twin = twin_factory([mapp_file], services=services)
+    p.wait_services(R, services)
+    p.put(fault_key("load/drive_motors", "stuck"), 77.5)
+    p.wait_value(keys.load_power(R, "drive_motors"), lambda v: v["power_w"] == 77.5)
+    twin.procs["loads"].kill()
+    twin.procs["loads"].wait()
+    p.history.clear()
+    twin.start("loads")  # same state folder, as lunaris up restarts it
+    wait_for(lambda: [s["power_w"] for s in p.samples(keys.load_power(R, "drive_motors"))][-3:]
+             == [77.5] * 3, what="the restarted loads service to keep drive_motors stuck")
+    (faults,) = p.get_json(keys.faults(R))
+    assert [f["key"] for f in faults] == [fault_key("load/drive_motors", "stuck")]
+    p.delete(fault_key("load/drive_motors", "stuck"))  # and it can still be cleared
+    p.wait_event(R, lambda e: e["kind"] == "fault_cleared")
+    p.wait_value(keys.load_power(R, "drive_motors"), lambda v: v["power_w"] != 77.5)
