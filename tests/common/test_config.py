@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import copy
 import subprocess
 
 import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from common.config import ConfigError, budget_warnings, load_rover, parse_rover
 from tests.harness import ROOT, ROVERS, lunaris_cmd
@@ -113,3 +117,40 @@ def test_check_warns_of_a_rail_its_loads_can_trip(tmp_path):
     assert "warning: rails.5V_CH1: its loads can draw 3.4 A" in run.stdout
     for shipped in ("mapp.yaml", "ltv.yaml"):  # the shipped rovers are sized right
         assert budget_warnings(load_rover(ROVERS / shipped)) == []
+
+
+# Any value, anywhere: the loader answers with problems, never with a crash.
+_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+    lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=5), inner,
+                                                                max_size=3),
+    max_leaves=8,
+)
+_MAPP_DATA = yaml.safe_load(MAPP.replace("5.3e5", "530000.0"))
+
+
+def _paths(node, prefix=()):
+    yield prefix
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _paths(v, (*prefix, k))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _paths(v, (*prefix, i))
+
+
+_ALL_PATHS = [p for p in _paths(_MAPP_DATA) if p]
+
+
+@settings(max_examples=300, deadline=None)
+@given(path=st.sampled_from(_ALL_PATHS), value=_values)
+def test_any_value_anywhere_gives_problems_not_a_crash(path, value):
+    data = copy.deepcopy(_MAPP_DATA)
+    node = data
+    for chunk in path[:-1]:
+        node = node[chunk]
+    node[path[-1]] = value
+    try:
+        parse_rover(yaml.safe_dump(data))
+    except ConfigError as exc:
+        assert exc.problems and all(isinstance(p, str) for p in exc.problems)
