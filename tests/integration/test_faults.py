@@ -50,7 +50,10 @@ def active_faults(p: Probe, expected_keys: set[str]) -> list[dict]:
     """The journal's answer once it lists exactly ``expected_keys`` (it trails events briefly)."""
     last: list = []
     def answer():
-        (faults,) = p.get_json(keys.faults(R))
+        replies = p.get_json(keys.faults(R))  # none while a restarted journal comes up
+        if len(replies) != 1:
+            return None
+        (faults,) = replies
         last[:] = faults
         return (faults,) if {f["key"] for f in faults} == expected_keys else None
     try:
@@ -283,3 +286,26 @@ def test_a_restarted_service_keeps_its_injected_faults(twin_factory, probe_solo,
     p.delete(fault_key("load/drive_motors", "stuck"))  # and it can still be cleared
     p.wait_event(R, lambda e: e["kind"] == "fault_cleared")
     p.wait_value(keys.load_power(R, "drive_motors"), lambda v: v["power_w"] != 77.5)
+
+
+def test_a_restarted_journal_rebuilds_the_active_faults(twin_factory, probe_solo, mapp_file):
+    p = probe_solo
+    p.watch(f"lunaris/{R}/**")
+    services = ("clock", "battery", "loads", "power", "solar", "faults")
+    twin = twin_factory([mapp_file], services=services)
+    p.wait_services(R, services)
+    p.put(fault_key("load/nav_camera", "short"), b"")
+    p.put(fault_key("battery", "heating"), 3)
+    p.put(fault_key("solar/left", "dust"), 0.2)
+    p.wait_event(R, lambda e: e["key"].endswith("solar/left/dust"))
+    p.delete(fault_key("solar/left", "dust"))  # cleared before the restart: must stay cleared
+    p.wait_event(R, lambda e: e["kind"] == "fault_cleared")
+    expected = {fault_key("load/nav_camera", "short"), fault_key("battery", "heating"),
+                f"lunaris/{R}/rail/5V_CH2/tripped"}
+    active_faults(p, expected)
+    twin.procs["faults"].kill()
+    twin.procs["faults"].wait()
+    twin.start("faults")
+    p.wait_services(R, ("faults",))
+    faults = {f["key"]: f for f in active_faults(p, expected)}  # replayed from the event caches
+    assert faults[fault_key("battery", "heating")]["params"] == {"heat_w": 3.0}
