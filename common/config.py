@@ -158,9 +158,6 @@ class Rover(_Strict):
     def id(self) -> str:
         return self.rover.id
 
-    def rail(self, name: str) -> Rail:
-        return next(r for r in self.rails if r.name == name)
-
 
 def budget_warnings(rover: Rover) -> list[str]:
     """What is valid but likely wrong: a rail whose loads, all at ``max_w``, draw more than its

@@ -15,10 +15,11 @@ __all__ = [
     "cmd_rail",
     "event",
     "fault",
-    "fault_prefix",
     "faults",
+    "faults_journal",
     "input_radio_position",
     "input_sun_angle",
+    "input_umbilical",
     "load_power",
     "power_summary",
     "radio_link",
@@ -81,12 +82,12 @@ def input_radio_position(rover: str, radio: str) -> str:
     return f"{ROOT}/{rover}/input/radio/{radio}/position"
 
 
+def input_umbilical(rover: str) -> str:
+    return f"{ROOT}/{rover}/input/umbilical"
+
+
 def cmd_rail(rover: str, rail: str) -> str:
     return f"{ROOT}/{rover}/cmd/rail/{rail}"
-
-
-def fault_prefix(rover: str) -> str:
-    return f"{ROOT}/{rover}/fault"
 
 
 def fault(rover: str, component: str, kind: str) -> str:
@@ -96,6 +97,10 @@ def fault(rover: str, component: str, kind: str) -> str:
 
 def faults(rover: str) -> str:
     return f"{ROOT}/{rover}/faults"
+
+
+def faults_journal(rover: str) -> str:
+    return f"{ROOT}/{rover}/faults/journal"
 
 
 def event(rover: str) -> str:

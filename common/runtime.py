@@ -101,7 +101,7 @@ class Runtime:
         self.session = zenoh.open(self._conf)
         # Sim time is tracked on Zenoh's thread, before any handler runs, so that every
         # event and payload of every service carries the rover's current t_s.
-        self._keep.append(self.session.declare_subscriber(f"{keys.ROOT}/*/clock", self._on_clock))
+        self._keep.append(self.session.declare_subscriber(keys.clock("*"), self._on_clock))
         return self
 
     def _on_clock(self, s: zenoh.Sample) -> None:

@@ -188,7 +188,7 @@ def _list(args: argparse.Namespace) -> int:
         "waiting for the Zenoh router ...", file=sys.stderr, flush=True))
     try:
         active = _get_json(session, keys.faults(args.rover), args.timeout)
-        journal = (_get_json(session, keys.faults(args.rover) + "/journal", args.timeout)
+        journal = (_get_json(session, keys.faults_journal(args.rover), args.timeout)
                    if args.journal else [])
     finally:
         session.close()

@@ -664,7 +664,7 @@ class Player:
                           final)]
         if step.umbilical is not None:
             body = {"connected": step.umbilical}
-            return [Write(f"{keys.rover_prefix(rover)}/input/umbilical", json.dumps(body).encode(), i)]
+            return [Write(keys.input_umbilical(rover), json.dumps(body).encode(), i)]
         if step.clock is not None:
             body = {k: v for k, v in msgspec.structs.asdict(step.clock).items() if v is not None}
             return [Write(keys.clock_control(rover), json.dumps(body).encode(), i, "clock")]

@@ -117,9 +117,9 @@ class _Status:
         self.rails: dict[str, dict[str, str]] = {r: {} for r in rover_ids}
         self.services: dict[str, set[str]] = {r: set() for r in rover_ids}
         self._subs = [
-            session.declare_subscriber(f"{keys.ROOT}/*/battery/state", self._on_battery),
-            session.declare_subscriber(f"{keys.ROOT}/*/rail/*/state", self._on_rail),
-            session.liveliness().declare_subscriber(f"{keys.ROOT}/*/service/*", self._on_token,
+            session.declare_subscriber(keys.battery_state("*"), self._on_battery),
+            session.declare_subscriber(keys.rail_state("*", "*"), self._on_rail),
+            session.liveliness().declare_subscriber(keys.service("*", "*"), self._on_token,
                                                     history=True),
         ]
 

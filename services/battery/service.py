@@ -70,8 +70,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             for rover, p in packs.items()
         })
 
-    rt.subscribe(f"{keys.ROOT}/*/clock", on_clock)
-    rt.subscribe(f"{keys.ROOT}/*/power/summary", on_summary)
+    rt.subscribe(keys.clock("*"), on_clock)
+    rt.subscribe(keys.power_summary("*"), on_summary)
     rt.handle_faults("battery", None, apply_fault)
     rt.restore_faults()
     rt.every(PERSIST_S, persist)

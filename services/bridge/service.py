@@ -221,7 +221,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     for pattern in sorted(patterns):
         rt.subscribe(pattern, on_twin, history=True)
     if diag_outlets:
-        rt.subscribe(f"{keys.ROOT}/*/event", on_event, history=True)
+        rt.subscribe(keys.event("*"), on_event, history=True)
         rt.every(opts.diagnostics_period_s, periodic_diagnostics)
     rt.after_batch(flush)
 

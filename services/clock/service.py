@@ -44,7 +44,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.save_state("clock", {r: {"t_s": c.t_s, "seq": c.seq, "time_scale": c.time_scale,
                                     "paused": c.paused} for r, c in clocks.items()})
 
-    rt.subscribe(f"{keys.ROOT}/*/clock/control", on_control)
+    rt.subscribe(keys.clock_control("*"), on_control)
     for rover, clock in clocks.items():
         # A clock that falls behind skips ahead rather than bursting (see Runtime.every).
         rt.every(clock.period_s, ticker(rover, clock))

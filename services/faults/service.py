@@ -33,7 +33,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             live_rovers.add(rover)
 
     rt.keep(rt.session.liveliness().declare_subscriber(
-        f"{keys.ROOT}/*/service/*", on_token, history=True))
+        keys.service("*", "*"), on_token, history=True))
 
     def on_event(s: Sample) -> None:
         journals[s.rover].record(decode(s.payload, Event))
@@ -57,7 +57,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         selector = str(q.key_expr)
         want_journal = selector.endswith("/journal")
         for rover, journal in journals.items():
-            key = keys.faults(rover) + ("/journal" if want_journal else "")
+            key = keys.faults_journal(rover) if want_journal else keys.faults(rover)
             if not zenoh.KeyExpr(key).intersects(q.key_expr):
                 continue
             if want_journal:
@@ -65,8 +65,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             else:
                 q.reply(key, msgspec.json.encode(journal.active_faults()))
 
-    rt.subscribe(f"{keys.ROOT}/*/event", on_event, history=True)
+    rt.subscribe(keys.event("*"), on_event, history=True)
     for head in ("fault/**", "input/**", "cmd/**", "clock/control"):
         rt.subscribe(f"{keys.ROOT}/*/{head}", on_instructor_key, any_rover=True)
-    rt.queryable(f"{keys.ROOT}/*/faults", on_query)
-    rt.queryable(f"{keys.ROOT}/*/faults/journal", on_query)
+    rt.queryable(keys.faults("*"), on_query)
+    rt.queryable(keys.faults_journal("*"), on_query)

@@ -39,7 +39,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         models[rover].set_fault(fk.name, fk.kind, params)
         publish(rover, {fk.name})
 
-    rt.subscribe(f"{keys.ROOT}/*/clock", on_clock)
-    rt.subscribe(f"{keys.ROOT}/*/rail/*/state", on_rail)
+    rt.subscribe(keys.clock("*"), on_clock)
+    rt.subscribe(keys.rail_state("*", "*"), on_rail)
     rt.handle_faults("load", lambda rover: models[rover].names, apply_fault)
     rt.restore_faults()

@@ -105,10 +105,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         publish(rover)
 
     root = keys.ROOT
-    rt.subscribe(f"{root}/*/load/*/power", on_load)
-    rt.subscribe(f"{root}/*/battery/state", on_battery)
-    rt.subscribe(f"{root}/*/solar/*/power", on_solar)
-    rt.subscribe(f"{root}/*/umbilical/state", on_umbilical)
+    rt.subscribe(keys.load_power("*", "*"), on_load)
+    rt.subscribe(keys.battery_state("*"), on_battery)
+    rt.subscribe(keys.solar_power("*", "*"), on_solar)
+    rt.subscribe(keys.umbilical_state("*"), on_umbilical)
     rt.subscribe(f"{root}/*/cmd/rail/**", on_command)
     rt.handle_faults("rail", lambda rover: models[rover].rail_names(), apply_fault)
     rt.restore_faults()

@@ -48,9 +48,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         models[rover].umbilical_fault = params is not None
         publish(rover)
 
-    rt.subscribe(f"{keys.ROOT}/*/clock", on_clock)
-    rt.subscribe(f"{keys.ROOT}/*/input/sun_angle", on_sun)
-    rt.subscribe(f"{keys.ROOT}/*/input/umbilical", on_umbilical)
+    rt.subscribe(keys.clock("*"), on_clock)
+    rt.subscribe(keys.input_sun_angle("*"), on_sun)
+    rt.subscribe(keys.input_umbilical("*"), on_umbilical)
     rt.handle_faults("solar", lambda rover: models[rover].panel_names(), apply_panel_fault)
     rt.handle_faults("umbilical", None, apply_umbilical_fault)
     rt.restore_faults()

@@ -167,7 +167,7 @@ def test_disconnected_panel_gives_nothing(probe):
 
 
 def test_umbilical_disconnect(probe):
-    probe.put(keys.input_sun_angle(R).replace("sun_angle", "umbilical"), "true")
+    probe.put(keys.input_umbilical(R), "true")
     probe.wait_value(keys.umbilical_state(R), lambda v: v["connected"] and v["power_w"] == 120)
     try:
         inject(probe, "umbilical", "disconnect")
@@ -175,7 +175,7 @@ def test_umbilical_disconnect(probe):
         clear(probe, "umbilical", "disconnect")
         probe.wait_value(keys.umbilical_state(R), lambda v: v["connected"] and v["power_w"] == 120)
     finally:
-        probe.put(keys.input_sun_angle(R).replace("sun_angle", "umbilical"), "false")
+        probe.put(keys.input_umbilical(R), "false")
         probe.wait_value(keys.umbilical_state(R), lambda v: not v["connected"])
 
 
