@@ -244,10 +244,7 @@ class Runtime:
         )
 
     def publish(self, key: str, msg: msgspec.Struct) -> None:
-        pub = self._publishers.get(key)
-        if pub is None:
-            pub = self._declare_publisher(key, 1)
-        pub.put(encode(msg))
+        self.publish_bytes(key, encode(msg), zenoh.Encoding.APPLICATION_JSON)
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
                       attachment: bytes | None = None) -> None:
