@@ -24,7 +24,7 @@ from collections.abc import Callable
 import fault_latency as fl
 from benchlib import machine, percentiles
 
-from services.bridge.model import rmw_topic_key
+from services.bridge.rmw_zenoh import rmw_topic_key
 from tests import rosmsg
 
 DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"

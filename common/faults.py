@@ -19,16 +19,30 @@ __all__ = [
     "CATALOGUE",
     "FAULT_CODES",
     "NAMED_COMPONENTS",
+    "FactorParams",
     "FaultKey",
+    "FractionParams",
+    "HeatParams",
     "KindSpec",
+    "NoParams",
+    "Params",
+    "RangeScaleParams",
+    "ShortParams",
+    "StuckParams",
     "battery_fault_code",
+    "check_component",
+    "fault_of",
+    "params_from_dict",
     "parse_fault_key",
     "parse_params",
 ]
 
 
-class _Params(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    pass
+class Params(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """The parameters of one fault kind; the model that owns the component reads them."""
+
+
+_Params = Params
 
 
 class NoParams(_Params):
@@ -105,16 +119,20 @@ class FaultKey(NamedTuple):
         return "/".join(p for p in (self.component, self.name, self.kind) if p)
 
 
+def check_component(parts: list[str]) -> str:
+    """The component type a fault key's chunks after ``fault/`` name; :class:`BadInput` when
+    it is missing or not in the catalogue (so no service owns it)."""
+    if not parts:
+        raise BadInput("no component in the fault key")
+    if parts[0] not in CATALOGUE:
+        raise BadInput(f"unknown component {parts[0]!r} (known: {', '.join(sorted(CATALOGUE))})")
+    return parts[0]
+
+
 def parse_fault_key(parts: list[str]) -> FaultKey:
     """Parse the chunks after ``fault/``; raise :class:`BadInput` for an unknown component,
     kind or key shape."""
-    if not parts:
-        raise BadInput("no component in the fault key")
-    component = parts[0]
-    if component not in CATALOGUE:
-        raise BadInput(
-            f"unknown component {component!r} (known: {', '.join(sorted(CATALOGUE))})"
-        )
+    component = check_component(parts)
     named = component in NAMED_COMPONENTS
     want = 3 if named else 2
     if len(parts) != want:
@@ -127,16 +145,31 @@ def parse_fault_key(parts: list[str]) -> FaultKey:
     return FaultKey(component, parts[1] if named else None, kind)
 
 
-def parse_params(key: FaultKey, payload: bytes) -> dict:
-    """Decode and validate the parameters of an injection; return them as a dict."""
+def fault_of(path: str, params: dict | None = None) -> tuple[FaultKey, Params | None]:
+    """A fault and its typed parameters from its path (``load/nav_camera/short``) and JSON
+    parameters; ``params`` None stands for a clearing. For callers that hold a model directly
+    (the composed twin, tests)."""
+    fk = parse_fault_key(path.split("/"))
+    return fk, None if params is None else params_from_dict(fk, params)
+
+
+def parse_params(key: FaultKey, payload: bytes) -> Params:
+    """Decode and validate the parameters of an injection into the kind's Struct."""
     spec = CATALOGUE[key.component][key.kind]
     if spec.params is NoParams:
         text = bytes(payload).strip()
-        if text not in (b"", b"{}", b"null"):
+        if text not in (b"", b"{}"):
             raise BadInput(f"{key.component} {key.kind} takes no parameters, got {text[:60]!r}")
-        return {}
-    params = decode_input(payload, spec.params, bare=spec.bare)
-    return msgspec.structs.asdict(params)
+        return NoParams()
+    return decode_input(payload, spec.params, bare=spec.bare)
+
+
+def params_from_dict(key: FaultKey, params: dict) -> Params:
+    """The typed parameters of a fault from their JSON object (a persisted fault)."""
+    try:
+        return msgspec.convert(params, CATALOGUE[key.component][key.kind].params)
+    except msgspec.ValidationError as exc:
+        raise BadInput(f"{key.path}: {exc}") from None
 
 
 # -- the battery fault_code table (SPEC §6: 0 nominal and 5 depleted are fixed) --------------

@@ -1,21 +1,42 @@
-"""Every Zenoh key expression of SPEC §5, built in one place.
+"""Every Zenoh key expression of SPEC §5, built in one place, and the table of key families.
 
-All keys live under ``lunaris/<rover>/``. Builders take a rover id (or ``"*"``
-for a subscription across the fleet) and return a string. :func:`split`
-parses a received key back into its rover and the rest.
+All keys live under ``lunaris/<rover>/``. Builders take a rover id (or ``"*"`` for a
+subscription across the fleet) and return a string; :func:`split` parses a received key
+back into its rover and the rest.
+
+A *family* is a key shape after ``lunaris/<rover>/`` whose name chunks are placeholders
+(``load/{load}/power``), with the msgspec Struct its payload follows, whether the twin
+publishes it (telemetry, ``out``) or reads it (an input or command, ``in``), and the
+service that owns it. :data:`FAMILIES` is the one table every tool reads: the bridge's
+mapping validation, the recorder's schemas, the scenario conditions, the gatekeeper that
+refuses keys nobody owns.
 """
 
 from __future__ import annotations
 
+from typing import Literal, NamedTuple
+
+import msgspec
+
+from common import messages as m
+
 __all__ = [
+    "FAMILIES",
+    "PLACEHOLDERS",
     "ROOT",
+    "Family",
     "battery_state",
     "clock",
     "clock_control",
     "cmd_rail",
     "event",
+    "families",
+    "family_of",
+    "family_of_template",
     "fault",
+    "fault_prefix",
     "faults",
+    "faults_active",
     "faults_journal",
     "input_radio_position",
     "input_sun_angle",
@@ -28,10 +49,12 @@ __all__ = [
     "service",
     "solar_power",
     "split",
+    "telemetry_family",
     "umbilical_state",
 ]
 
 ROOT = "lunaris"
+PLACEHOLDERS = ("load", "rail", "radio", "panel")  # the component kinds a key can name
 
 
 def rover_prefix(rover: str) -> str:
@@ -95,8 +118,23 @@ def fault(rover: str, component: str, kind: str) -> str:
     return f"{ROOT}/{rover}/fault/{component}/{kind}"
 
 
+def fault_prefix(rover: str, component: str) -> str:
+    """Every fault key of one component type: ``lunaris/<rover>/fault/<component>/**``."""
+    return f"{ROOT}/{rover}/fault/{component}/**"
+
+
+def derived_fault(rover: str, component: str, name: str) -> str:
+    """The key a derived fault is known by: ``lunaris/<rover>/rail/12V/tripped``."""
+    return f"{ROOT}/{rover}/{component}/{name}"
+
+
 def faults(rover: str) -> str:
     return f"{ROOT}/{rover}/faults"
+
+
+def faults_active(rover: str, service: str) -> str:
+    """The faults in effect on the components one service owns (published and queryable)."""
+    return f"{ROOT}/{rover}/faults/active/{service}"
 
 
 def faults_journal(rover: str) -> str:
@@ -117,3 +155,103 @@ def split(key: str) -> tuple[str, list[str]]:
     if len(parts) < 2 or parts[0] != ROOT:
         raise ValueError(f"key {key!r} is not under {ROOT}/<rover>/")
     return parts[1], parts[2:]
+
+
+# -- families ----------------------------------------------------------------------------------
+
+Direction = Literal["out", "in"]
+
+
+class Family(NamedTuple):
+    """A family of keys: chunks after ``lunaris/<rover>/`` (``{load}`` stands for a name),
+    its payload Struct, its direction and the service that owns it."""
+
+    chunks: tuple[str, ...]
+    payload: type[msgspec.Struct]
+    direction: Direction
+    owner: str
+
+    @property
+    def name(self) -> str:
+        """``load/*/power``: the family as it is written in tables and recordings."""
+        return "/".join("*" if c.startswith("{") else c for c in self.chunks)
+
+    @property
+    def placeholder(self) -> str | None:
+        return next((c[1:-1] for c in self.chunks if c.startswith("{")), None)
+
+    def pattern(self, rover: str = "*") -> str:
+        """Zenoh key expression for every component of the family (of every rover)."""
+        return "/".join([ROOT, rover, *("*" if c.startswith("{") else c for c in self.chunks)])
+
+    def matches(self, parts: list[str] | tuple[str, ...]) -> bool:
+        return len(parts) == len(self.chunks) and all(
+            c.startswith("{") or c == p for c, p in zip(self.chunks, parts, strict=True))
+
+
+def _f(shape: str, payload: type[msgspec.Struct], owner: str) -> Family:
+    return Family(tuple(shape.split("/")), payload,
+                  "out" if m.is_telemetry(payload) else "in", owner)
+
+
+FAMILIES: tuple[Family, ...] = (
+    _f("clock", m.Clock, "clock"),
+    _f("battery/state", m.BatteryState, "battery"),
+    _f("load/{load}/power", m.LoadPower, "loads"),
+    _f("rail/{rail}/state", m.RailState, "power"),
+    _f("power/summary", m.PowerSummary, "power"),
+    _f("solar/{panel}/power", m.SolarPower, "solar"),
+    _f("umbilical/state", m.UmbilicalState, "solar"),
+    _f("radio/{radio}/link", m.RadioLink, "radio"),
+    _f("event", m.Event, "*"),
+    _f("faults/active/{service}", m.ActiveFaults, "*"),
+    _f("input/sun_angle", m.SunAngle, "solar"),
+    _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
+    _f("input/umbilical", m.UmbilicalInput, "solar"),
+    _f("cmd/rail/{rail}", m.RailCommand, "power"),
+    _f("clock/control", m.ClockControl, "clock"),
+)
+
+
+def families(direction: Direction | None = None) -> tuple[Family, ...]:
+    return tuple(f for f in FAMILIES if direction is None or f.direction == direction)
+
+
+def family_of(parts: list[str] | tuple[str, ...]) -> Family | None:
+    """The family of a key's chunks after ``lunaris/<rover>/``, or None if it has none.
+
+    >>> family_of(["load", "imu", "power"]).name
+    'load/*/power'
+    """
+    return next((f for f in FAMILIES if f.matches(parts)), None)
+
+
+def telemetry_family(parts: list[str] | tuple[str, ...]) -> Family | None:
+    """The family of a key the twin publishes (telemetry, events, faults in effect); None
+    for inputs, commands and keys outside every family."""
+    fam = family_of(parts)
+    return fam if fam is not None and fam.direction == "out" else None
+
+
+def family_of_template(template: str) -> tuple[Family, str | None] | None:
+    """The family of a key template ``lunaris/{rover}/...`` and the component it names (a
+    literal name, a ``{placeholder}``, or None for keys without one); None when no family
+    fits. ``lunaris/{rover}/rail/{rail}/state`` -> (rail family, ``"{rail}"``)."""
+    parts = template.split("/")
+    if len(parts) < 3 or parts[0] != ROOT or parts[1] != "{rover}":
+        return None
+    rest = parts[2:]
+    for fam in FAMILIES:
+        if len(fam.chunks) != len(rest):
+            continue
+        item: str | None = None
+        for want, got in zip(fam.chunks, rest, strict=True):
+            if want.startswith("{"):
+                if got.startswith("{") and got != want:
+                    break
+                item = got
+            elif want != got:
+                break
+        else:
+            return fam, item
+    return None

@@ -15,12 +15,15 @@ from typing import Annotated, Any, Literal, TypeVar
 import msgspec
 
 __all__ = [
-    "KEY_PAYLOADS",
+    "ActiveFault",
+    "ActiveFaults",
     "BadInput",
     "BatteryState",
     "Clock",
     "ClockControl",
     "Event",
+    "EventKind",
+    "Severity",
     "LoadPower",
     "PowerSummary",
     "RadioLink",
@@ -124,14 +127,42 @@ class RadioLink(_Msg):
     faults: list[str] = []
 
 
+# What an event says happened: a refused input, a fault's life, an accepted command or
+# input, a change of the clock, a bug in a service.
+EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
+                    "fault_resolved", "command", "input", "clock", "internal_error"]
+
+
 class Event(_Msg):
     t_s: float
     severity: Severity
     source: str
-    kind: str
+    kind: EventKind
     key: str
     message: str
     params: dict[str, Any] | None = None
+
+
+FaultOrigin = Literal["injected", "derived"]
+
+
+class ActiveFault(_Msg):
+    """A fault in effect: injected by an instructor, or derived by a model itself."""
+
+    key: str  # lunaris/<rover>/fault/<component>/<kind>, or the derived fault's key
+    params: dict[str, Any]
+    since_t_s: float
+    origin: FaultOrigin
+    severity: Severity = "warning"
+
+
+class ActiveFaults(_Msg):
+    """``faults/active/<service>``: every fault in effect on the components one service owns
+    (published on every change, cached for late joiners, and answered live to a query)."""
+
+    t_s: float
+    service: str
+    faults: list[ActiveFault]
 
 
 # -- inputs and commands (decoded strictly) -----------------------------------------------
@@ -162,29 +193,6 @@ class UmbilicalInput(_Input):
 class RailCommand(_Input):
     on: bool | None = None
     reset: bool | None = None
-
-
-# -- which payload goes with which key -----------------------------------------------------
-
-# Every key under lunaris/<rover>/ that carries a JSON payload, as its chunks after the rover
-# ("{load}", "{rail}", "{panel}", "{radio}" stand for a component's name), and its Struct.
-# Telemetry Structs are :class:`_Msg`; inputs and commands are :class:`_Input`.
-KEY_PAYLOADS: dict[tuple[str, ...], type[msgspec.Struct]] = {
-    ("clock",): Clock,
-    ("battery", "state"): BatteryState,
-    ("load", "{load}", "power"): LoadPower,
-    ("rail", "{rail}", "state"): RailState,
-    ("power", "summary"): PowerSummary,
-    ("solar", "{panel}", "power"): SolarPower,
-    ("umbilical", "state"): UmbilicalState,
-    ("radio", "{radio}", "link"): RadioLink,
-    ("event",): Event,
-    ("input", "sun_angle"): SunAngle,
-    ("input", "radio", "{radio}", "position"): RadioPosition,
-    ("input", "umbilical"): UmbilicalInput,
-    ("cmd", "rail", "{rail}"): RailCommand,
-    ("clock", "control"): ClockControl,
-}
 
 
 def is_telemetry(struct: type[msgspec.Struct]) -> bool:

@@ -28,15 +28,14 @@ from common.config import ConfigError
 from common.connection import add_connection_args
 from common.messages import Clock, decode
 from lunaris.tooling import ToolError, live_rovers, open_session
-from services.bridge.model import (
+from services.bridge.convert import out_value
+from services.bridge.mapping import (
     PLACEHOLDERS,
     Binding,
     MappingFile,
     RoverNames,
     expand,
     load_mapping,
-    out_value,
-    shape_of,
 )
 from services.bridge.service import resolve_mapping
 
@@ -73,14 +72,14 @@ class PdmView:
         self.t_s: float | None = None
         self.changed_at = time.monotonic()
         self._lock = threading.Lock()
-        self._types = {}
+        self._families: list[keys.Family] = []
         for m in mf.mappings:
-            shape, _ = shape_of(m.key)
-            self._types[shape.chunks] = shape
+            found = keys.family_of_template(m.key)
+            if found is not None and found[0] not in self._families:
+                self._families.append(found[0])
 
     def patterns(self) -> list[str]:
-        return sorted({shape.pattern.replace("/*/", f"/{self.rover}/", 1)
-                       for shape in self._types.values()} | {keys.clock(self.rover)})
+        return sorted({fam.pattern(self.rover) for fam in self._families} | {keys.clock(self.rover)})
 
     def on_sample(self, s: zenoh.Sample) -> None:
         key = str(s.key_expr)
@@ -89,18 +88,17 @@ class PdmView:
         if parts == ["clock"]:
             self.t_s = decode(payload, Clock).t_s
             return
-        shape = next((sh for chunks, sh in self._types.items() if len(chunks) == len(parts) and all(
-            c.startswith("{") or c == p for c, p in zip(chunks, parts, strict=True))), None)
-        if shape is None:
+        fam = next((f for f in self._families if f.matches(parts)), None)
+        if fam is None:
             return
         with self._lock:
             if key not in self.latest:
                 self.changed_at = time.monotonic()
-            self.latest[key] = decode(payload, shape.payload)
-            if shape.placeholder is not None:
-                name = parts[shape.chunks.index(f"{{{shape.placeholder}}}")]
-                if name not in self.names[shape.placeholder]:
-                    self.names[shape.placeholder].append(name)
+            self.latest[key] = decode(payload, fam.payload)
+            if fam.placeholder is not None:
+                name = parts[fam.chunks.index(f"{{{fam.placeholder}}}")]
+                if name not in self.names[fam.placeholder]:
+                    self.names[fam.placeholder].append(name)
 
     def bindings(self) -> list[Binding]:
         names = RoverNames(self.rover, **{p: tuple(v) for p, v in self.names.items()})

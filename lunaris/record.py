@@ -42,7 +42,6 @@ from mcap.writer import Writer
 
 from common import keys
 from common.connection import add_connection_args
-from lunaris.telemetry import FAMILIES, family_of, json_schema
 from lunaris.tooling import ToolError, describe_endpoint, open_session
 
 __all__ = ["KeyWrite", "Recorder", "add_arguments", "main", "schema_for"]
@@ -61,10 +60,28 @@ class KeyWrite(msgspec.Struct):
 
 def schema_for(parts: list[str]) -> tuple[str, dict[str, Any]]:
     """The schema name and JSON schema of a key (its chunks after ``lunaris/<rover>/``)."""
-    family = family_of(parts)
-    struct = FAMILIES[family] if family is not None else KeyWrite
+    family = keys.telemetry_family(parts)
+    struct = family.payload if family is not None else KeyWrite
     name = ENVELOPE if family is None else f"lunaris.{struct.__name__}"
     return name, json_schema(struct)
+
+
+def json_schema(struct: type[msgspec.Struct]) -> dict[str, Any]:
+    """The JSON schema of ``struct`` with the Struct itself at the root.
+
+    ``msgspec.json.schema`` returns ``{"$ref": "#/$defs/Name", "$defs": {...}}``; viewers
+    such as Foxglove want the object at the top, so the root reference is resolved and
+    any other definitions are kept in ``$defs``.
+    """
+    full = msgspec.json.schema(struct)
+    defs = dict(full.get("$defs", {}))
+    ref = full.get("$ref", "")
+    if not ref.startswith("#/$defs/"):
+        return full
+    root = dict(defs.pop(ref.removeprefix("#/$defs/")))
+    if defs:
+        root["$defs"] = defs
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", **root}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -121,7 +138,8 @@ class Recorder:
         except ValueError:
             self.skipped += 1
             return False
-        family = family_of(parts)
+        fam = keys.telemetry_family(parts)
+        family = fam.name if fam is not None else None
         if family is not None:
             if deleted:
                 self.skipped += 1

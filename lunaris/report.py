@@ -23,7 +23,6 @@ from pathlib import Path
 import msgspec
 
 from common import keys
-from lunaris.telemetry import family_of
 
 __all__ = ["Session", "add_arguments", "draw", "load_session", "main"]
 
@@ -83,7 +82,8 @@ def load_session(path: Path) -> dict[str, Session]:
             rover, parts = keys.split(channel.topic)
         except ValueError:
             continue
-        family = family_of(parts)
+        fam = keys.telemetry_family(parts)
+        family = fam.name if fam is not None else None
         if family is None:
             continue
         try:

@@ -48,12 +48,12 @@ def load_rovers(paths: list[str]) -> list[Rover]:
 def main(args: argparse.Namespace) -> int:
     rovers = load_rovers(args.rover)
     module = importlib.import_module(f"services.{args.service}.service")
-    rt = Runtime(args.service, [r.id for r in rovers], config_from_args(args), args.state_dir)
-    rt.open()
-    options = {"seed": args.seed}
+    options: dict[str, object] = {"seed": args.seed}
     if args.service == "bridge":
         options["mapping_file"] = args.bridge_config
-    module.serve(rt, rovers, **options)
-    print(f"lunaris {args.service}: serving {', '.join(r.id for r in rovers)}", flush=True)
-    rt.run()
+    with Runtime(args.service, [r.id for r in rovers], config_from_args(args),
+                 args.state_dir) as rt:
+        module.serve(rt, rovers, **options)
+        print(f"lunaris {args.service}: serving {', '.join(r.id for r in rovers)}", flush=True)
+        rt.run()
     return 0

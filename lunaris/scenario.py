@@ -1,6 +1,6 @@
 """``lunaris scenario run|check FILE``: play or validate a scripted training scenario.
 
-The format and the player's logic are in :mod:`lunaris.scenario_model`; this is
+The format is :mod:`common.scenario` and the player's logic :mod:`common.scenario_player`; this is
 the Zenoh shell around them. ``run`` follows the rover's clock (scenario times
 are simulated time, so a scenario can play with the clock sped up), keeps the
 latest telemetry for the conditions, makes each step's writes, and reports each
@@ -31,17 +31,8 @@ from common import keys
 from common.config import ConfigError, Rover, load_rover
 from common.connection import add_connection_args
 from common.messages import Event, decode
-from lunaris.scenario_model import (
-    Player,
-    Scenario,
-    ScenarioError,
-    Write,
-    describe_action,
-    describe_trigger,
-    load_scenario,
-    rover_id_of,
-)
-from lunaris.telemetry import family_of
+from common.scenario import Scenario, ScenarioError, load_scenario, rover_id_of
+from common.scenario_player import Player, Write, describe_action, describe_trigger
 from lunaris.tooling import ToolError, describe_endpoint, open_session, require_rover
 
 __all__ = ["add_arguments", "find_rover", "main"]
@@ -163,7 +154,8 @@ class _Run:
             rover, parts = keys.split(str(s.key_expr))
         except ValueError:
             return
-        family = family_of(parts)
+        fam = keys.telemetry_family(parts)
+        family = fam.name if fam is not None else None
         if family is None or family == "event" or rover != self.rover:
             return
         try:

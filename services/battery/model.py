@@ -25,6 +25,8 @@ import math
 from typing import NamedTuple
 
 from common.config import Battery as BatteryConfig
+from common.faults import FactorParams, FaultKey, FractionParams, HeatParams, Params
+from common.messages import Severity
 
 __all__ = ["BatteryModel", "BatteryReading", "BusPoint", "ocv", "solve_bus", "thermal_step"]
 
@@ -96,7 +98,8 @@ class BatteryReading(NamedTuple):
 
 class BatteryModel:
     """One pack. ``demand_w`` (net, positive = discharge) is held until the next change;
-    :meth:`step` integrates it over ``dt``. Injected faults are attributes set by the shell."""
+    :meth:`step` integrates it over ``dt``. The pack's injected faults (SPEC §6) are applied
+    by :meth:`apply_fault`."""
 
     def __init__(self, cfg: BatteryConfig):
         self.cfg = cfg
@@ -167,6 +170,19 @@ class BatteryModel:
             raise ValueError(f"power_w must be finite, got {power_w}")
         self.demand_w = power_w
 
+    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
+        """Inject (``params``) or clear (None) one of the pack's faults."""
+        if fault.kind == "capacity_loss":
+            self.apply_capacity_loss(params.fraction if isinstance(params, FractionParams) else 0.0)
+        elif fault.kind == "resistance":
+            self.resistance_factor = params.factor if isinstance(params, FactorParams) else 1.0
+        elif fault.kind == "heating":
+            self.injected_heat_w = params.heat_w if isinstance(params, HeatParams) else 0.0
+        elif fault.kind == "disconnect":
+            self.disconnected = params is not None
+        else:
+            raise ValueError(f"the battery has no fault kind {fault.kind!r}")
+
     def apply_capacity_loss(self, fraction: float) -> None:
         """Shrink usable capacity; energy above the new capacity is lost for good."""
         self.capacity_loss = fraction
@@ -204,12 +220,12 @@ class BatteryModel:
 
     # -- reporting --------------------------------------------------------------------------
 
-    def derived_faults(self, point: BusPoint | None = None) -> dict[str, tuple[str, str]]:
+    def derived_faults(self, point: BusPoint | None = None) -> dict[str, tuple[Severity, str]]:
         """Faults the pack raises itself: name -> (severity, message)."""
         point = point or self.operating_point()
         cfg, th = self.cfg, self.cfg.thermal
         t = self.temperature_c
-        out: dict[str, tuple[str, str]] = {}
+        out: dict[str, tuple[Severity, str]] = {}
         if self.thermal_cutoff:
             out["thermal_cutoff"] = ("critical", f"pack at {t:.1f} C above cutoff "
                                      f"{th.cutoff_c} C: disconnected itself")

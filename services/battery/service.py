@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey, battery_fault_code
+from common.faults import FaultKey, Params, battery_fault_code
 from common.messages import BatteryState, Clock, PowerSummary, decode
 from common.runtime import Runtime, Sample
 from services.battery.model import BatteryModel
@@ -16,7 +16,7 @@ PERSIST_S = 0.2  # wall time between saves: what a killed battery service can lo
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     packs = {r.id: BatteryModel(r.battery) for r in rovers}
-    saved = rt.load_state("state") or {}
+    saved = rt.store.load("state") or {}
     for rover, pack in packs.items():
         s = saved.get(rover)
         if s:  # resume after a restart: the store and the heat are not reset
@@ -24,24 +24,19 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             pack.temperature_c = s["temperature_c"]
             pack.depleted = s.get("depleted", pack.depleted)
             pack.thermal_cutoff = s.get("thermal_cutoff", False)
-            rt.now[rover] = s.get("t_s", 0.0)
+            rt.t_s[rover] = s.get("t_s", 0.0)
 
     def publish(rover: str) -> None:
         pack = packs[rover]
         r = pack.reading()
-        rt.sync_derived(rover, "battery", pack.derived_faults())
+        rt.faults.sync_derived(rover, "battery", pack.derived_faults())
+        fields = r._asdict()
         rt.publish(keys.battery_state(rover), BatteryState(
-            t_s=rt.now[rover], energy_j=r.energy_j, capacity_j=r.capacity_j, soc=r.soc,
-            ocv_v=r.ocv_v, voltage_v=r.voltage_v, current_a=r.current_a, power_w=r.power_w,
-            temperature_c=r.temperature_c, operational=r.operational,
-            fault_code=battery_fault_code(r.faults), faults=r.faults,
-            time_to_empty_s=r.time_to_empty_s, heat_w=r.heat_w,
-        ))
+            t_s=rt.t_s[rover], fault_code=battery_fault_code(r.faults), **fields))
 
-    def on_clock(s: Sample) -> None:
-        tick = decode(s.payload, Clock)
-        packs[s.rover].step(tick.dt_s)
-        publish(s.rover)
+    def on_tick(rover: str, tick: Clock) -> None:
+        packs[rover].step(tick.dt_s)
+        publish(rover)
 
     def on_summary(s: Sample) -> None:
         summary = decode(s.payload, PowerSummary)
@@ -50,30 +45,22 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             pack.set_demand(summary.net_battery_power_w)
             publish(s.rover)  # the bus voltage and current move at once, not at the next tick
 
-    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
-        pack = packs[rover]
-        if fk.kind == "capacity_loss":
-            pack.apply_capacity_loss(params["fraction"] if params else 0.0)
-        elif fk.kind == "resistance":
-            pack.resistance_factor = params["factor"] if params else 1.0
-        elif fk.kind == "heating":
-            pack.injected_heat_w = params["heat_w"] if params else 0.0
-        elif fk.kind == "disconnect":
-            pack.disconnected = params is not None
+    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
+        packs[rover].apply_fault(fk, params)
         publish(rover)
 
     def persist() -> None:
-        rt.save_state("state", {
+        rt.store.save("state", {
             rover: {"energy_j": p.energy_j, "temperature_c": p.temperature_c,
                     "depleted": p.depleted, "thermal_cutoff": p.thermal_cutoff,
-                    "t_s": rt.now[rover]}
+                    "t_s": rt.t_s[rover]}
             for rover, p in packs.items()
         })
 
-    rt.subscribe(keys.clock("*"), on_clock)
+    rt.on_tick(on_tick)
     rt.subscribe(keys.power_summary("*"), on_summary)
-    rt.handle_faults("battery", None, apply_fault)
-    rt.restore_faults()
+    rt.faults.own("battery", None, apply_fault)
+    rt.faults.restore()
     rt.every(PERSIST_S, persist)
     rt.on_exit(persist)
     for rover in packs:

@@ -7,9 +7,10 @@ start-up; with a problem the service prints every one and exits with status 2. T
   of samples, never on a timer), in each enabled flavour: ``ros2dds`` (CDR on the topic name),
   ``rmw_zenoh`` (CDR on the rmw_zenoh key with its attachment; the node, publisher and
   subscription liveliness tokens are held for the life of the service) and ``json``;
-- the DiagnosticArray follows the fault journal (events, replayed from the services' caches
-  when the bridge joins late) and each component's telemetry (STALE when it stops), published
-  on every change of the active faults and every ``diagnostics_period_s``;
+- the DiagnosticArray follows the faults in effect (each owning service's
+  ``faults/active/<service>``, replayed from its cache when the bridge joins late) and each
+  component's telemetry (STALE when it stops), published on every change of the active
+  faults and every ``diagnostics_period_s``;
 - an inbound topic (any flavour) becomes a twin input; a message that cannot be decoded or
   carries a bad value is refused with a rejection event, like any bad input.
 """
@@ -26,38 +27,32 @@ import zenoh
 
 from common import keys
 from common.config import ConfigError, Rover
-from common.messages import BadInput, Event, decode
+from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
-from services.bridge.model import (
-    Binding,
-    MappingFile,
-    attachment,
+from services.bridge.cdr import decode_cdr, encode_cdr
+from services.bridge.convert import (
     battery_state_message,
     components,
     data_key,
-    decode_cdr,
     diagnostic_array_message,
     diagnostic_statuses,
-    encode_cdr,
-    entity_token,
-    expand,
-    gid_of,
     in_payload,
-    load_mapping,
-    node_token,
     out_message,
+)
+from services.bridge.mapping import Binding, MappingFile, expand, load_mapping, rover_names
+from services.bridge.rmw_zenoh import (
+    attachment,
+    entity_token,
+    gid_of,
+    node_token,
     qos_keyexpr,
     rmw_topic_key,
-    rover_names,
-    shape_of,
 )
-from services.faults.model import Journal
 
 __all__ = ["DEFAULT_MAPPING", "resolve_mapping", "serve"]
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MAPPING = REPO / "config" / "bridge" / "default.yaml"
-FAULT_KINDS = frozenset({"fault_injected", "fault_cleared", "fault_raised", "fault_resolved"})
 PUBLISHER_DEPTH = 1  # the last-value cache: TRANSIENT_LOCAL, KEEP_LAST 1
 SUBSCRIPTION_DEPTH = 10
 CDR = zenoh.Encoding.APPLICATION_CDR
@@ -110,6 +105,12 @@ class _Outlet:
             self.rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON)
 
 
+def _family(key_template: str) -> keys.Family:
+    found = keys.family_of_template(key_template)
+    assert found is not None, "the mapping was validated"
+    return found[0]
+
+
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
           mapping_file: str | None = None) -> None:
     path = resolve_mapping(mapping_file)
@@ -118,7 +119,6 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         bindings = expand(mf, [rover_names(r) for r in rovers], source=str(path))
     except ConfigError as exc:
         print(exc, file=sys.stderr, flush=True)
-        rt.close()  # an open session would hold the process at exit
         raise SystemExit(2) from None
     opts = mf.bridge
     rover_cfg = {r.id: r for r in rovers}
@@ -141,7 +141,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             diag_outlets.setdefault(b.rover, []).append(outlet)
         else:
             by_key.setdefault(b.key, []).append(outlet)
-            payload_type[b.key] = shape_of(b.mapping.key)[0].payload
+            payload_type[b.key] = _family(b.mapping.key).payload
 
     latest: dict[str, msgspec.Struct] = {}
     dirty: set[str] = set()
@@ -157,9 +157,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
                                          opts.ros_distro)
         return out_message(m, payload)
 
-    # -- diagnostics: the journal and each component's last telemetry ---------------------------
-    journals = {r.id: Journal() for r in rovers if r.id in diag_outlets}
-    comps = {rid: components(rover_cfg[rid]) for rid in journals}
+    # -- diagnostics: the faults in effect and each component's last telemetry -----------------
+    # rover -> owning service -> its faults in effect (a view of the owners' records)
+    in_effect: dict[str, dict[str, list[ActiveFault]]] = {r: {} for r in diag_outlets}
+    comps = {rid: components(rover_cfg[rid]) for rid in in_effect}
     started = time.monotonic()
     last_seen: dict[str, float] = {}  # component data key -> monotonic time
     alive_of = {data_key(rid, c): (rid, c) for rid, cs in comps.items() for c in cs}
@@ -170,11 +171,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         return {c: now - last_seen.get(data_key(rover, c), started) for c in comps[rover]}
 
     def publish_diagnostics(rover: str) -> None:
-        statuses = diagnostic_statuses(rover, comps[rover], journals[rover].active_faults(),
-                                       ages(rover), opts.stale_after_s)
+        active = sorted((f for fs in in_effect[rover].values() for f in fs),
+                        key=lambda f: (f.since_t_s, f.key))
+        statuses = diagnostic_statuses(rover, comps[rover], active, ages(rover), opts.stale_after_s)
         msg = None
         for outlet in diag_outlets[rover]:
-            msg = msg or diagnostic_array_message(statuses, stamp_ns(rt.now.get(rover, 0.0)),
+            msg = msg or diagnostic_array_message(statuses, stamp_ns(rt.t_s.get(rover, 0.0)),
                                                   outlet.binding.mapping.frame_id)
             outlet.publish(msg)
 
@@ -189,14 +191,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             latest[s.key] = decode(s.payload, payload_type[s.key])
             dirty.add(s.key)
 
-    def on_event(s: Sample) -> None:
-        journal = journals.get(s.rover)
-        if journal is None:
+    def on_faults(s: Sample) -> None:
+        if s.rover not in in_effect or s.deleted:
             return
-        ev = decode(s.payload, Event)
-        journal.record(ev)
-        if ev.kind in FAULT_KINDS:
-            diag_dirty.add(s.rover)
+        answer = decode(s.payload, ActiveFaults)
+        in_effect[s.rover][answer.service] = answer.faults
+        diag_dirty.add(s.rover)
 
     def flush() -> None:
         for key in sorted(dirty):
@@ -216,12 +216,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
 
     # One subscription per family of keys (lunaris/*/rail/*/state ...); samples are told apart
     # by their exact key above.
-    patterns = {shape_of(o.binding.mapping.key)[0].pattern for ol in by_key.values() for o in ol}
-    patterns |= {shape_of(data_key("{rover}", c))[0].pattern for cs in comps.values() for c in cs}
+    patterns = {_family(o.binding.mapping.key).pattern() for ol in by_key.values() for o in ol}
+    patterns |= {_family(data_key("{rover}", c)).pattern() for cs in comps.values() for c in cs}
     for pattern in sorted(patterns):
         rt.subscribe(pattern, on_twin, history=True)
     if diag_outlets:
-        rt.subscribe(keys.event("*"), on_event, history=True)
+        rt.subscribe(keys.faults_active("*", "*"), on_faults, history=True)
         rt.every(opts.diagnostics_period_s, periodic_diagnostics)
     rt.after_batch(flush)
 

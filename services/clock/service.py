@@ -6,24 +6,24 @@ from common import keys
 from common.config import Rover
 from common.messages import BadInput, Clock, ClockControl, decode_input
 from common.runtime import Runtime, Sample
-from services.clock.model import ClockModel
+from services.clock.model import ClockModel, Tick
 
 __all__ = ["serve"]
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    saved = rt.load_state("clock") or {}
+    saved = rt.store.load("clock") or {}
     clocks: dict[str, ClockModel] = {}
     for rover in rovers:
         s = saved.get(rover.id, {})
         clocks[rover.id] = ClockModel(rover.tick_hz, t_s=s.get("t_s", 0.0), seq=s.get("seq", 0),
                                       time_scale=s.get("time_scale", 1.0),
                                       paused=s.get("paused", False))
-        rt.now[rover.id] = clocks[rover.id].t_s
+        rt.t_s[rover.id] = clocks[rover.id].t_s
 
-    def publish(rover: str, tick) -> None:
-        rt.now[rover] = tick.t_s
-        rt.publish(keys.clock(rover), Clock(*tick))
+    def publish(rover: str, tick: Tick) -> None:
+        rt.t_s[rover] = tick.t_s
+        rt.publish(keys.clock(rover), Clock(**tick._asdict()))
 
     def ticker(rover: str, clock: ClockModel):
         return lambda: publish(rover, clock.tick())
@@ -41,7 +41,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                  f"clock {'paused' if clock.paused else 'running'} at x{clock.time_scale:g}")
 
     def persist() -> None:
-        rt.save_state("clock", {r: {"t_s": c.t_s, "seq": c.seq, "time_scale": c.time_scale,
+        rt.store.save("clock", {r: {"t_s": c.t_s, "seq": c.seq, "time_scale": c.time_scale,
                                     "paused": c.paused} for r, c in clocks.items()})
 
     rt.subscribe(keys.clock_control("*"), on_control)

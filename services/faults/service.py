@@ -1,38 +1,49 @@
-"""Faults service: keeps the session's journal and answers ``get lunaris/<rover>/faults``.
+"""Faults service: the session's journal, ``get lunaris/<rover>/faults``, and the gatekeeper.
 
-It is also the gatekeeper for what no other service owns: an instructor key for
-a rover no service serves, a fault on an unknown component, an unknown input or
-command. Each is rejected with an event, like every other bad input.
+- **The journal**: every event of the rover, answered to ``get lunaris/<rover>/faults/journal``.
+- **The faults in effect**: ``get lunaris/<rover>/faults`` is answered by asking each owning
+  service for its own record (``lunaris/<rover>/faults/active/<service>``, see
+  ``common.fault_book``) at the time of the query and merging the answers. A fault whose
+  effect is on the telemetry is therefore in the answer: its owner applied it, and recorded
+  it, before publishing the effect. Nothing is kept here that could go stale.
+- **The gatekeeper** for what no other service owns: an instructor key for a rover no
+  service serves, a fault on an unknown component, an input or command the twin does not
+  have. Each is rejected with an event, like every other bad input.
 """
 
 from __future__ import annotations
+
+import threading
 
 import msgspec
 import zenoh
 
 from common import keys
 from common.config import Rover
-from common.faults import CATALOGUE
-from common.messages import BadInput, Event, decode
+from common.faults import check_component
+from common.messages import ActiveFault, ActiveFaults, BadInput, Event, decode
 from common.runtime import Runtime, Sample
 from services.faults.model import Journal
 
 __all__ = ["serve"]
 
-OWNED_INPUTS = {"sun_angle", "radio", "umbilical"}
-OWNED_COMMANDS = {"rail"}
+GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
+# The heads of the keys that instructors, scenarios and dashboards write.
+WRITABLE = ("fault/**", "input/**", "cmd/**", "clock/control/**")
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     journals = {r.id: Journal() for r in rovers}
     live_rovers: set[str] = set()
+    session = rt.session
+    assert session is not None
 
     def on_token(s: zenoh.Sample) -> None:
         rover, _ = keys.split(str(s.key_expr))
         if s.kind == zenoh.SampleKind.PUT:
             live_rovers.add(rover)
 
-    rt.keep(rt.session.liveliness().declare_subscriber(
+    rt.keep(session.liveliness().declare_subscriber(
         keys.service("*", "*"), on_token, history=True))
 
     def on_event(s: Sample) -> None:
@@ -43,30 +54,56 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             raise BadInput(f"unknown rover {s.rover!r}: no Lunaris service serves it")
         if s.rover not in rt.rovers:
             return  # another faults service journals that rover
-        head, rest = s.parts[0], s.parts[1:]
-        if head == "fault" and (not rest or rest[0] not in CATALOGUE):
-            known = ", ".join(sorted(CATALOGUE))
-            raise BadInput(f"unknown component {rest[0] if rest else ''!r} (known: {known})")
-        if head == "input" and (not rest or rest[0] not in OWNED_INPUTS):
-            raise BadInput(f"unknown input {'/'.join(rest)!r} "
-                           f"(inputs: {', '.join(sorted(OWNED_INPUTS))})")
-        if head == "cmd" and (not rest or rest[0] not in OWNED_COMMANDS):
-            raise BadInput(f"unknown command {'/'.join(rest)!r} (commands: rail/<name>)")
+        if s.parts[0] == "fault":
+            check_component(s.parts[1:])  # the owner of a known component answers the rest
+            return
+        family = keys.family_of(s.parts)
+        if family is None or family.direction != "in":
+            writable = ", ".join(f.name for f in keys.families("in"))
+            raise BadInput(f"no such input or command {'/'.join(s.parts)!r} (the twin reads: "
+                           f"{writable}, fault/...)")
 
-    def on_query(q: zenoh.Query) -> None:
-        selector = str(q.key_expr)
-        want_journal = selector.endswith("/journal")
-        for rover, journal in journals.items():
-            key = keys.faults_journal(rover) if want_journal else keys.faults(rover)
-            if not zenoh.KeyExpr(key).intersects(q.key_expr):
-                continue
-            if want_journal:
-                q.reply(key, msgspec.json.encode(list(journal.events)))
-            else:
-                q.reply(key, msgspec.json.encode(journal.active_faults()))
+    def on_journal_query(q: zenoh.Query) -> None:
+        with q:
+            for rover, journal in journals.items():
+                key = keys.faults_journal(rover)
+                if zenoh.KeyExpr(key).intersects(q.key_expr):
+                    q.reply(key, msgspec.json.encode(list(journal.events)))
+
+    def on_faults_query(q: zenoh.Query) -> None:
+        # Answered on Zenoh's thread: the owners are asked at once, and the query is
+        # finalised when their answers are in (or the timeout ends the gathering).
+        wanted = [r for r in sorted(journals) if zenoh.KeyExpr(keys.faults(r)).intersects(q.key_expr)]
+        if not wanted:
+            q.drop()
+            return
+        gathered: dict[str, list[ActiveFault]] = {r: [] for r in wanted}
+        lock = threading.Lock()
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.ok is None:
+                return
+            rover, _ = keys.split(str(reply.ok.key_expr))
+            answer = decode(reply.ok.payload.to_bytes(), ActiveFaults)
+            with lock:
+                if rover in gathered:
+                    gathered[rover].extend(answer.faults)
+
+        def on_done() -> None:
+            with q:
+                for rover in wanted:
+                    faults = sorted(gathered[rover], key=lambda f: (f.since_t_s, f.key))
+                    q.reply(keys.faults(rover), msgspec.json.encode(faults),
+                            encoding=zenoh.Encoding.APPLICATION_JSON)
+
+        rover_chunk = wanted[0] if len(wanted) == 1 else "*"
+        session.get(keys.faults_active(rover_chunk, "*"),
+                    zenoh.handlers.Callback(on_reply, on_done),
+                    consolidation=zenoh.ConsolidationMode.NONE,
+                    timeout=GATHER_TIMEOUT_S)
 
     rt.subscribe(keys.event("*"), on_event, history=True)
-    for head in ("fault/**", "input/**", "cmd/**", "clock/control"):
+    for head in WRITABLE:
         rt.subscribe(f"{keys.ROOT}/*/{head}", on_instructor_key, any_rover=True)
-    rt.queryable(keys.faults("*"), on_query)
-    rt.queryable(keys.faults_journal("*"), on_query)
+    rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
+    rt.queryable(keys.faults_journal("*"), on_journal_query)

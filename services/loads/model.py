@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from common.config import Rover
+from common.faults import FaultKey, Params, ShortParams, StuckParams
 
 __all__ = ["LoadsModel", "sample_power"]
 
@@ -33,7 +34,7 @@ class LoadsModel:
         self.max_w = np.array([ld.max_w for ld in rover.loads], dtype=float)
         self.sampled_w = self.nominal_w.copy()
         self.rail_on = {r.name: r.initially_on for r in rover.rails}
-        self.faults: dict[str, dict[str, dict]] = {}  # load -> {kind: params}
+        self.faults: dict[str, dict[str, Params]] = {}  # load -> {kind: params}
         self.rng = np.random.default_rng(seed)
 
     def sample(self) -> None:
@@ -58,19 +59,27 @@ class LoadsModel:
         if not faults:
             return float(self.sampled_w[i]), True
         # Several faults on one load: a short dominates, then an open circuit, then stuck.
-        if "short" in faults:
-            return self.rail_voltage_v[rail] ** 2 / faults["short"]["resistance_ohm"], True
+        short = faults.get("short")
+        if isinstance(short, ShortParams):
+            return self.rail_voltage_v[rail] ** 2 / short.resistance_ohm, True
         if "open" in faults:
             return 0.0, True
-        return float(faults["stuck"]["power_w"]), True
+        stuck = faults["stuck"]
+        assert isinstance(stuck, StuckParams)
+        return stuck.power_w, True
 
-    def set_fault(self, name: str, kind: str, params: dict | None) -> None:
+    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
         """Inject (``params``) or clear (None) one fault of one load."""
-        faults = self.faults.setdefault(name, {})
+        if fault.name not in self.index:
+            raise ValueError(f"no load {fault.name!r}")
+        faults = self.faults.setdefault(fault.name, {})
         if params is None:
-            faults.pop(kind, None)
+            faults.pop(fault.kind, None)
         else:
-            faults[kind] = params
+            faults[fault.kind] = params
+
+    def fault_names(self, name: str) -> list[str]:
+        return sorted(self.faults.get(name, {}))
 
     def powers(self) -> list[tuple[str, float, str, bool]]:
         """``(load, power_w, rail, on)`` for every load."""

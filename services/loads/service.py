@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey
+from common.faults import FaultKey, Params
 from common.messages import Clock, LoadPower, RailState, decode
 from common.runtime import Runtime, Sample
 from services.loads.model import LoadsModel
@@ -20,14 +20,13 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         for name, power_w, rail, on in m.powers():
             if only is None or name in only:
                 rt.publish(keys.load_power(rover, name), LoadPower(
-                    t_s=rt.now[rover], power_w=power_w, rail=rail, on=on,
-                    faults=sorted(m.faults.get(name, {}))))
+                    t_s=rt.t_s[rover], power_w=power_w, rail=rail, on=on,
+                    faults=m.fault_names(name)))
 
-    def on_clock(s: Sample) -> None:
-        tick = decode(s.payload, Clock)
+    def on_tick(rover: str, tick: Clock) -> None:
         if tick.dt_s > 0.0:  # a paused clock holds every load where it is
-            models[s.rover].sample()
-        publish(s.rover)
+            models[rover].sample()
+        publish(rover)
 
     def on_rail(s: Sample) -> None:
         rail = s.parts[1]
@@ -35,11 +34,11 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if rail in m.rail_on and m.set_rail(rail, decode(s.payload, RailState).state == "on"):
             publish(s.rover, {n for n, r in zip(m.names, m.rails, strict=True) if r == rail})
 
-    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
-        models[rover].set_fault(fk.name, fk.kind, params)
-        publish(rover, {fk.name})
+    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
+        models[rover].apply_fault(fk, params)
+        publish(rover, {fk.name} if fk.name else None)
 
-    rt.subscribe(keys.clock("*"), on_clock)
+    rt.on_tick(on_tick)
     rt.subscribe(keys.rail_state("*", "*"), on_rail)
-    rt.handle_faults("load", lambda rover: models[rover].names, apply_fault)
-    rt.restore_faults()
+    rt.faults.own("load", lambda rover: models[rover].names, apply_fault)
+    rt.faults.restore()

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from common.config import Rail, Rover
+from common.config import Rail, Rover, SolarRail
+from common.faults import FaultKey, Params
+from common.messages import Severity
 
 __all__ = ["PowerModel", "RailReading", "RailSwitch", "Summary"]
 
@@ -84,7 +86,7 @@ class PowerModel:
         self.bus_voltage_v = 0.0
 
     @property
-    def solar_rail(self):
+    def solar_rail(self) -> SolarRail:
         return self.rover.solar.rail
 
     def rail_names(self) -> list[str]:
@@ -105,6 +107,15 @@ class PowerModel:
                 sw.shed = True
             elif sw.shed and soc >= sw.restore_soc:
                 sw.shed = False
+
+    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
+        """Inject (``params``) or clear (None) a converter failure of one rail."""
+        if fault.name == self.solar_rail.name:
+            self.solar_failed = params is not None
+        elif fault.name in self.switches:
+            self.switches[fault.name].failed = params is not None
+        else:
+            raise ValueError(f"no rail {fault.name!r}")
 
     def command(self, rail: str, on: bool | None = None, reset: bool = False) -> None:
         sw = self.switches[rail]
@@ -152,12 +163,12 @@ class PowerModel:
                           self.bus_voltage_v)
         return readings, summary
 
-    def derived_faults(self, rail: str) -> dict[str, tuple[str, str]]:
+    def derived_faults(self, rail: str) -> dict[str, tuple[Severity, str]]:
         """Faults a rail raises itself: name -> (severity, message)."""
         sw = self.switches.get(rail)
         if sw is None:
             return {}
-        out: dict[str, tuple[str, str]] = {}
+        out: dict[str, tuple[Severity, str]] = {}
         if sw.tripped:
             out["tripped"] = ("critical", f"rail {rail} tripped: {sw.trip_current_a:.2f} A over "
                               f"its {sw.cfg.current_limit_a} A limit")

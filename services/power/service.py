@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey
+from common.faults import FaultKey, Params
 from common.messages import (
     BadInput,
     BatteryState,
@@ -33,15 +33,15 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def publish(rover: str) -> None:
         m = models[rover]
         readings, summary = m.compute()
-        t = rt.now[rover]
+        t = rt.t_s[rover]
         for r in readings:
-            rt.publish(keys.rail_state(rover, r.name), RailState(
-                t_s=t, voltage_v=r.voltage_v, current_a=r.current_a, power_w=r.power_w,
-                current_limit_a=r.current_limit_a, state=r.state, reason=r.reason))
-            if last_state.get((rover, r.name)) != r.state:
-                last_state[(rover, r.name)] = r.state
-                rt.sync_derived(rover, f"rail/{r.name}", m.derived_faults(r.name))
-        rt.publish(keys.power_summary(rover), PowerSummary(t, *summary))
+            fields = r._asdict()
+            name = fields.pop("name")
+            rt.publish(keys.rail_state(rover, name), RailState(t_s=t, **fields))
+            if last_state.get((rover, name)) != r.state:
+                last_state[(rover, name)] = r.state
+                rt.faults.sync_derived(rover, f"rail/{name}", m.derived_faults(name))
+        rt.publish(keys.power_summary(rover), PowerSummary(t_s=t, **summary._asdict()))
 
     def flush() -> None:
         for rover in sorted(dirty):
@@ -79,7 +79,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     def on_command(s: Sample) -> None:
         m = models[s.rover]
-        rail = s.parts[2] if len(s.parts) == 3 else ""
+        rail = s.parts[2]
         if rail not in m.switches:
             if rail == m.solar_rail.name:
                 raise BadInput(f"the solar rail {rail} cannot be switched")
@@ -96,22 +96,17 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.event(s.rover, "info", "command", s.key, f"rail {rail}: {what}")
         publish(s.rover)  # at once: the loads follow the new rail state
 
-    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
-        m = models[rover]
-        if fk.name == m.solar_rail.name:
-            m.solar_failed = params is not None
-        else:
-            m.switches[fk.name].failed = params is not None
+    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
+        models[rover].apply_fault(fk, params)
         publish(rover)
 
-    root = keys.ROOT
     rt.subscribe(keys.load_power("*", "*"), on_load)
     rt.subscribe(keys.battery_state("*"), on_battery)
     rt.subscribe(keys.solar_power("*", "*"), on_solar)
     rt.subscribe(keys.umbilical_state("*"), on_umbilical)
-    rt.subscribe(f"{root}/*/cmd/rail/**", on_command)
-    rt.handle_faults("rail", lambda rover: models[rover].rail_names(), apply_fault)
-    rt.restore_faults()
+    rt.subscribe(keys.cmd_rail("*", "*"), on_command)
+    rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_fault)
+    rt.faults.restore()
     # The loads of a rover arrive as a burst each tick: fold it into one recomputation.
     rt.after_batch(flush, linger_s=LINGER_S)
     for rover in models:

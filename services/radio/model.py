@@ -12,6 +12,7 @@ import math
 from typing import NamedTuple
 
 from common.config import Radio
+from common.faults import FaultKey, Params, RangeScaleParams
 
 __all__ = ["Link", "RadioModel", "in_range", "position_xy"]
 
@@ -42,6 +43,17 @@ class RadioModel:
         self.angle_deg = 0.0
         self.failed = False
         self.range_scale = 1.0
+
+    def set_position(self, distance_m: float, angle_deg: float) -> None:
+        """The rover's position relative to this radio [m, deg]."""
+        self.distance_m, self.angle_deg = distance_m, angle_deg
+
+    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
+        """Inject (``params``) or clear (None) a failure or a degradation of this radio."""
+        if fault.kind == "failure":
+            self.failed = params is not None
+        else:
+            self.range_scale = params.range_scale if isinstance(params, RangeScaleParams) else 1.0
 
     def faults(self) -> list[str]:
         return (["failure"] if self.failed else []) + (

@@ -6,7 +6,7 @@ import time
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey
+from common.faults import FaultKey, Params
 from common.messages import BadInput, RadioLink, RadioPosition, decode_input
 from common.runtime import Runtime, Sample
 from services.radio.model import RadioModel
@@ -28,8 +28,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if force or prev is None or prev[0] != link.in_range or now - prev[1] >= HEARTBEAT_S:
             last[(rover, name)] = (link.in_range, now)
             rt.publish(keys.radio_link(rover, name), RadioLink(
-                t_s=rt.now[rover], in_range=link.in_range, x_m=link.x_m, y_m=link.y_m,
-                faults=m.faults()))
+                t_s=rt.t_s[rover], faults=m.faults(), **link._asdict()))
 
     def heartbeat() -> None:
         for rover, named in radios.items():
@@ -37,25 +36,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                 publish(rover, name)
 
     def on_position(s: Sample) -> None:
-        name = s.parts[2] if len(s.parts) == 4 else ""
+        name = s.parts[2]
         if name not in radios[s.rover]:
             known = ", ".join(radios[s.rover]) or "none"
             raise BadInput(f"rover {s.rover} has no radio {name!r} (radios: {known})")
         pos = decode_input(s.payload, RadioPosition)
-        m = radios[s.rover][name]
-        m.distance_m, m.angle_deg = pos.distance_m, pos.angle_deg
+        radios[s.rover][name].set_position(pos.distance_m, pos.angle_deg)
         publish(s.rover, name, force=True)
 
-    def apply_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
-        m = radios[rover][fk.name]
-        if fk.kind == "failure":
-            m.failed = params is not None
-        else:
-            m.range_scale = params["range_scale"] if params else 1.0
+    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
+        assert fk.name is not None
+        radios[rover][fk.name].apply_fault(fk, params)
         publish(rover, fk.name, force=True)
 
-    rt.subscribe(f"{keys.ROOT}/*/input/radio/**", on_position)
-    rt.handle_faults("radio", lambda rover: radios[rover], apply_fault)
-    rt.restore_faults()
+    rt.subscribe(keys.input_radio_position("*", "*"), on_position)
+    rt.faults.own("radio", lambda rover: radios[rover], apply_fault)
+    rt.faults.restore()
     rt.every(0.2, heartbeat)
     heartbeat()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 from common.config import Rover
+from common.faults import FaultKey, FractionParams, Params
 
 __all__ = ["SolarModel", "panel_power"]
 
@@ -30,6 +31,19 @@ class SolarModel:
         self.disconnected: set[str] = set()
         self.umbilical_plugged = rover.umbilical.connected
         self.umbilical_fault = False
+
+    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
+        """Inject (``params``) or clear (None) a fault of a panel or of the umbilical."""
+        if fault.component == "umbilical":
+            self.umbilical_fault = params is not None
+        elif fault.name not in self.dust:
+            raise ValueError(f"no panel {fault.name!r}")
+        elif fault.kind == "dust":
+            self.dust[fault.name] = params.fraction if isinstance(params, FractionParams) else 0.0
+        elif params is not None:
+            self.disconnected.add(fault.name)
+        else:
+            self.disconnected.discard(fault.name)
 
     def panel_names(self) -> list[str]:
         return [p.name for p in self.cfg.panels]

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey
-from common.messages import SolarPower, SunAngle, UmbilicalInput, UmbilicalState, decode_input
+from common.faults import FaultKey, Params
+from common.messages import Clock, SolarPower, SunAngle, UmbilicalInput, UmbilicalState, decode_input
 from common.runtime import Runtime, Sample
 from services.solar.model import SolarModel
 
@@ -17,15 +17,15 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     def publish(rover: str) -> None:
         m = models[rover]
-        t = rt.now[rover]
+        t = rt.t_s[rover]
         for name, power_w, dust, faults in m.panels():
             rt.publish(keys.solar_power(rover, name), SolarPower(
                 t_s=t, power_w=power_w, sun_angle_deg=m.sun_angle_deg, dust=dust, faults=faults))
         rt.publish(keys.umbilical_state(rover), UmbilicalState(
             t_s=t, connected=m.umbilical_connected, power_w=m.umbilical_power_w))
 
-    def on_clock(s: Sample) -> None:
-        publish(s.rover)
+    def on_tick(rover: str, tick: Clock) -> None:
+        publish(rover)
 
     def on_sun(s: Sample) -> None:
         models[s.rover].sun_angle_deg = decode_input(s.payload, SunAngle, bare="angle_deg").angle_deg
@@ -36,23 +36,15 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             s.payload, UmbilicalInput, bare="connected").connected
         publish(s.rover)
 
-    def apply_panel_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
-        m = models[rover]
-        if fk.kind == "dust":
-            m.dust[fk.name] = params["fraction"] if params else 0.0
-        else:
-            (m.disconnected.add if params is not None else m.disconnected.discard)(fk.name)
+    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
+        models[rover].apply_fault(fk, params)
         publish(rover)
 
-    def apply_umbilical_fault(rover: str, fk: FaultKey, params: dict | None) -> None:
-        models[rover].umbilical_fault = params is not None
-        publish(rover)
-
-    rt.subscribe(keys.clock("*"), on_clock)
+    rt.on_tick(on_tick)
     rt.subscribe(keys.input_sun_angle("*"), on_sun)
     rt.subscribe(keys.input_umbilical("*"), on_umbilical)
-    rt.handle_faults("solar", lambda rover: models[rover].panel_names(), apply_panel_fault)
-    rt.handle_faults("umbilical", None, apply_umbilical_fault)
-    rt.restore_faults()
+    rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_fault)
+    rt.faults.own("umbilical", None, apply_fault)
+    rt.faults.restore()
     for rover in models:
         publish(rover)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import msgspec
 import pytest
 
 from common.faults import FAULT_CODES, battery_fault_code, parse_fault_key, parse_params
@@ -66,7 +67,7 @@ def test_bad_fault_keys(parts, reason):
     ("battery/disconnect", b"{}", {}),
 ])
 def test_fault_params(path, payload, params):
-    assert parse_params(parse_fault_key(path.split("/")), payload) == params
+    assert msgspec.structs.asdict(parse_params(parse_fault_key(path.split("/")), payload)) == params
 
 
 @pytest.mark.parametrize(("path", "payload", "reason"), [

@@ -6,6 +6,8 @@ leave a lasting mark on the pack (heat, depletion) get a twin of their own.
 
 from __future__ import annotations
 
+import json
+import threading
 from pathlib import Path
 
 import pytest
@@ -309,3 +311,58 @@ def test_a_restarted_journal_rebuilds_the_active_faults(twin_factory, probe_solo
     p.wait_services(R, ("faults",))
     faults = {f["key"]: f for f in active_faults(p, expected)}  # replayed from the event caches
     assert faults[fault_key("battery", "heating")]["params"] == {"heat_w": 3.0}
+
+
+# -- the faults in effect, as soon as their effect shows --------------------------------------
+
+EFFECTS = [  # (component, kind, payload, telemetry key, effect seen)
+    ("battery", "heating", b"5", keys.battery_state(R), lambda v: "heating" in v["faults"]),
+    ("load/imu", "stuck", b"1.5", keys.load_power(R, "imu"), lambda v: "stuck" in v["faults"]),
+    ("solar/left", "dust", b"0.3", keys.solar_power(R, "left"), lambda v: v["dust"] == 0.3),
+    ("radio/lander", "failure", b"", keys.radio_link(R, "lander"), lambda v: "failure" in v["faults"]),
+    ("rail/3V3_CH2", "fail", b"", keys.rail_state(R, "3V3_CH2"), lambda v: v["state"] == "failed"),
+]
+
+
+def listed(p: Probe) -> set[str]:
+    (faults,) = p.get_json(keys.faults(R))
+    return {f["key"] for f in faults}
+
+
+class _Effect:
+    """Wakes the test the moment a sample on ``key`` satisfies ``holds`` (no polling delay)."""
+
+    def __init__(self, p: Probe, key: str):
+        self.holds = lambda v: False
+        self.seen = threading.Event()
+        self._sub = p.session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, s) -> None:
+        if self.holds(json.loads(s.payload.to_bytes())):
+            self.seen.set()
+
+    def expect(self, holds) -> None:
+        self.seen.clear()
+        self.holds = holds
+
+    def wait(self, what: str) -> None:
+        assert self.seen.wait(5.0), f"no sample showed {what}"
+
+
+@pytest.mark.timeout(120)
+def test_get_faults_lists_a_fault_as_soon_as_its_effect_shows(probe):
+    """SPEC §5: an instructor who sees the effect and then asks for the active faults sees the
+    fault; and once the effect is gone, the fault is gone from the list. 10 rounds of 5, each
+    query made the moment the effect's sample arrives."""
+    watchers = {key: _Effect(probe, key) for _, _, _, key, _ in EFFECTS}
+    for _ in range(10):
+        for component, kind, payload, key, effect in EFFECTS:
+            fkey = fault_key(component, kind)
+            watchers[key].expect(effect)
+            probe.put(fkey, payload)
+            watchers[key].wait(f"the effect of {fkey}")
+            assert fkey in listed(probe), f"{fkey} has its effect on {key} but is not listed"
+            watchers[key].expect(lambda v, effect=effect: not effect(v))
+            probe.delete(fkey)
+            watchers[key].wait(f"the clearing of {fkey}")
+            assert fkey not in listed(probe), f"{fkey} was cleared but is still listed"

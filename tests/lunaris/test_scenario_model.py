@@ -7,14 +7,10 @@ from pathlib import Path
 
 import pytest
 
+from common.conditions import parse_condition
 from common.config import load_rover
-from lunaris.scenario_model import (
-    Player,
-    ScenarioError,
-    load_scenario,
-    parse_condition,
-    parse_scenario,
-)
+from common.scenario import ScenarioError, load_scenario, parse_scenario
+from common.scenario_player import Player
 from tests.harness import ROOT, ROVERS
 
 MAPP = load_rover(ROVERS / "mapp.yaml")

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import Battery, load_rover
-from common.faults import battery_fault_code
+from common.faults import battery_fault_code, fault_of
 from services.battery.model import BatteryModel, ocv, solve_bus, thermal_step
 from tests.harness import ROVERS
 
@@ -172,16 +172,16 @@ def test_depleted_pack_recovers_only_above_the_hysteresis():
 
 def test_capacity_loss_loses_energy_above_the_new_capacity():
     pack = BatteryModel(battery_cfg())
-    pack.apply_capacity_loss(0.4)
+    pack.apply_fault(*fault_of("battery/capacity_loss", {"fraction": 0.4}))
     assert_allclose(pack.energy_j, 0.6 * 5.3e5)
     assert_allclose(pack.soc, 1.0)
-    pack.apply_capacity_loss(0.0)  # cleared: capacity back, the lost energy is not
+    pack.apply_fault(*fault_of("battery/capacity_loss"))  # cleared: capacity back, the lost energy is not
     assert_allclose(pack.soc, 0.6)
 
 
 def test_overheating_raises_alarm_then_cutoff_then_recovers_below_max():
     pack = BatteryModel(battery_cfg())
-    pack.injected_heat_w = 200.0  # T_inf = 20 + 200 / 0.8 = 270 C
+    pack.apply_fault(*fault_of("battery/heating", {"heat_w": 200.0}))  # T_inf = 20 + 200 / 0.8 = 270 C
     while pack.temperature_c <= 60.0:
         pack.step(1.0)
     assert "over_temperature" in pack.derived_faults() and pack.operational
@@ -189,7 +189,7 @@ def test_overheating_raises_alarm_then_cutoff_then_recovers_below_max():
         pack.step(1.0)
     assert pack.thermal_cutoff and not pack.operational
     assert battery_fault_code(pack.reading().faults) == 6
-    pack.injected_heat_w = 0.0
+    pack.apply_fault(*fault_of("battery/heating"))
     while pack.temperature_c >= 60.0:
         pack.step(10.0)
     assert not pack.thermal_cutoff and pack.operational
@@ -197,7 +197,7 @@ def test_overheating_raises_alarm_then_cutoff_then_recovers_below_max():
 
 def test_disconnected_pack_supplies_nothing():
     pack = BatteryModel(battery_cfg())
-    pack.disconnected = True
+    pack.apply_fault(*fault_of("battery/disconnect", {}))
     pack.set_demand(50.0)
     r = pack.reading()
     assert (r.voltage_v, r.current_a, r.operational) == (0.0, 0.0, False)
@@ -225,9 +225,9 @@ def test_no_input_gives_nan_negative_energy_or_soc_outside_0_1(demands, dts, r_o
                                                                 heat, loss, factor):
     pack = BatteryModel(battery_cfg(internal_resistance_ohm=r_ohm, capacity_j=capacity_j,
                                     initial_soc=soc))
-    pack.injected_heat_w = heat
-    pack.resistance_factor = factor
-    pack.apply_capacity_loss(loss)
+    pack.apply_fault(*fault_of("battery/heating", {"heat_w": heat}))
+    pack.apply_fault(*fault_of("battery/resistance", {"factor": factor}))
+    pack.apply_fault(*fault_of("battery/capacity_loss", {"fraction": loss}))
     for demand, dt in zip(demands, dts * len(demands), strict=False):
         pack.set_demand(demand)
         pack.step(dt)

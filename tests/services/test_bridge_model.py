@@ -11,9 +11,9 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import ConfigError, load_rover
-from common.messages import BadInput, BatteryState, LoadPower, PowerSummary, RailState
-from common.runtime import ActiveFault
-from services.bridge import model as bm
+from common.messages import ActiveFault, BadInput, BatteryState, LoadPower, PowerSummary, RailState
+from services.bridge import cdr, convert, rmw_zenoh
+from services.bridge import mapping as mp
 from tests import rosmsg
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -27,8 +27,8 @@ BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528
 STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
 
 
-def mapping(text: str) -> bm.MappingFile:
-    return bm.parse_mapping(text, source="test.yaml")
+def mapping(text: str) -> mp.MappingFile:
+    return mp.parse_mapping(text, source="test.yaml")
 
 
 def one(extra: str = "", **fields: str) -> str:
@@ -52,8 +52,8 @@ def battery_state(**kw) -> BatteryState:
 
 
 def test_default_mapping_covers_what_the_dashboard_uses():
-    mf = bm.load_mapping(DEFAULT)
-    bindings = bm.expand(mf, [bm.rover_names(MAPP)])
+    mf = mp.load_mapping(DEFAULT)
+    bindings = mp.expand(mf, [mp.rover_names(MAPP)])
     out = {b.topic: b for b in bindings if b.mapping.direction == "out"}
     inbound = {b.topic: b for b in bindings if b.mapping.direction == "in"}
     assert out["/final_comms_radio_bool"].mapping.type == "std_msgs/msg/Bool"
@@ -77,8 +77,8 @@ def test_default_mapping_covers_what_the_dashboard_uses():
 
 
 def test_a_fleet_gets_prefixed_ros_safe_topics():
-    mf = bm.load_mapping(DEFAULT)
-    bindings = bm.expand(mf, [bm.rover_names(MAPP), bm.rover_names(LTV)])
+    mf = mp.load_mapping(DEFAULT)
+    bindings = mp.expand(mf, [mp.rover_names(MAPP), mp.rover_names(LTV)])
     topics = {b.topic for b in bindings}
     assert "/mapp_1/final_comms_radio_bool" in topics
     assert "/ltv_1/pdm/rail_TRACTION_400V_voltage_mv" in topics
@@ -158,7 +158,7 @@ def test_mapping_files_are_found_from_anywhere(tmp_path, monkeypatch):
     (tmp_path / "mine.yaml").write_text("")
     assert resolve_mapping("mine.yaml") == Path("mine.yaml")  # relative to the working directory
     with pytest.raises(ConfigError, match="cannot read file"):
-        bm.load_mapping(tmp_path / "missing.yaml")
+        mp.load_mapping(tmp_path / "missing.yaml")
     # An installed package run from a folder holding config/ (the container image) uses it.
     (tmp_path / "config/bridge").mkdir(parents=True)
     (tmp_path / "config/bridge/default.yaml").write_text("")
@@ -187,24 +187,24 @@ mappings:
      field: voltage_v, scale: 1000}
 """)
     with pytest.raises(ConfigError) as err:
-        bm.expand(mf, [bm.rover_names(MAPP)], source="m.yaml")
+        mp.expand(mf, [mp.rover_names(MAPP)], source="m.yaml")
     text = "\n".join(err.value.problems)
     assert "rover mapp-1 has no radio 'hls_relay' (radios: lander)" in text
     assert "'/12V_mv' (rover mapp-1) is not a ROS 2 name" in text
-    link_only = bm.MappingFile(mappings=mf.mappings[:1])
-    assert bm.expand(link_only, [bm.rover_names(LTV)])[0].key == "lunaris/ltv-1/radio/hls_relay/link"
+    link_only = mp.MappingFile(mappings=mf.mappings[:1])
+    assert mp.expand(link_only, [mp.rover_names(LTV)])[0].key == "lunaris/ltv-1/radio/hls_relay/link"
 
 
 def test_placeholders_in_topics_become_ros_safe():
-    assert bm.ros_name("mapp-1") == "mapp_1"
-    assert bm.ros_name("cam.left-2") == "cam_left_2"
+    assert mp.ros_name("mapp-1") == "mapp_1"
+    assert mp.ros_name("cam.left-2") == "cam_left_2"
     mf = mapping("""
 bridge: {topic_prefix: "/{rover}"}
 mappings:
   - {topic: "/load/{load}", type: std_msgs/msg/Float32, key: "lunaris/{rover}/load/{load}/power",
      field: power_w, label: "{load} on {rover}"}
 """)
-    b = bm.expand(mf, [bm.rover_names(MAPP)])[0]
+    b = mp.expand(mf, [mp.rover_names(MAPP)])[0]
     assert (b.topic, b.label) == ("/mapp_1/load/drive_motors", "drive_motors on mapp-1")
 
 
@@ -215,51 +215,51 @@ def test_scale_rounds_half_away_from_zero_and_clamps():
     m = mapping(one()).mappings[0]
     rail = RailState(t_s=0, voltage_v=12.0, current_a=0.0, power_w=0.0, current_limit_a=None,
                      state="on")
-    assert bm.out_value(m, rail) == 12000
+    assert convert.out_value(m, rail) == 12000
     for volts, mv in ((0.0125, 13), (-0.0125, -13), (0.0124, 12), (2.5e-4, 0), (5e-4, 1),
                       (1e9, 2**31 - 1), (-1e9, -(2**31))):
-        assert bm.out_value(m, battery_state(voltage_v=volts)) == mv, volts
-    assert isinstance(bm.out_value(m, battery_state()), int)
+        assert convert.out_value(m, battery_state(voltage_v=volts)) == mv, volts
+    assert isinstance(convert.out_value(m, battery_state()), int)
 
 
 def test_a_null_field_publishes_nothing_unless_a_default_is_given():
     rail = RailState(t_s=0, voltage_v=18.0, current_a=1.0, power_w=18.0, current_limit_a=None,
                      state="on")
     plain = mapping(one(key="lunaris/{rover}/rail/SOLAR/state", field="current_limit_a")).mappings[0]
-    assert bm.out_message(plain, rail) is None
+    assert convert.out_message(plain, rail) is None
     with_default = mapping(one(key="lunaris/{rover}/rail/SOLAR/state", field="current_limit_a",
                                default="-1")).mappings[0]
-    assert bm.out_message(with_default, rail) == {"data": -1000}
+    assert convert.out_message(with_default, rail) == {"data": -1000}
 
 
 def test_float_and_bool_values():
     load = LoadPower(t_s=0, power_w=3.25, rail="5V", on=True, faults=[])
     m = mapping(one(type="std_msgs/msg/Float32", key="lunaris/{rover}/load/x/power",
                     field="power_w", scale=None)).mappings[0]
-    assert bm.out_message(m, load) == {"data": 3.25}
+    assert convert.out_message(m, load) == {"data": 3.25}
     rounded = mapping(one(type="std_msgs/msg/Float32", key="lunaris/{rover}/load/x/power",
                           field="power_w", integer="true")).mappings[0]
-    assert bm.out_value(rounded, load) == 3250.0
+    assert convert.out_value(rounded, load) == 3250.0
     summary = PowerSummary(t_s=0, load_power_w=1, bus_power_w=1, generation_w=0,
                            net_battery_power_w=1, bus_voltage_v=16.7)
     m = mapping(one(key="lunaris/{rover}/power/summary", field="bus_voltage_v")).mappings[0]
-    assert bm.out_message(m, summary) == {"data": 16700}
+    assert convert.out_message(m, summary) == {"data": 16700}
 
 
 def test_inbound_values():
-    m = bm.load_mapping(DEFAULT).mappings[1]
+    m = mp.load_mapping(DEFAULT).mappings[1]
     assert m.direction == "in"
-    assert bm.in_payload(m, {"data": [1200.0, 45.0]}) == {"distance_m": 1200.0, "angle_deg": 45.0}
+    assert convert.in_payload(m, {"data": [1200.0, 45.0]}) == {"distance_m": 1200.0, "angle_deg": 45.0}
     with pytest.raises(BadInput, match="expected 2 values"):
-        bm.in_payload(m, {"data": [1.0]})
+        convert.in_payload(m, {"data": [1.0]})
     with pytest.raises(BadInput, match="not a finite number"):
-        bm.in_payload(m, {"data": [math.nan, 0.0]})
+        convert.in_payload(m, {"data": [math.nan, 0.0]})
     with pytest.raises(BadInput, match="expected a number"):
-        bm.in_payload(m, {"data": ["far", 0.0]})
+        convert.in_payload(m, {"data": ["far", 0.0]})
     km = mapping(one(topic="/km", type="std_msgs/msg/Float64MultiArray",
                      key="lunaris/{rover}/input/radio/lander/position", direction="in",
                      field=None, fields="[distance_m, angle_deg]", scale="1000")).mappings[0]
-    assert bm.in_payload(km, {"data": [1.5, 0.01]}) == {"distance_m": 1500.0, "angle_deg": 10.0}
+    assert convert.in_payload(km, {"data": [1.5, 0.01]}) == {"distance_m": 1500.0, "angle_deg": 10.0}
 
 
 # -- BatteryState: ROS conventions ---------------------------------------------------------------
@@ -269,8 +269,8 @@ def test_battery_state_follows_ros_conventions():
     # Mean of the MAPP per-cell curve by the trapezoid rule on its 0.1 steps:
     # 0.1 * (sum of the 11 points - (first + last) / 2) = 0.1 * (42.64 - 3.90) = 3.874 V.
     v_nom = MAPP.battery.cells_series * 3.874
-    assert_allclose(bm.nominal_voltage_v(MAPP.battery), v_nom, rtol=1e-4)
-    msg = bm.battery_state_message(battery_state(), MAPP.battery, 1_700_000_000_123_456_789,
+    assert_allclose(convert.nominal_voltage_v(MAPP.battery), v_nom, rtol=1e-4)
+    msg = convert.battery_state_message(battery_state(), MAPP.battery, 1_700_000_000_123_456_789,
                                    frame_id="base", options={"location": "bay 1"})
     assert msg["header"] == {"stamp": {"sec": 1_700_000_000, "nanosec": 123_456_789},
                              "frame_id": "base"}
@@ -297,7 +297,7 @@ def test_battery_state_follows_ros_conventions():
     ({"faults": ["capacity_loss", "over_temperature"]}, 2, 2),
 ])
 def test_battery_status_and_health_codes(kw, status, health):
-    msg = bm.battery_state_message(battery_state(**kw), MAPP.battery, 0)
+    msg = convert.battery_state_message(battery_state(**kw), MAPP.battery, 0)
     assert (msg["power_supply_status"], msg["power_supply_health"]) == (status, health)
 
 
@@ -305,7 +305,7 @@ def test_battery_status_and_health_codes(kw, status, health):
 
 
 def test_diagnostic_levels_follow_faults_and_staleness():
-    comps = bm.components(MAPP)
+    comps = convert.components(MAPP)
     assert comps[:2] == ["battery", "rail/12V"] and "rail/SOLAR" in comps
     assert "load/nav_camera" in comps and "radio/lander" in comps and "umbilical" in comps
     active = [
@@ -316,34 +316,34 @@ def test_diagnostic_levels_follow_faults_and_staleness():
     ages = dict.fromkeys(comps, 0.1)
     ages["radio/lander"] = 5.0
     ages["umbilical"] = None
-    statuses = {s["name"]: s for s in bm.diagnostic_statuses("mapp-1", comps, active, ages, 3.0)}
+    statuses = {s["name"]: s for s in convert.diagnostic_statuses("mapp-1", comps, active, ages, 3.0)}
     assert list(statuses) == [f"mapp-1/{c}" for c in comps]
     cam = statuses["mapp-1/load/nav_camera"]
-    assert (cam["level"], cam["message"], cam["hardware_id"]) == (bm.DIAG_WARN, "short", "mapp-1")
+    assert (cam["level"], cam["message"], cam["hardware_id"]) == (convert.DIAG_WARN, "short", "mapp-1")
     assert cam["values"][0]["key"] == "short"
     assert '"resistance_ohm":0.05' in cam["values"][0]["value"]
-    assert statuses["mapp-1/rail/5V_CH2"]["level"] == bm.DIAG_ERROR
-    assert statuses["mapp-1/radio/lander"]["level"] == bm.DIAG_STALE
+    assert statuses["mapp-1/rail/5V_CH2"]["level"] == convert.DIAG_ERROR
+    assert statuses["mapp-1/radio/lander"]["level"] == convert.DIAG_STALE
     assert statuses["mapp-1/radio/lander"]["message"] == "no data for 5.0 s"
-    assert statuses["mapp-1/umbilical"]["level"] == bm.DIAG_STALE
-    assert statuses["mapp-1/battery"] == {"level": bm.DIAG_OK, "name": "mapp-1/battery",
+    assert statuses["mapp-1/umbilical"]["level"] == convert.DIAG_STALE
+    assert statuses["mapp-1/battery"] == {"level": convert.DIAG_OK, "name": "mapp-1/battery",
                                           "message": "OK", "hardware_id": "mapp-1", "values": []}
-    assert [bm.level_name(x) for x in range(4)] == ["OK", "WARN", "ERROR", "STALE"]
+    assert [convert.level_name(x) for x in range(4)] == ["OK", "WARN", "ERROR", "STALE"]
 
 
 def test_fault_component_from_either_key_form():
-    assert bm.component_of_fault("lunaris/r/fault/load/cam/short") == ("load/cam", "short")
-    assert bm.component_of_fault("lunaris/r/fault/battery/heating") == ("battery", "heating")
-    assert bm.component_of_fault("lunaris/r/rail/12V/tripped") == ("rail/12V", "tripped")
-    assert bm.component_of_fault("lunaris/r/battery/depleted") == ("battery", "depleted")
+    assert convert.component_of_fault("lunaris/r/fault/load/cam/short") == ("load/cam", "short")
+    assert convert.component_of_fault("lunaris/r/fault/battery/heating") == ("battery", "heating")
+    assert convert.component_of_fault("lunaris/r/rail/12V/tripped") == ("rail/12V", "tripped")
+    assert convert.component_of_fault("lunaris/r/battery/depleted") == ("battery", "depleted")
 
 
 # -- CDR, read back by the independent decoder ----------------------------------------------------
 
 
 def test_cdr_of_every_default_type_reads_back_independently():
-    battery = bm.battery_state_message(battery_state(), MAPP.battery, 12_000_000_034, "f")
-    diag = bm.diagnostic_array_message(bm.diagnostic_statuses(
+    battery = convert.battery_state_message(battery_state(), MAPP.battery, 12_000_000_034, "f")
+    diag = convert.diagnostic_array_message(convert.diagnostic_statuses(
         "mapp-1", ["battery"], [ActiveFault("lunaris/mapp-1/fault/battery/heating",
                                             {"heat_w": 5.0}, 1.0, "injected", "warning")],
         {}, 3.0), 12_000_000_034, "f")
@@ -351,14 +351,14 @@ def test_cdr_of_every_default_type_reads_back_independently():
         "std_msgs/msg/Bool": {"data": True},
         "std_msgs/msg/Int32": {"data": -123456},
         "std_msgs/msg/Float32": {"data": 3.25},
-        "std_msgs/msg/Float64MultiArray": bm._multi_array(["distance_m", "angle_deg"], [1.5, -2.0]),
+        "std_msgs/msg/Float64MultiArray": convert._multi_array(["distance_m", "angle_deg"], [1.5, -2.0]),
         "sensor_msgs/msg/BatteryState": battery,
         "diagnostic_msgs/msg/DiagnosticArray": diag,
     }
     for typename, msg in cases.items():
-        cdr = bm.encode_cdr(typename, msg)
-        assert cdr[:4] == b"\x00\x01\x00\x00", typename  # CDR little endian encapsulation
-        got = rosmsg.decode(typename, cdr)
+        data = cdr.encode_cdr(typename, msg)
+        assert data[:4] == b"\x00\x01\x00\x00", typename  # CDR little endian encapsulation
+        got = rosmsg.decode(typename, data)
         if typename == "sensor_msgs/msg/BatteryState":
             assert (got.header.stamp.sec, got.header.stamp.nanosec, got.header.frame_id) == (
                 12, 34, "f")
@@ -381,49 +381,49 @@ def test_cdr_of_every_default_type_reads_back_independently():
 
 
 def test_inbound_cdr_from_an_independent_encoder_and_garbage():
-    cdr = rosmsg.encode("std_msgs/msg/Float64MultiArray",
-                        {"layout": {"dim": [], "data_offset": 0}, "data": [250.0, 30.0]})
-    msg = bm.decode_cdr("std_msgs/msg/Float64MultiArray", cdr)
+    data = rosmsg.encode("std_msgs/msg/Float64MultiArray",
+                         {"layout": {"dim": [], "data_offset": 0}, "data": [250.0, 30.0]})
+    msg = cdr.decode_cdr("std_msgs/msg/Float64MultiArray", data)
     assert msg["data"] == [250.0, 30.0]
     with pytest.raises(BadInput, match="not a CDR std_msgs/msg/Float64MultiArray"):
-        bm.decode_cdr("std_msgs/msg/Float64MultiArray", b"\x00\x01\x00\x00\xff")
+        cdr.decode_cdr("std_msgs/msg/Float64MultiArray", b"\x00\x01\x00\x00\xff")
 
 
 # -- rmw_zenoh names -----------------------------------------------------------------------------------
 
 
 def test_rmw_zenoh_topic_key_and_published_type_hashes():
-    assert bm.type_hash("std_msgs/msg/Bool") == BOOL_HASH
-    assert bm.type_hash("std_msgs/msg/String") == STRING_HASH
-    assert bm.rmw_topic_key(0, "/final_comms_radio_bool", "std_msgs/msg/Bool") == (
+    assert rmw_zenoh.type_hash("std_msgs/msg/Bool") == BOOL_HASH
+    assert rmw_zenoh.type_hash("std_msgs/msg/String") == STRING_HASH
+    assert rmw_zenoh.rmw_topic_key(0, "/final_comms_radio_bool", "std_msgs/msg/Bool") == (
         f"0/final_comms_radio_bool/std_msgs::msg::dds_::Bool_/{BOOL_HASH}")
-    assert bm.rmw_topic_key(0, "/robot1/chatter", "std_msgs/msg/String") == (
+    assert rmw_zenoh.rmw_topic_key(0, "/robot1/chatter", "std_msgs/msg/String") == (
         f"0/robot1/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}")
-    assert bm.rmw_topic_key(2, "/x", "std_msgs/msg/Bool", "humble") == (
+    assert rmw_zenoh.rmw_topic_key(2, "/x", "std_msgs/msg/Bool", "humble") == (
         "2/x/std_msgs::msg::dds_::Bool_/TypeHashNotSupported")
-    assert bm.type_hash("sensor_msgs/msg/BatteryState").startswith("RIHS01_")
+    assert rmw_zenoh.type_hash("sensor_msgs/msg/BatteryState").startswith("RIHS01_")
 
 
 def test_liveliness_tokens_match_the_rmw_zenoh_design_examples():
-    assert bm.node_token(2, "aac3178e146ba6f1fc6e6a4085e77f21", 0, "/", "listener") == (
+    assert rmw_zenoh.node_token(2, "aac3178e146ba6f1fc6e6a4085e77f21", 0, "/", "listener") == (
         "@ros2_lv/2/aac3178e146ba6f1fc6e6a4085e77f21/0/0/NN/%/%/listener")
-    talker = bm.entity_token(2, "8b20917502ee955ac4476e0266340d5c", 0, 10, "MP", "/", "talker",
-                             "/chatter", "std_msgs/msg/String", bm.qos_keyexpr(False, 7))
+    talker = rmw_zenoh.entity_token(2, "8b20917502ee955ac4476e0266340d5c", 0, 10, "MP", "/", "talker",
+                             "/chatter", "std_msgs/msg/String", rmw_zenoh.qos_keyexpr(False, 7))
     assert talker == ("@ros2_lv/2/8b20917502ee955ac4476e0266340d5c/0/10/MP/%/%/talker/%chatter/"
                       f"std_msgs::msg::dds_::String_/{STRING_HASH}/::,7:,:,:,,")
-    assert bm.qos_keyexpr(True, 1) == ":1:,1:,:,:,,"  # TRANSIENT_LOCAL, KEEP_LAST 1
-    assert bm.qos_keyexpr(False, 42) == "::,:,:,:,,"  # every rmw_zenoh default
-    assert bm.mangle("/pdm/rail_12V_voltage_mv") == "%pdm%rail_12V_voltage_mv"
-    assert bm.mangle("/") == "%"
+    assert rmw_zenoh.qos_keyexpr(True, 1) == ":1:,1:,:,:,,"  # TRANSIENT_LOCAL, KEEP_LAST 1
+    assert rmw_zenoh.qos_keyexpr(False, 42) == "::,:,:,:,,"  # every rmw_zenoh default
+    assert rmw_zenoh.mangle("/pdm/rail_12V_voltage_mv") == "%pdm%rail_12V_voltage_mv"
+    assert rmw_zenoh.mangle("/") == "%"
 
 
 def test_attachment_layout():
-    gid = bm.gid_of("@ros2_lv/0/z/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::Bool_/h/q")
-    assert len(gid) == 16 and gid != bm.gid_of("@ros2_lv/0/z/0/2/MP/%/%/n/%t/x/h/q")
-    raw = bm.attachment(1, 1_700_000_000_000_000_001, gid)
-    assert len(raw) == bm.ATTACHMENT_LEN == 33
+    gid = rmw_zenoh.gid_of("@ros2_lv/0/z/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::Bool_/h/q")
+    assert len(gid) == 16 and gid != rmw_zenoh.gid_of("@ros2_lv/0/z/0/2/MP/%/%/n/%t/x/h/q")
+    raw = rmw_zenoh.attachment(1, 1_700_000_000_000_000_001, gid)
+    assert len(raw) == rmw_zenoh.ATTACHMENT_LEN == 33
     assert struct.unpack("<qqB", raw[:17]) == (1, 1_700_000_000_000_000_001, 16)
     assert raw[17:] == gid
     assert rosmsg.parse_attachment(raw) == (1, 1_700_000_000_000_000_001, gid)
     with pytest.raises(ValueError, match="gid must be 16 bytes"):
-        bm.attachment(1, 0, b"short")
+        rmw_zenoh.attachment(1, 0, b"short")

@@ -9,6 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import Rover, load_rover
+from common.faults import fault_of
 from services.composed import ComposedTwin, run_budget
 from tests.harness import ROOT, ROVERS, lunaris_cmd
 
@@ -53,7 +54,7 @@ def test_a_long_run_sheds_in_order_then_depletes(mapp):
 
 def test_a_short_trips_the_rail_and_darkens_its_loads(mapp):
     twin = ComposedTwin(mapp, seed=1)
-    twin.loads.set_fault("nav_camera", "short", {"resistance_ohm": 0.05})
+    twin.loads.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
     twin.step()
     assert twin.power.switches["5V_CH2"].tripped
     assert twin.loads.power("hazard_cameras") == (0.0, False)

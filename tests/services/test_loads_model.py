@@ -7,6 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import load_rover
+from common.faults import fault_of
 from services.loads.model import LoadsModel, sample_power
 from tests.harness import ROVERS
 
@@ -49,12 +50,12 @@ def test_a_load_draws_nothing_while_its_rail_is_off(mapp):
 
 def test_faults_short_open_stuck(mapp):
     m = LoadsModel(mapp, seed=3)
-    m.set_fault("nav_camera", "short", {"resistance_ohm": 0.05})
+    m.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
     assert_allclose(m.power("nav_camera")[0], 5.0**2 / 0.05)  # V_rail^2 / R = 500 W
-    m.set_fault("drive_motors", "stuck", {"power_w": 77.0})
+    m.apply_fault(*fault_of("load/drive_motors/stuck", {"power_w": 77.0}))
     assert m.power("drive_motors")[0] == 77.0
-    m.set_fault("imu", "open", {})
+    m.apply_fault(*fault_of("load/imu/open", {}))
     assert m.power("imu")[0] == 0.0
-    m.set_fault("nav_camera", "short", None)
+    m.apply_fault(*fault_of("load/nav_camera/short"))
     m.sample()
     assert 0.0 <= m.power("nav_camera")[0] <= 5.0

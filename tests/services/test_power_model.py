@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import load_rover
+from common.faults import fault_of
 from services.power.model import PowerModel
 from tests.harness import ROVERS
 
@@ -94,7 +95,7 @@ def test_shedding_and_restoring_with_hysteresis(pdm):
 
 def test_a_failed_converter_gives_zero_volts(pdm):
     pdm.load_power_w.update(flight_computer=6.0)
-    pdm.switches["5V_CH1"].failed = True
+    pdm.apply_fault(*fault_of("rail/5V_CH1/fail", {}))
     r, _ = rails(pdm)
     assert (r["5V_CH1"].state, r["5V_CH1"].voltage_v, r["5V_CH1"].power_w) == ("failed", 0.0, 0.0)
 

@@ -8,6 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import Radio, load_rover
+from common.faults import fault_of
 from services.clock.model import ClockModel
 from services.radio.model import RadioModel, in_range, position_xy
 from services.solar.model import SolarModel, panel_power
@@ -30,15 +31,15 @@ def test_panel_power_formula(angle, dust, degradation, expected):
 
 def test_panel_faults_and_umbilical():
     m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
-    m.dust["left"] = 0.3
-    m.disconnected.add("right")
+    m.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.3}))
+    m.apply_fault(*fault_of("solar/right/disconnect", {}))
     powers = {name: p for name, p, _, _ in m.panels()}
     assert_allclose(powers["left"], 1361 * 0.12 * 0.29 * 0.5 * 0.7)
     assert powers["right"] == 0.0
     assert (m.umbilical_connected, m.umbilical_power_w) == (False, 0.0)
     m.umbilical_plugged = True
     assert m.umbilical_power_w == 120.0
-    m.umbilical_fault = True
+    m.apply_fault(*fault_of("umbilical/disconnect", {}))
     assert m.umbilical_power_w == 0.0
 
 
@@ -66,13 +67,13 @@ def test_radio_faults():
     m = RadioModel(Radio(name="lander", a_m=400, b_m=250, offset_x_m=100, offset_y_m=0))
     m.distance_m, m.angle_deg = 450.0, 0.0      # ((450 - 100) / 400)^2 = 0.766: in range
     assert m.link().in_range
-    m.range_scale = 0.5                          # ((350) / 200)^2 = 3.06: out
+    m.apply_fault(*fault_of("radio/lander/degraded", {"range_scale": 0.5}))  # ((350) / 200)^2 = 3.06: out
     assert not m.link().in_range
-    m.range_scale = 0.0                          # an ellipse of zero size holds nothing
+    m.apply_fault(*fault_of("radio/lander/degraded", {"range_scale": 0.0}))  # zero size holds nothing
     m.distance_m = 100.0
     assert not m.link().in_range
-    m.range_scale = 1.0
-    m.failed = True
+    m.apply_fault(*fault_of("radio/lander/degraded"))
+    m.apply_fault(*fault_of("radio/lander/failure", {}))
     assert not m.link().in_range
 
 

@@ -1,0 +1,254 @@
+"""The machinery every Lunaris data file shares: rover definitions, bridge mappings, scenarios.
+
+A data file is YAML checked against a msgspec Struct. :func:`parse_yaml` reads it with
+YAML 1.2 scalars and :func:`check_structure` walks the Struct's annotations (types,
+ranges, name patterns, unknown and missing fields), so every problem is reported at once
+with its path (``battery.ocv_curve.volts[3]: must be >= 0.0, got -1``). Each file format
+adds its own cross-field rules on top and raises :class:`ConfigError` listing them all.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import msgspec
+import msgspec.inspect as mi
+import yaml
+
+__all__ = [
+    "ID_PATTERN",
+    "ConfigError",
+    "Efficiency",
+    "Fraction",
+    "Id",
+    "Name",
+    "NonNegative",
+    "Positive",
+    "Strict",
+    "YamlLoader",
+    "check_structure",
+    "doc",
+    "load_yaml",
+    "field_kind",
+    "parse_yaml",
+    "read_text",
+]
+
+# A name becomes a chunk of a key expression: no '/', wildcards or spaces.
+NAME_PATTERN = r"^[A-Za-z0-9_.-]+$"
+# An id (a rover's) is the first chunk after lunaris/: lower case, no dots.
+ID_PATTERN = r"^[a-z0-9][a-z0-9_-]*$"
+
+Name = Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)]
+Id = Annotated[str, msgspec.Meta(pattern=ID_PATTERN)]
+Fraction = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+Positive = Annotated[float, msgspec.Meta(gt=0.0)]
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+Efficiency = Annotated[float, msgspec.Meta(gt=0.0, le=1.0)]
+
+_PATTERN_WORDS = {
+    NAME_PATTERN: "letters, digits, '_', '-' and '.'",
+    ID_PATTERN: "lower-case letters, digits, '_' and '-', starting with a letter or digit",
+}
+
+
+def doc(text: str) -> msgspec.Meta:
+    """A field's description, for the generated reference (``docs/reference``):
+    ``capacity_j: Annotated[Positive, doc("usable energy when full [J]")]``."""
+    return msgspec.Meta(description=text)
+
+
+class Strict(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
+    """Base of every data-file Struct: an unknown field is a problem, values never change."""
+
+
+class ConfigError(ValueError):
+    """A data file with problems; ``problems`` lists every one of them."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source = source
+        self.problems = problems
+        lines = "\n".join(f"  {p}" for p in problems)
+        super().__init__(f"{source}: {len(problems)} problem(s)\n{lines}")
+
+
+def read_text(path: str | Path, error: type[ConfigError] = ConfigError) -> str:
+    """A data file's text; an unreadable file is a problem like any other."""
+    try:
+        return Path(path).read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
+        raise error(str(path), [f"cannot read file: {reason}"]) from None
+
+
+class YamlLoader(yaml.SafeLoader):
+    """SafeLoader with YAML 1.2 scalars: ``5.3e5`` is a number (YAML 1.1 makes it a string)
+    and only ``true``/``false`` are booleans (YAML 1.1 also reads ``on``, ``off``, ``yes``,
+    ``no`` as booleans, which would turn a key ``on:`` into ``True:``)."""
+
+
+_BOOL = "tag:yaml.org,2002:bool"
+YamlLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag != _BOOL]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+YamlLoader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+                                 list("tTfF"))
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+        |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+        |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+        |[-+]?\.(?:inf|Inf|INF)
+        |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
+
+
+def load_yaml(text: str, source: str, error: type[ConfigError] = ConfigError) -> Any:
+    """YAML text with Lunaris scalars; invalid YAML raises ``error`` naming the problem."""
+    try:
+        return yaml.load(text, Loader=YamlLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise error(source, [f"not valid YAML: {exc}"]) from None
+
+
+def parse_yaml(text: str, source: str, struct: type[msgspec.Struct],
+               error: type[ConfigError] = ConfigError) -> tuple[Any, list[str]]:
+    """Parse a data file and check it against ``struct``: the data and every structural
+    problem found. Invalid YAML raises ``error``."""
+    data = load_yaml(text, source, error)
+    problems: list[str] = []
+    check_structure(data, struct, problems)
+    return data, problems
+
+
+# -- structural validation, driven by the Struct annotations -------------------------------
+
+
+def _join(path: str, name: str) -> str:
+    return f"{path}.{name}" if path else name
+
+
+def _kind(value: Any) -> str:
+    if value is None:
+        return "null"
+    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
+            list: "a list", dict: "a mapping"}.get(type(value), type(value).__name__)
+
+
+def _check_bounds(value: float, t: Any, path: str, problems: list[str]) -> None:
+    where = path or "value"
+    if t.ge is not None and value < t.ge:
+        problems.append(f"{where}: must be >= {t.ge}, got {value}")
+    if t.gt is not None and value <= t.gt:
+        problems.append(f"{where}: must be > {t.gt}, got {value}")
+    if t.le is not None and value > t.le:
+        problems.append(f"{where}: must be <= {t.le}, got {value}")
+    if t.lt is not None and value >= t.lt:
+        problems.append(f"{where}: must be < {t.lt}, got {value}")
+
+
+def check_structure(data: Any, struct: type[msgspec.Struct], problems: list[str]) -> None:
+    """Check parsed YAML against a Struct's annotations (types, ranges, name patterns,
+    unknown and missing fields), appending every problem with its path to ``problems``."""
+    _check(data, mi.type_info(struct), "", problems)
+
+
+def _check(value: Any, t: Any, path: str, problems: list[str]) -> None:
+    where = path or "file"
+    if isinstance(t, mi.Metadata):  # a field with a description
+        _check(value, t.type, path, problems)
+    elif isinstance(t, mi.UnionType):
+        if value is None and any(isinstance(m, mi.NoneType) for m in t.types):
+            return
+        members = [m for m in t.types if not isinstance(m, mi.NoneType)]
+        _check(value, members[0], path, problems)
+    elif isinstance(t, mi.StructType):
+        _check_struct(value, t, path, problems)
+    elif isinstance(t, mi.ListType):
+        if not isinstance(value, list):
+            problems.append(f"{where}: expected a list, got {_kind(value)}")
+            return
+        for i, item in enumerate(value):
+            _check(item, t.item_type, f"{path}[{i}]", problems)
+    elif isinstance(t, mi.DictType):
+        if not isinstance(value, dict):
+            problems.append(f"{where}: expected a mapping, got {_kind(value)}")
+            return
+        for k, v in value.items():
+            _check(k, t.key_type, _join(path, str(k)), problems)
+            _check(v, t.value_type, _join(path, str(k)), problems)
+    elif isinstance(t, mi.FloatType | mi.IntType):
+        _check_number(value, t, path, problems)
+    elif isinstance(t, mi.StrType):
+        if not isinstance(value, str):
+            problems.append(f"{where}: expected a string, got {_kind(value)}")
+        elif t.pattern is not None and re.search(t.pattern, value) is None:
+            words = _PATTERN_WORDS.get(t.pattern, f"matching {t.pattern}")
+            problems.append(f"{where}: {value!r} is not a valid name ({words})")
+    elif isinstance(t, mi.BoolType):
+        if not isinstance(value, bool):
+            problems.append(f"{where}: expected true or false, got {_kind(value)}")
+    elif isinstance(t, mi.LiteralType):
+        if value not in t.values:
+            choices = ", ".join(str(v) for v in t.values)
+            problems.append(f"{where}: expected one of {choices}, got {value!r}")
+
+
+def _check_struct(value: Any, t: Any, path: str, problems: list[str]) -> None:
+    if not isinstance(value, dict):
+        problems.append(f"{path or 'file'}: expected a mapping, got {_kind(value)}")
+        return
+    known = {f.encode_name for f in t.fields}
+    for key in value:
+        if key not in known:
+            problems.append(f"{_join(path, str(key))}: unknown field")
+    for f in t.fields:
+        if f.encode_name in value:
+            _check(value[f.encode_name], f.type, _join(path, f.encode_name), problems)
+        elif f.required:
+            problems.append(f"{_join(path, f.encode_name)}: missing required field")
+
+
+def _check_number(value: Any, t: Any, path: str, problems: list[str]) -> None:
+    where = path or "file"
+    want_int = isinstance(t, mi.IntType)
+    ok = isinstance(value, int) if want_int else isinstance(value, int | float)
+    if isinstance(value, bool) or not ok:
+        problems.append(f"{where}: expected {'an integer' if want_int else 'a number'}, "
+                        f"got {_kind(value)}")
+        return
+    if not math.isfinite(value):
+        problems.append(f"{where}: must be finite, got {value}")
+        return
+    _check_bounds(value, t, path, problems)
+
+
+FieldKind = Literal["number", "bool", "word", "other"]
+
+
+def field_kind(t: Any) -> tuple[FieldKind, tuple | None]:
+    """What a payload field holds, for the tools that read fields by name (bridge mappings,
+    scenario conditions): ``number``, ``bool``, ``word`` (with the allowed words of a
+    Literal), or ``other``. ``float | None`` counts as a number."""
+    if isinstance(t, mi.Metadata):
+        return field_kind(t.type)
+    if isinstance(t, mi.UnionType):
+        members = [m for m in t.types if not isinstance(m, mi.NoneType)]
+        return field_kind(members[0]) if len(members) == 1 else ("other", None)
+    if isinstance(t, mi.FloatType | mi.IntType):
+        return "number", None
+    if isinstance(t, mi.BoolType):
+        return "bool", None
+    if isinstance(t, mi.LiteralType):
+        return "word", tuple(t.values)
+    if isinstance(t, mi.StrType):
+        return "word", None
+    return "other", None

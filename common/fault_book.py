@@ -1,0 +1,176 @@
+"""The faults in effect on the components one service owns: the one record of them.
+
+A fault's whole life happens in the service that owns its component (SPEC §6): the
+battery service owns ``fault/battery/**``, the loads service ``fault/load/**`` and so
+on. Its :class:`FaultBook`
+
+- validates an injection or clearing (the component's name, the kind, the parameters),
+  has the model apply it (``apply(rover, key, params)``; ``params`` None clears), and
+  journals it as an event;
+- raises and resolves the faults the models derive themselves, on transitions;
+- persists the injected faults, so a restarted service re-applies them;
+- publishes ``lunaris/<rover>/faults/active/<service>`` on every change (cached for late
+  joiners: the bridge's ``/diagnostics``, ``lunaris watch``, the console) and answers a
+  query on that key from the book itself, which is what ``get lunaris/<rover>/faults``
+  gathers (see ``services/faults``).
+
+Nothing else keeps a list of active faults; the others are views of these.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
+
+import msgspec
+import zenoh
+
+from common import keys
+from common.faults import FaultKey, Params, params_from_dict, parse_fault_key, parse_params
+from common.messages import ActiveFault, ActiveFaults, BadInput, Severity, encode
+
+if TYPE_CHECKING:
+    from common.runtime import Runtime, Sample
+
+__all__ = ["FaultApply", "FaultBook"]
+
+FaultApply = Callable[[str, FaultKey, Params | None], None]  # rover, key, params (None: clear)
+Names = Callable[[str], Iterable[str]]
+
+
+class FaultBook:
+    def __init__(self, rt: Runtime):
+        self.rt = rt
+        self.injected: dict[str, dict[str, tuple[ActiveFault, Params]]] = {r: {} for r in rt.rovers}
+        self.derived: dict[str, dict[str, ActiveFault]] = {r: {} for r in rt.rovers}
+        self._appliers: dict[str, FaultApply] = {}
+        self._declared = False
+
+    # -- injected faults ---------------------------------------------------------------------
+
+    def own(self, component: str, names: Names | None, apply: FaultApply) -> None:
+        """Own the faults of one component type (``battery``, ``load`` ...). ``names(rover)``
+        lists the instances of a named type; ``apply`` changes the model."""
+        self._declare()
+        self._appliers[component] = apply
+
+        def on_fault(s: Sample) -> None:
+            fk = parse_fault_key(s.parts[1:])
+            if names is not None and fk.name not in set(names(s.rover)):
+                known = ", ".join(sorted(names(s.rover))) or "none"
+                raise BadInput(f"rover {s.rover} has no {component} {fk.name!r} (known: {known})")
+            if s.deleted:
+                self._clear(s.rover, s.key, fk)
+            else:
+                self._inject(s.rover, s.key, fk, parse_params(fk, s.payload))
+
+        # The owner answers for every key of its component, well formed or not.
+        self.rt.subscribe(keys.fault_prefix("*", component), on_fault)
+
+    def _inject(self, rover: str, key: str, fk: FaultKey, params: Params) -> None:
+        active = self.injected[rover]
+        self._appliers[fk.component](rover, fk, params)
+        previous = active.get(fk.path)
+        # Injecting again replaces the parameters; the fault has been active since the first.
+        since = previous[0].since_t_s if previous else self.rt.t_s[rover]
+        as_dict = msgspec.structs.asdict(params)
+        active[fk.path] = (ActiveFault(key, as_dict, since, "injected"), params)
+        self._changed(rover)
+        verb = "replaced" if previous else "injected"
+        self.rt.event(rover, "warning", "fault_injected", key,
+                      f"{verb} {fk.path} {json.dumps(as_dict)}", as_dict)
+
+    def _clear(self, rover: str, key: str, fk: FaultKey) -> None:
+        active = self.injected[rover]
+        if fk.path not in active:
+            raise BadInput(f"no active fault {fk.path} to clear")
+        self._appliers[fk.component](rover, fk, None)
+        del active[fk.path]
+        self._changed(rover)
+        self.rt.event(rover, "info", "fault_cleared", key, f"cleared {fk.path}")
+
+    def clear_all(self, rover: str) -> None:
+        """Clear every injected fault of a rover (a session reset), each journalled."""
+        for path, (fault, _) in list(self.injected[rover].items()):
+            self._clear(rover, fault.key, parse_fault_key(path.split("/")))
+
+    def restore(self) -> None:
+        """Re-apply the injected faults persisted by an earlier run of this service."""
+        saved = self.rt.store.load("faults") or {}
+        for rover, faults in saved.items():
+            if rover not in self.injected:
+                continue
+            for path, raw in faults.items():
+                fault = msgspec.convert(raw, ActiveFault)
+                fk = parse_fault_key(path.split("/"))
+                apply = self._appliers.get(fk.component)
+                if apply is None:
+                    continue
+                params = params_from_dict(fk, fault.params)
+                apply(rover, fk, params)
+                self.injected[rover][path] = (fault, params)
+            self._publish(rover)
+
+    # -- derived faults ----------------------------------------------------------------------
+
+    def sync_derived(self, rover: str, component: str,
+                     active: dict[str, tuple[Severity, str]]) -> None:
+        """Raise and resolve derived faults on transitions. ``active`` maps a fault name to
+        ``(severity, message)`` for every derived fault of ``component`` (``battery``,
+        ``rail/12V``) that holds now."""
+        self._declare()
+        registry = self.derived[rover]
+        prefix = f"{component}/"
+        changed = False
+        for name, (severity, message) in active.items():
+            path = prefix + name
+            if path not in registry:
+                key = keys.derived_fault(rover, component, name)
+                registry[path] = ActiveFault(key, {}, self.rt.t_s[rover], "derived", severity)
+                changed = True
+                self.rt.event(rover, severity, "fault_raised", key, message)
+        for path in [p for p in registry if p.startswith(prefix)]:
+            if path[len(prefix):] not in active:
+                fault = registry.pop(path)
+                changed = True
+                self.rt.event(rover, "info", "fault_resolved", fault.key, f"resolved {path}")
+        if changed:
+            self._publish(rover)
+
+    # -- the record --------------------------------------------------------------------------
+
+    def active(self, rover: str) -> list[ActiveFault]:
+        faults = [f for f, _ in self.injected[rover].values()] + list(self.derived[rover].values())
+        return sorted(faults, key=lambda f: (f.since_t_s, f.key))
+
+    def _changed(self, rover: str) -> None:
+        self.rt.store.save("faults", {
+            r: {p: msgspec.structs.asdict(f) for p, (f, _) in fs.items()}
+            for r, fs in self.injected.items()})
+        self._publish(rover)
+
+    def _publish(self, rover: str) -> None:
+        self.rt.publish(keys.faults_active(rover, self.rt.name), self._message(rover))
+
+    def _message(self, rover: str) -> ActiveFaults:
+        return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover))
+
+    def publish_all(self) -> None:
+        for rover in sorted(self.injected):
+            self._publish(rover)
+
+    def _declare(self) -> None:
+        if self._declared:
+            return
+        self._declared = True
+
+        def on_query(q: zenoh.Query) -> None:
+            with q:
+                for rover in sorted(self.injected):
+                    key = keys.faults_active(rover, self.rt.name)
+                    if zenoh.KeyExpr(key).intersects(q.key_expr):
+                        q.reply(key, encode(self._message(rover)),
+                                encoding=zenoh.Encoding.APPLICATION_JSON)
+
+        self.rt.queryable(keys.faults_active("*", self.rt.name), on_query)

@@ -1,0 +1,273 @@
+"""Training scenarios: the YAML format and its validation.
+
+Pure: no Zenoh, no clock. :func:`parse_scenario` validates a whole file and
+reports every problem with its path (as :mod:`common.config` does for rovers);
+:class:`common.scenario_player.Player` plays it.
+
+A scenario::
+
+    scenario: {name: Dust storm, description: ...}
+    rover: mapp-1
+    time_scale: 20            # optional: clock speed while it plays (restored at the end)
+    duration_s: 900           # optional: stop this long (sim time) after the start
+    steps:
+      - name: dust on the left panel
+        at_s: 30              # sim seconds after the start
+        inject: {component: solar/left, kind: dust, value: 0.6}
+      - after_s: 60           # sim seconds after the previous step fired
+        sun_angle: {from: 60, to: 85, over_s: 120}   # a ramp, re-published every tick
+      - when: battery.soc < 0.4 and rail.5V_CH2.state == on
+        timeout_s: 600        # give up if it has not held 600 s after being armed
+        rail: {name: 5V_CH2, on: false}
+
+A step has a time gate (``at_s`` or ``after_s``, optional), a condition (``when``,
+optional; at least one of the two), and one action: ``inject``, ``clear``,
+``sun_angle``, ``position``, ``umbilical``, ``clock`` or ``rail``. A step with
+both waits for its time, then for its condition; ``after_s: 0`` with a ``when``
+therefore waits for the condition only once the previous step has fired. A step
+with a ``note`` and no action is a checkpoint: it marks, in the run's report,
+when something the instructor expects (a trip, the crew's response) happened.
+
+Conditions are the language of :mod:`common.conditions`
+(``battery.soc < 0.4 and rail.5V_CH2.state == on``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import msgspec
+
+from common.conditions import parse_condition
+from common.config import Rover
+from common.datafile import ID_PATTERN, ConfigError, Name, Strict, load_yaml, parse_yaml, read_text
+from common.faults import FaultKey, parse_fault_key, parse_params
+from common.messages import BadInput
+
+__all__ = [
+    "ACTIONS",
+    "Scenario",
+    "ScenarioError",
+    "Step",
+    "load_scenario",
+    "parse_scenario",
+    "rover_id_of",
+]
+
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+Positive = Annotated[float, msgspec.Meta(gt=0.0)]
+
+
+class ScenarioInfo(Strict):
+    name: str
+    description: str = ""
+
+
+class InjectAction(Strict):
+    component: str  # battery, umbilical, load/<name>, rail/<name>, solar/<panel>, radio/<name>
+    kind: str
+    value: Any = None  # a number for one-parameter kinds, or a mapping of parameters
+
+
+class ClearAction(Strict):
+    component: str
+    kind: str
+
+
+class PositionAction(Strict):
+    radio: Name
+    distance_m: Any  # metres, or a ramp {from, to, over_s}
+    angle_deg: Any = 0.0  # degrees, or a ramp
+
+
+class ClockAction(Strict):
+    time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=10000.0)] | None = None
+    paused: bool | None = None
+
+
+class RailAction(Strict):
+    name: Name
+    on: bool | None = None
+    reset: bool | None = None
+
+
+class Step(Strict):
+    name: str = ""
+    note: str = ""  # shown to the instructor when the step fires
+    at_s: NonNegative | None = None
+    after_s: NonNegative | None = None
+    when: str | None = None
+    timeout_s: Positive | None = None
+    inject: InjectAction | None = None
+    clear: ClearAction | None = None
+    sun_angle: Any = None  # degrees, or a ramp {from, to, over_s}
+    position: PositionAction | None = None
+    umbilical: bool | None = None
+    clock: ClockAction | None = None
+    rail: RailAction | None = None
+
+
+class Scenario(Strict):
+    scenario: ScenarioInfo
+    rover: Annotated[str, msgspec.Meta(pattern=ID_PATTERN)]
+    steps: list[Step]
+    time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=10000.0)] | None = None
+    duration_s: Positive | None = None
+
+
+ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail")
+
+
+class ScenarioError(ConfigError):
+    """A scenario with problems; ``problems`` lists every one of them."""
+
+
+# -- loading and validation -----------------------------------------------------------------
+
+
+def load_scenario(path: str | Path, rover: Rover | None = None) -> Scenario:
+    return parse_scenario(read_text(path, ScenarioError), source=str(path), rover=rover)
+
+
+def rover_id_of(text: str) -> str | None:
+    """The ``rover`` a scenario text names, if it can be read (to find its definition first)."""
+    try:
+        data = load_yaml(text, "<scenario>")
+    except ConfigError:
+        return None  # not YAML: parse_scenario says so with the file's name
+    rover = data.get("rover") if isinstance(data, dict) else None
+    return rover if isinstance(rover, str) else None
+
+
+def parse_scenario(text: str, source: str = "<scenario>", rover: Rover | None = None) -> Scenario:
+    """Validate scenario YAML; raise :class:`ScenarioError` listing every problem. With
+    ``rover`` the names of loads, rails, panels and radios are checked too."""
+    data, problems = parse_yaml(text, source, Scenario, ScenarioError)
+    if isinstance(data, dict):
+        if rover is not None and data.get("rover") not in (None, rover.id):
+            problems.append(f"rover: the scenario is for {data.get('rover')!r}, "
+                            f"the rover definition is {rover.id!r}")
+        steps = data.get("steps")
+        if isinstance(steps, list):
+            if not steps:
+                problems.append("steps: a scenario needs at least one step")
+            for i, step in enumerate(steps):
+                if isinstance(step, dict):
+                    _step_problems(step, f"steps[{i}]", rover, problems)
+    if problems:
+        raise ScenarioError(source, problems)
+    return msgspec.convert(data, Scenario)
+
+
+def _names(rover: Rover) -> dict[str, list[str]]:
+    return {
+        "load": [ld.name for ld in rover.loads],
+        "rail": [r.name for r in rover.rails] + [rover.solar.rail.name],
+        "switchable rail": [r.name for r in rover.rails],
+        "solar": [p.name for p in rover.solar.panels],
+        "radio": [r.name for r in rover.radios],
+    }
+
+
+def _check_name(kind: str, name: str, rover: Rover | None, path: str, problems: list[str]) -> None:
+    if rover is None:
+        return
+    known = _names(rover)[kind]
+    if name not in known:
+        what = {"solar": "panel", "switchable rail": "switchable rail"}.get(kind, kind)
+        problems.append(f"{path}: rover {rover.id} has no {what} {name!r} "
+                        f"(known: {', '.join(known) or 'none'})")
+
+
+def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[str]) -> None:
+    if "at_s" in step and "after_s" in step:
+        problems.append(f"{path}: give at_s or after_s, not both")
+    if not any(k in step for k in ("at_s", "after_s", "when")):
+        problems.append(f"{path}: give a trigger: at_s, after_s or when")
+    if "timeout_s" in step and "when" not in step:
+        problems.append(f"{path}.timeout_s: only a step with a when condition can time out")
+    actions = [a for a in ACTIONS if step.get(a) is not None]
+    if len(actions) > 1:
+        problems.append(f"{path}: give one action per step, got {', '.join(actions)}")
+    if not actions and not step.get("note"):
+        problems.append(f"{path}: give an action ({', '.join(ACTIONS)}), or a note for a checkpoint")
+    if isinstance(step.get("when"), str):
+        try:
+            cond = parse_condition(step["when"])
+        except ValueError as exc:
+            problems.append(f"{path}.when: {exc}")
+        else:
+            for c in cond.comparisons:
+                if c.name is not None:
+                    kind = {"load": "load", "rail": "rail", "solar": "solar", "radio": "radio"}[c.source]
+                    _check_name(kind, c.name, rover, f"{path}.when", problems)
+    for action in ("inject", "clear"):
+        a = step.get(action)
+        if isinstance(a, dict) and isinstance(a.get("component"), str) and isinstance(a.get("kind"), str):
+            fk = _fault_problems(a, f"{path}.{action}", rover, problems)
+            if fk is not None and action == "inject":
+                value = a.get("value")
+                payload = b"" if value is None else json.dumps(value).encode()
+                try:
+                    parse_params(fk, payload)
+                except (BadInput, TypeError) as exc:
+                    problems.append(f"{path}.inject.value: {exc}")
+    if "sun_angle" in step and step["sun_angle"] is not None:
+        _number_or_ramp(step["sun_angle"], f"{path}.sun_angle", -360.0, 360.0, problems)
+    pos = step.get("position")
+    if isinstance(pos, dict):
+        if "distance_m" in pos:
+            _number_or_ramp(pos["distance_m"], f"{path}.position.distance_m", 0.0, 1e9, problems)
+        if "angle_deg" in pos:
+            _number_or_ramp(pos["angle_deg"], f"{path}.position.angle_deg", -360.0, 360.0, problems)
+        if isinstance(pos.get("radio"), str):
+            _check_name("radio", pos["radio"], rover, f"{path}.position.radio", problems)
+    clk = step.get("clock")
+    if isinstance(clk, dict) and clk.get("time_scale") is None and clk.get("paused") is None:
+        problems.append(f"{path}.clock: give time_scale (> 0) or paused (true or false)")
+    rail = step.get("rail")
+    if isinstance(rail, dict):
+        if rail.get("on") is None and not rail.get("reset"):
+            problems.append(f"{path}.rail: give on: true|false or reset: true")
+        if isinstance(rail.get("name"), str):
+            _check_name("switchable rail", rail["name"], rover, f"{path}.rail.name", problems)
+
+
+def _fault_problems(a: dict, path: str, rover: Rover | None, problems: list[str]) -> FaultKey | None:
+    parts = [p for p in a["component"].split("/") if p]
+    try:
+        fk = parse_fault_key([*parts, a["kind"]])
+    except BadInput as exc:
+        problems.append(f"{path}: {exc}")
+        return None
+    if fk.name is not None:
+        _check_name(fk.component, fk.name, rover, f"{path}.component", problems)
+    return fk
+
+
+def _number_or_ramp(value: Any, path: str, lo: float, hi: float, problems: list[str]) -> None:
+    def number(v: Any, where: str) -> None:
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            problems.append(f"{where}: expected a number, got {type(v).__name__}")
+        elif not math.isfinite(v) or not lo <= v <= hi:
+            problems.append(f"{where}: must be within {lo:g}..{hi:g}, got {v}")
+
+    if isinstance(value, dict):
+        for k in value:
+            if k not in ("from", "to", "over_s"):
+                problems.append(f"{path}.{k}: unknown field (a ramp has from, to, over_s)")
+        for k in ("from", "to", "over_s"):
+            if k not in value:
+                problems.append(f"{path}.{k}: missing required field")
+        for k in ("from", "to"):
+            if k in value:
+                number(value[k], f"{path}.{k}")
+        over = value.get("over_s")
+        if "over_s" in value and (isinstance(over, bool) or not isinstance(over, int | float)
+                                  or not math.isfinite(over) or over <= 0):
+            problems.append(f"{path}.over_s: must be a number > 0, got {over!r}")
+    else:
+        number(value, path)

@@ -1,0 +1,247 @@
+"""Playing a training scenario: the clock-driven state machine, without Zenoh or a clock.
+
+:class:`Player` is stepped with the simulated time and a lookup of the latest telemetry
+and returns the writes to make, so a scenario can be played in a test without a twin.
+The shell that plays it against the running twin is ``lunaris scenario run``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+import msgspec
+
+from common import keys
+from common.conditions import Lookup, parse_condition
+from common.scenario import Scenario, Step
+
+__all__ = ["Player", "StepResult", "Write", "describe_action", "describe_trigger"]
+
+
+@dataclass(frozen=True)
+class Write:
+    """A put (``payload`` bytes) or a delete (``payload`` None) the player asks for."""
+
+    key: str
+    payload: bytes | None
+    step: int
+    answer: str | None = None  # the event kind that accepts it (fault_injected ...), if any
+    final: bool = True  # False for the intermediate values of a ramp
+
+
+@dataclass
+class StepResult:
+    """What happened to one step."""
+
+    index: int
+    label: str
+    armed_t_s: float | None = None  # when its time gate opened (relative to the start)
+    fired_t_s: float | None = None  # relative to the start
+    status: str = "waiting"  # waiting, armed, fired, ramping, done, timed out, not fired
+    outcome: str = ""  # accepted, rejected, sent, no answer ... (set by the shell)
+    detail: str = ""
+
+
+def _ramp(value: Any) -> tuple[float, float, float] | None:
+    if isinstance(value, dict):
+        return float(value["from"]), float(value["to"]), float(value["over_s"])
+    return None
+
+
+def _at(value: Any, since_s: float) -> float:
+    """A number, or a ramp's value ``since_s`` after it started."""
+    r = _ramp(value)
+    if r is None:
+        return float(value)
+    lo, hi, over = r
+    return lo + (hi - lo) * min(1.0, max(0.0, since_s / over))
+
+
+def _ramp_length(step: Step) -> float:
+    values = [step.sun_angle] if step.sun_angle is not None else []
+    if step.position is not None:
+        values += [step.position.distance_m, step.position.angle_deg]
+    return max((r[2] for r in map(_ramp, values) if r is not None), default=0.0)
+
+
+def describe_action(step: Step) -> str:
+    def val(v: Any, unit: str) -> str:
+        r = _ramp(v)
+        return f"{r[0]:g} -> {r[1]:g}{unit} over {r[2]:g} s" if r else f"{float(v):g}{unit}"
+
+    if step.inject is not None:
+        value = "" if step.inject.value is None else f" {json.dumps(step.inject.value)}"
+        return f"inject {step.inject.component} {step.inject.kind}{value}"
+    if step.clear is not None:
+        return f"clear {step.clear.component} {step.clear.kind}"
+    if step.sun_angle is not None:
+        return f"sun angle {val(step.sun_angle, ' deg')}"
+    if step.position is not None:
+        p = step.position
+        return f"position to radio {p.radio}: {val(p.distance_m, ' m')}, {val(p.angle_deg, ' deg')}"
+    if step.umbilical is not None:
+        return "umbilical " + ("connected" if step.umbilical else "disconnected")
+    if step.clock is not None:
+        what = []
+        if step.clock.time_scale is not None:
+            what.append(f"x{step.clock.time_scale:g}")
+        if step.clock.paused is not None:
+            what.append("paused" if step.clock.paused else "running")
+        return "clock " + " ".join(what)
+    if step.rail is not None:
+        what = "reset" if step.rail.reset else ("on" if step.rail.on else "off")
+        return f"rail {step.rail.name} {what}"
+    return "checkpoint"
+
+
+def describe_trigger(step: Step) -> str:
+    parts = []
+    if step.at_s is not None:
+        parts.append(f"at {step.at_s:g} s")
+    if step.after_s is not None:
+        parts.append(f"{step.after_s:g} s after the previous step")
+    if step.when is not None:
+        parts.append(f"when {step.when}" + (f" (within {step.timeout_s:g} s)" if step.timeout_s else ""))
+    return ", then ".join(parts)
+
+
+class Player:
+    """The scenario's clock-driven state machine. Call :meth:`tick` with every clock tick's
+    ``t_s``; it returns the writes to make now. Times in results are relative to the first
+    tick (the scenario's start)."""
+
+    def __init__(self, scenario: Scenario):
+        self.scenario = scenario
+        self.rover = scenario.rover
+        self.conditions = [parse_condition(s.when) if s.when else None for s in scenario.steps]
+        self.results = [StepResult(i, s.name or describe_action(s)) for i, s in enumerate(scenario.steps)]
+        self.t0: float | None = None
+        self.t_rel = 0.0
+        self._ramps: dict[int, float] = {}  # step -> start (relative)
+        self.finished = False
+        self.end_reason = ""
+
+    def _gate(self, i: int) -> float | None:
+        """When step ``i``'s time gate opens (relative), None while it cannot be known."""
+        step = self.scenario.steps[i]
+        if step.at_s is not None:
+            return step.at_s
+        if step.after_s is not None:
+            if i == 0:
+                return step.after_s
+            prev = self.results[i - 1].fired_t_s
+            return None if prev is None else prev + step.after_s
+        return 0.0
+
+    def tick(self, t_s: float, lookup: Lookup) -> list[Write]:
+        if self.finished:
+            return []
+        if self.t0 is None:
+            self.t0 = t_s
+        t = self.t_rel = t_s - self.t0
+        writes: list[Write] = []
+        for i, step in enumerate(self.scenario.steps):
+            r = self.results[i]
+            if r.status not in ("waiting", "armed"):
+                continue
+            gate = self._gate(i)
+            if gate is None or t < gate:
+                continue
+            if r.status == "waiting":
+                r.status, r.armed_t_s = "armed", gate
+            cond = self.conditions[i]
+            if cond is not None and not cond.holds(lookup):
+                if step.timeout_s is not None and t - r.armed_t_s >= step.timeout_s:
+                    r.status = "timed out"
+                    r.detail = (f"{cond.text} did not hold within {step.timeout_s:g} s "
+                                f"({cond.describe(lookup)})")
+                continue
+            r.fired_t_s = t
+            r.status = "fired"
+            if cond is not None:
+                r.detail = cond.describe(lookup)
+            fired = self.writes_of(i, 0.0, final=_ramp_length(step) == 0)
+            if not fired:
+                r.outcome = "reached"  # a checkpoint: nothing to write
+            writes += fired
+            if _ramp_length(step) > 0:
+                self._ramps[i] = t
+                r.status = "ramping"
+        for i, start in list(self._ramps.items()):
+            if self.results[i].fired_t_s == t:
+                continue  # already written this tick
+            done = t - start >= _ramp_length(self.scenario.steps[i])
+            writes += self.writes_of(i, t - start, final=done)
+            if done:
+                del self._ramps[i]
+                self.results[i].status = "done"
+        self._check_end(t)
+        return writes
+
+    def _check_end(self, t: float) -> None:
+        duration = self.scenario.duration_s
+        if duration is not None and t >= duration:
+            self.finish(f"duration of {duration:g} s reached")
+            return
+        if duration is None and all(r.status in ("fired", "done", "timed out") for r in self.results):
+            self.finish("every step has played")
+        elif duration is None and not self._ramps and not self._drop_blocked():
+            self.finish("no remaining step can fire")
+
+    def _drop_blocked(self) -> bool:
+        """Mark the steps chained to a step that will never fire; True if any can still fire."""
+        for i, r in enumerate(self.results):
+            if r.status in ("waiting", "armed"):
+                step = self.scenario.steps[i]
+                blocked = (step.after_s is not None and i > 0
+                           and self.results[i - 1].status in ("timed out", "not fired"))
+                if not blocked:
+                    return True
+                r.status = "not fired"
+                r.detail = "the previous step did not fire"
+        return False
+
+    def finish(self, reason: str) -> None:
+        if self.finished:
+            return
+        self.finished = True
+        self.end_reason = reason
+        for r in self.results:
+            if r.status in ("waiting", "armed"):
+                r.status = "not fired"
+            elif r.status == "ramping":
+                r.status = "fired"
+                r.detail = (r.detail + "; " if r.detail else "") + "ramp cut short"
+
+    def writes_of(self, i: int, since_s: float, final: bool = True) -> list[Write]:
+        """The writes of step ``i``'s action, ``since_s`` after it fired (for ramps)."""
+        rover, step = self.rover, self.scenario.steps[i]
+        if step.inject is not None:
+            key = keys.fault(rover, step.inject.component.strip("/"), step.inject.kind)
+            value = step.inject.value
+            payload = b"" if value is None else json.dumps(value).encode()
+            return [Write(key, payload, i, "fault_injected")]
+        if step.clear is not None:
+            return [Write(keys.fault(rover, step.clear.component.strip("/"), step.clear.kind), None, i,
+                          "fault_cleared")]
+        if step.sun_angle is not None:
+            body = {"angle_deg": _at(step.sun_angle, since_s)}
+            return [Write(keys.input_sun_angle(rover), json.dumps(body).encode(), i, None, final)]
+        if step.position is not None:
+            p = step.position
+            body = {"distance_m": _at(p.distance_m, since_s), "angle_deg": _at(p.angle_deg, since_s)}
+            return [Write(keys.input_radio_position(rover, p.radio), json.dumps(body).encode(), i, None,
+                          final)]
+        if step.umbilical is not None:
+            body = {"connected": step.umbilical}
+            return [Write(keys.input_umbilical(rover), json.dumps(body).encode(), i)]
+        if step.clock is not None:
+            body = {k: v for k, v in msgspec.structs.asdict(step.clock).items() if v is not None}
+            return [Write(keys.clock_control(rover), json.dumps(body).encode(), i, "clock")]
+        if step.rail is not None:
+            body = {k: v for k, v in msgspec.structs.asdict(step.rail).items()
+                    if k != "name" and v is not None}
+            return [Write(keys.cmd_rail(rover, step.rail.name), json.dumps(body).encode(), i, "command")]
+        return []

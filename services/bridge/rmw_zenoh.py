@@ -1,0 +1,97 @@
+"""rmw_zenoh's names for a ROS 2 graph on Zenoh (ros2/rmw_zenoh ``docs/design.md``).
+
+The topic key ``<domain>/<topic>/<pkg>::msg::dds_::<Name>_/<RIHS01 hash>``, the liveliness
+tokens of a node (``NN``), its publishers (``MP``) and subscriptions (``MS``), the GID of an
+entity and the 33-byte attachment every sample carries.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+
+from services.bridge.cdr import typestore
+
+__all__ = [
+    "ATTACHMENT_LEN",
+    "GID_LEN",
+    "attachment",
+    "dds_type_name",
+    "entity_token",
+    "gid_of",
+    "mangle",
+    "node_token",
+    "qos_keyexpr",
+    "rmw_topic_key",
+    "type_hash",
+]
+
+ATTACHMENT_LEN = 33
+GID_LEN = 16
+
+
+def dds_type_name(typename: str) -> str:
+    """``std_msgs/msg/Bool`` -> ``std_msgs::msg::dds_::Bool_`` (the DDS name rmw_zenoh uses)."""
+    pkg, kind, name = typename.split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+def type_hash(typename: str, distro: str = "jazzy") -> str:
+    """REP-2016 type hash (``RIHS01_<sha256>``) as Jazzy and later advertise it; Humble's
+    rmw_zenoh has none and writes ``TypeHashNotSupported``."""
+    if distro == "humble":
+        return "TypeHashNotSupported"
+    return typestore(distro).hash_rihs01(typename)
+
+
+def rmw_topic_key(domain_id: int, topic: str, typename: str, distro: str = "jazzy") -> str:
+    """``<domain>/<topic without its outer '/'>/<dds type>/<type hash>``."""
+    return f"{domain_id}/{topic.strip('/')}/{dds_type_name(typename)}/{type_hash(typename, distro)}"
+
+
+def mangle(name: str) -> str:
+    """A ROS name as one key chunk: every ``/`` becomes ``%`` (``/`` alone becomes ``%``)."""
+    return name.replace("/", "%") or "%"
+
+
+def qos_keyexpr(transient_local: bool, depth: int) -> str:
+    """rmw_zenoh's compact QoS chunk: ``rel:dur:hist,depth:dl_s,dl_ns:ls_s,ls_ns:liv,lease_s,
+    lease_ns`` where a field equal to rmw_zenoh's default (RELIABLE, VOLATILE, KEEP_LAST, 42,
+    infinite durations, AUTOMATIC) is left empty. TRANSIENT_LOCAL is durability 1."""
+    durability = "1" if transient_local else ""
+    depth_s = "" if depth == 42 else str(depth)
+    return f":{durability}:,{depth_s}:,:,:,,"
+
+
+def node_token(domain_id: int, zid: str, node_id: int, namespace: str, node: str,
+               enclave: str = "/") -> str:
+    """``@ros2_lv/<domain>/<zid>/<nid>/<nid>/NN/<enclave>/<namespace>/<node>``."""
+    return "/".join(["@ros2_lv", str(domain_id), zid, str(node_id), str(node_id), "NN",
+                     mangle(enclave), mangle(namespace), node])
+
+
+def entity_token(domain_id: int, zid: str, node_id: int, entity_id: int, kind: str,
+                 namespace: str, node: str, topic: str, typename: str, qos: str,
+                 distro: str = "jazzy", enclave: str = "/") -> str:
+    """A publisher (``MP``) or subscription (``MS``) token: the node's chunks, then the mangled
+    topic, the DDS type name, the type hash and the QoS chunk."""
+    assert kind in ("MP", "MS", "SS", "SC")
+    return "/".join(["@ros2_lv", str(domain_id), zid, str(node_id), str(entity_id), kind,
+                     mangle(enclave), mangle(namespace), node, mangle(topic),
+                     dds_type_name(typename), type_hash(typename, distro), qos])
+
+
+def gid_of(token: str) -> bytes:
+    """A 16-byte GID derived from the entity's liveliness token, as rmw_zenoh derives its own
+    (it uses XXH3-128; any stable 128-bit hash of the token serves: the GID only has to be
+    unique per entity and constant while it lives)."""
+    return hashlib.blake2b(token.encode(), digest_size=GID_LEN).digest()
+
+
+def attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    """The 33 bytes rmw_zenoh attaches to every sample: sequence number (int64, little
+    endian, from 1, one per publisher), source timestamp [ns since the epoch] (int64, little
+    endian), the GID length (one byte, 16) and the GID."""
+    if len(gid) != GID_LEN:
+        raise ValueError(f"gid must be {GID_LEN} bytes, got {len(gid)}")
+    return struct.pack("<qqB", sequence, timestamp_ns, GID_LEN) + gid
