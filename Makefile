@@ -5,7 +5,7 @@ BIN     = $(VENV)/bin
 ROVER  ?= config/rovers/mapp.yaml
 STAMP   = $(VENV)/.installed
 
-.PHONY: run test lint bench system-deps clean
+.PHONY: run test lint typecheck reference bench system-deps clean
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -27,11 +27,21 @@ run: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-test: $(STAMP) system-deps lint
-	$(BIN)/pytest
+typecheck: $(STAMP)
+	$(BIN)/mypy
+
+# docs/reference is generated from the code; a test fails when the committed pages are stale.
+reference: $(STAMP)
+	$(BIN)/python -m lunaris.reference
+
+# ruff, mypy, then every test with coverage (services' subprocesses included); the coverage
+# table and total are printed at the end, and below 90 % the run fails.
+test: $(STAMP) system-deps lint typecheck
+	rm -f .coverage .coverage.*
+	$(BIN)/pytest --cov --cov-report=term
 
 bench: $(STAMP)
 	$(BIN)/python bench/run_all.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis .mypy_cache .coverage .coverage.*

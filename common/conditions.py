@@ -17,10 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import msgspec.inspect as mi
-
 from common import keys
-from common.datafile import field_kind
+from common.datafile import field_kind, struct_fields
 
 __all__ = ["SOURCES", "Comparison", "Condition", "Lookup", "parse_condition"]
 
@@ -129,7 +127,7 @@ def _comparison(ref: str, op: str, raw: str) -> Comparison:
         if not fld or "." in fld:
             raise ValueError(f"{source} has no names: {source}.<field>")
     struct = SOURCES[source].payload
-    fields = {f.name: f for f in mi.type_info(struct).fields}
+    fields = {f.name: f for f in struct_fields(struct)}
     if fld not in fields:
         raise ValueError(f"unknown field {fld!r} of {source} (fields: {', '.join(fields)})")
     kind, words = field_kind(fields[fld].type)

@@ -50,14 +50,14 @@ __all__ = [
 ]
 
 
-class RoverInfo(Strict):
+class RoverInfo(Strict, frozen=True):
     """Who the rover is."""
 
     id: Annotated[Id, doc("used in every key expression (lunaris/<id>/...)")]
     name: Annotated[str, doc("a name for people")]
 
 
-class OcvCurve(Strict):
+class OcvCurve(Strict, frozen=True):
     """Per-cell open-circuit voltage against state of charge, linearly interpolated."""
 
     soc: Annotated[list[Fraction], doc("state of charge points, strictly increasing from 0.0 to 1.0")]
@@ -65,7 +65,7 @@ class OcvCurve(Strict):
                                            "never decreasing")]
 
 
-class Thermal(Strict):
+class Thermal(Strict, frozen=True):
     """Lumped thermal model of the pack: C dT/dt = I^2 R + injected heat - G (T - T_env)."""
 
     initial_c: Annotated[float, doc("pack temperature at the start [degC]")]
@@ -78,7 +78,7 @@ class Thermal(Strict):
     min_c: Annotated[float, doc("under-temperature alarm below this [degC]")]
 
 
-class Battery(Strict):
+class Battery(Strict, frozen=True):
     """The pack: an open-circuit voltage behind an internal resistance (SPEC §4)."""
 
     capacity_j: Annotated[Positive, doc("usable energy when full [J]")]
@@ -97,7 +97,7 @@ class Battery(Strict):
         "does not chatter on and off")] = 0.05
 
 
-class Rail(Strict):
+class Rail(Strict, frozen=True):
     """A converter of the PDM from the battery bus."""
 
     name: Name
@@ -113,7 +113,7 @@ class Rail(Strict):
     initially_on: Annotated[bool, doc("switched on at the start")] = True
 
 
-class Load(Strict):
+class Load(Strict, frozen=True):
     """A consumer on a rail: a normal sample around nominal_w each tick, clipped to [0, max_w]."""
 
     name: Name
@@ -123,7 +123,7 @@ class Load(Strict):
     std_w: Annotated[NonNegative, doc("standard deviation of the power [W]")] = 0.0
 
 
-class Panel(Strict):
+class Panel(Strict, frozen=True):
     """A solar panel: irradiance * area * efficiency * max(0, cos(angle)) * (1 - dust) *
     (1 - degradation)."""
 
@@ -133,7 +133,7 @@ class Panel(Strict):
     degradation: Annotated[Fraction, doc("ageing and radiation damage, 0..1")] = 0.0
 
 
-class SolarRail(Strict):
+class SolarRail(Strict, frozen=True):
     """The panels' own rail: generation reaches the bus through its efficiency."""
 
     name: Name
@@ -142,7 +142,7 @@ class SolarRail(Strict):
     current_limit_a: Annotated[Positive | None, doc("shown on the PDM; never trips")] = None
 
 
-class Solar(Strict):
+class Solar(Strict, frozen=True):
     """Generation: the panels and the sun."""
 
     irradiance_w_per_m2: Annotated[NonNegative, doc("solar irradiance [W/m^2] (1361 with no "
@@ -152,14 +152,14 @@ class Solar(Strict):
     panels: list[Panel] = []
 
 
-class Umbilical(Strict):
+class Umbilical(Strict, frozen=True):
     """A wired supply from the lander or a charging station."""
 
     connected: Annotated[bool, doc("plugged in at the start")] = False
     power_w: Annotated[NonNegative, doc("what the connection can supply [W]")] = 0.0
 
 
-class Radio(Strict):
+class Radio(Strict, frozen=True):
     """A radio the rover talks to: in range inside an ellipse around it."""
 
     name: Name
@@ -169,7 +169,7 @@ class Radio(Strict):
     offset_y_m: Annotated[float, doc("ellipse centre offset along y [m]")] = 0.0
 
 
-class Rover(Strict):
+class Rover(Strict, frozen=True):
     """A rover definition: one file per rover in config/rovers/."""
 
     rover: RoverInfo
@@ -229,7 +229,8 @@ def _typed(value: object, typ: type) -> Any:
 
 def _semantic_problems(d: dict) -> list[str]:
     problems: list[str] = []
-    battery = d.get("battery") if isinstance(d.get("battery"), dict) else {}
+    raw_battery = d.get("battery")
+    battery: dict = raw_battery if isinstance(raw_battery, dict) else {}
     thermal = _typed(battery.get("thermal"), Thermal)
     if thermal is not None:
         _thermal_rules(thermal, problems)

@@ -15,10 +15,15 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULT_ENDPOINT", "add_connection_args", "make_config"]
+__all__ = ["DEFAULT_ENDPOINT", "ConnectionConfigError", "add_connection_args", "config_from_args",
+           "make_config"]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 CONFIG_ENV = "LUNARIS_ZENOH_CONFIG"
+
+
+class ConnectionConfigError(ValueError):
+    """A connection setting that cannot work (a configuration file that does not exist)."""
 
 
 def add_connection_args(parser: argparse.ArgumentParser) -> None:
@@ -47,7 +52,7 @@ def make_config(
     if config_file:
         path = Path(config_file)
         if not path.is_file():
-            raise zenoh.ZError(f"Zenoh configuration {str(path)!r} does not exist")
+            raise ConnectionConfigError(f"Zenoh configuration {str(path)!r} does not exist")
         conf = zenoh.Config.from_file(str(path))
     else:
         conf = zenoh.Config()

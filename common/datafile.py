@@ -35,6 +35,7 @@ __all__ = [
     "field_kind",
     "parse_yaml",
     "read_text",
+    "struct_fields",
 ]
 
 # A name becomes a chunk of a key expression: no '/', wildcards or spaces.
@@ -82,6 +83,13 @@ def read_text(path: str | Path, error: type[ConfigError] = ConfigError) -> str:
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) else "not UTF-8 text"
         raise error(str(path), [f"cannot read file: {reason}"]) from None
+
+
+def struct_fields(struct: type[msgspec.Struct]) -> tuple[mi.Field, ...]:
+    """The fields of a Struct class as :mod:`msgspec.inspect` describes them."""
+    info = mi.type_info(struct)
+    assert isinstance(info, mi.StructType)  # type_info is typed as any Type; a Struct's is this
+    return info.fields
 
 
 class YamlLoader(yaml.SafeLoader):

@@ -17,6 +17,7 @@ from common.messages import BadInput, decode_input
 
 __all__ = [
     "CATALOGUE",
+    "DERIVED",
     "FAULT_CODES",
     "NAMED_COMPONENTS",
     "FactorParams",
@@ -45,31 +46,31 @@ class Params(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
 _Params = Params
 
 
-class NoParams(_Params):
+class NoParams(_Params, frozen=True):
     pass
 
 
-class FractionParams(_Params):
+class FractionParams(_Params, frozen=True):
     fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 
 
-class FactorParams(_Params):
+class FactorParams(_Params, frozen=True):
     factor: Annotated[float, msgspec.Meta(ge=1.0, le=1e6)]
 
 
-class HeatParams(_Params):
+class HeatParams(_Params, frozen=True):
     heat_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
 
 
-class ShortParams(_Params):
+class ShortParams(_Params, frozen=True):
     resistance_ohm: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)] = 0.05
 
 
-class StuckParams(_Params):
+class StuckParams(_Params, frozen=True):
     power_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
 
 
-class RangeScaleParams(_Params):
+class RangeScaleParams(_Params, frozen=True):
     range_scale: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 
 
@@ -170,6 +171,26 @@ def params_from_dict(key: FaultKey, params: dict) -> Params:
         return msgspec.convert(params, CATALOGUE[key.component][key.kind].params)
     except msgspec.ValidationError as exc:
         raise BadInput(f"{key.path}: {exc}") from None
+
+
+# -- derived faults: raised by the models themselves ----------------------------------------
+
+DERIVED: dict[str, dict[str, str]] = {
+    "battery": {
+        "thermal_cutoff": "pack above cutoff_c: it disconnected itself (back on below max_c)",
+        "depleted": "state of charge at or below depleted_soc (back on line with hysteresis)",
+        "brownout": "demand beyond what the pack can deliver (P > V_oc^2 / 4R, or the current "
+                    "limit)",
+        "over_current": "the BMS held the discharge current at max_discharge_a",
+        "under_voltage": "terminal voltage below the empty-cell voltage",
+        "over_temperature": "pack above max_c (alarm)",
+        "under_temperature": "pack below min_c (alarm)",
+    },
+    "rail/<name>": {
+        "tripped": "current above current_limit_a: off until reset",
+        "shed": "shed below shed_below_soc (restored at restore_above_soc)",
+    },
+}
 
 
 # -- the battery fault_code table (SPEC §6: 0 nominal and 5 depleted are fixed) --------------

@@ -123,7 +123,7 @@ class Runtime:
             signal.signal(sig, lambda *_: self.stop())
         # The tokens go up once every handler is declared: live means listening.
         for rover in sorted(self.rovers):
-            self._keep.append(self._session.liveliness().declare_token(keys.service(rover, self.name)))
+            self._keep.append(self.zenoh_session.liveliness().declare_token(keys.service(rover, self.name)))
         try:
             self._loop()
         finally:
@@ -138,7 +138,8 @@ class Runtime:
             self.session = None
 
     @property
-    def _session(self) -> zenoh.Session:
+    def zenoh_session(self) -> zenoh.Session:
+        """The open session (:attr:`session` narrowed); RuntimeError outside the ``with`` block."""
         if self.session is None:
             raise RuntimeError(f"{self.name}: the runtime is not open (use it as a context manager)")
         return self.session
@@ -218,7 +219,7 @@ class Runtime:
         """Queue every sample on ``keyexpr`` for ``handler``; samples for rovers this service
         does not serve are dropped unless ``any_rover``. With ``history`` the publishers'
         caches are replayed first (an advanced subscriber), for a service that joins late."""
-        session = self._session
+        session = self.zenoh_session
 
         def on_sample(s: zenoh.Sample) -> None:
             key = str(s.key_expr)
@@ -244,7 +245,7 @@ class Runtime:
     def queryable(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> None:
         """Answer queries on the worker thread (the model state is only read there)."""
         self._keep.append(
-            self._session.declare_queryable(keyexpr, lambda q: self._queue.put((handler, q)))
+            self.zenoh_session.declare_queryable(keyexpr, lambda q: self._queue.put((handler, q)))
         )
 
     def publish(self, key: str, msg: msgspec.Struct) -> None:
@@ -262,7 +263,7 @@ class Runtime:
     def _declare_publisher(self, key: str, cache: int,
                            encoding: zenoh.Encoding = zenoh.Encoding.APPLICATION_JSON) -> Any:
         pub = zext.declare_advanced_publisher(
-            self._session, key,
+            self.zenoh_session, key,
             encoding=encoding,
             cache=zext.CacheConfig(max_samples=cache),
             publisher_detection=True,

@@ -61,40 +61,40 @@ NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
 Positive = Annotated[float, msgspec.Meta(gt=0.0)]
 
 
-class ScenarioInfo(Strict):
+class ScenarioInfo(Strict, frozen=True):
     name: str
     description: str = ""
 
 
-class InjectAction(Strict):
+class InjectAction(Strict, frozen=True):
     component: str  # battery, umbilical, load/<name>, rail/<name>, solar/<panel>, radio/<name>
     kind: str
     value: Any = None  # a number for one-parameter kinds, or a mapping of parameters
 
 
-class ClearAction(Strict):
+class ClearAction(Strict, frozen=True):
     component: str
     kind: str
 
 
-class PositionAction(Strict):
+class PositionAction(Strict, frozen=True):
     radio: Name
     distance_m: Any  # metres, or a ramp {from, to, over_s}
     angle_deg: Any = 0.0  # degrees, or a ramp
 
 
-class ClockAction(Strict):
+class ClockAction(Strict, frozen=True):
     time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=10000.0)] | None = None
     paused: bool | None = None
 
 
-class RailAction(Strict):
+class RailAction(Strict, frozen=True):
     name: Name
     on: bool | None = None
     reset: bool | None = None
 
 
-class Step(Strict):
+class Step(Strict, frozen=True):
     name: str = ""
     note: str = ""  # shown to the instructor when the step fires
     at_s: NonNegative | None = None
@@ -110,7 +110,7 @@ class Step(Strict):
     rail: RailAction | None = None
 
 
-class Scenario(Strict):
+class Scenario(Strict, frozen=True):
     scenario: ScenarioInfo
     rover: Annotated[str, msgspec.Meta(pattern=ID_PATTERN)]
     steps: list[Step]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import msgspec
 
@@ -17,7 +17,9 @@ from common import keys
 from common.conditions import Lookup, parse_condition
 from common.scenario import Scenario, Step
 
-__all__ = ["Player", "StepResult", "Write", "describe_action", "describe_trigger"]
+__all__ = ["Player", "StepResult", "StepStatus", "Write", "describe_action", "describe_trigger"]
+
+StepStatus = Literal["waiting", "armed", "fired", "ramping", "done", "timed out", "not fired"]
 
 
 @dataclass(frozen=True)
@@ -39,7 +41,7 @@ class StepResult:
     label: str
     armed_t_s: float | None = None  # when its time gate opened (relative to the start)
     fired_t_s: float | None = None  # relative to the start
-    status: str = "waiting"  # waiting, armed, fired, ramping, done, timed out, not fired
+    status: StepStatus = "waiting"
     outcome: str = ""  # accepted, rejected, sent, no answer ... (set by the shell)
     detail: str = ""
 
@@ -91,8 +93,8 @@ def describe_action(step: Step) -> str:
             what.append("paused" if step.clock.paused else "running")
         return "clock " + " ".join(what)
     if step.rail is not None:
-        what = "reset" if step.rail.reset else ("on" if step.rail.on else "off")
-        return f"rail {step.rail.name} {what}"
+        switch = "reset" if step.rail.reset else ("on" if step.rail.on else "off")
+        return f"rail {step.rail.name} {switch}"
     return "checkpoint"
 
 
@@ -151,6 +153,7 @@ class Player:
                 continue
             if r.status == "waiting":
                 r.status, r.armed_t_s = "armed", gate
+            assert r.armed_t_s is not None  # set when the step was armed, just above or before
             cond = self.conditions[i]
             if cond is not None and not cond.holds(lookup):
                 if step.timeout_s is not None and t - r.armed_t_s >= step.timeout_s:

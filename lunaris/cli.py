@@ -14,6 +14,8 @@ import sys
 
 import zenoh
 
+from common.connection import ConnectionConfigError
+
 __all__ = ["COMMANDS", "main"]
 
 # command -> (module, one-line help)
@@ -47,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
         return int(importlib.import_module(COMMANDS[args.command][0]).main(args) or 0)
     except KeyboardInterrupt:
         return 130
-    except zenoh.ZError as exc:  # a port in use, a bad endpoint or configuration file
+    except (zenoh.ZError, ConnectionConfigError) as exc:  # a port in use, a bad endpoint or file
         print(f"lunaris {args.command}: {_zenoh_message(exc)}", file=sys.stderr)
         return 1
 

@@ -28,15 +28,9 @@ from common.config import ConfigError
 from common.connection import add_connection_args
 from common.messages import Clock, decode
 from lunaris.tooling import ToolError, live_rovers, open_session
+from services.bridge.bindings import Binding, RoverNames, expand
 from services.bridge.convert import out_value
-from services.bridge.mapping import (
-    PLACEHOLDERS,
-    Binding,
-    MappingFile,
-    RoverNames,
-    expand,
-    load_mapping,
-)
+from services.bridge.mapping import PLACEHOLDERS, MappingFile, load_mapping
 from services.bridge.service import resolve_mapping
 
 __all__ = ["PdmView", "add_arguments", "main", "pdm_mappings", "render"]

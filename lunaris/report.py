@@ -120,7 +120,7 @@ def _marks(s: Session) -> list[dict]:
 
 def _short(s: Session, e: dict) -> str:
     name = e.get("key", "").removeprefix(keys.rover_prefix(s.rover) + "/").removeprefix("fault/")
-    return f"{MARK_KINDS.get(e.get('kind'), '')}{name}"
+    return f"{MARK_KINDS.get(e.get('kind', ''), '')}{name}"
 
 
 def draw(s: Session, title: str):
@@ -166,12 +166,12 @@ def draw(s: Session, title: str):
     for ax in axes:
         ax.grid(True, alpha=0.3)
         for e in marks:
-            ax.axvline(e.get("t_s", 0.0), color=SEVERITY_COLOUR.get(e.get("severity"), "gray"),
+            ax.axvline(e.get("t_s", 0.0), color=SEVERITY_COLOUR.get(e.get("severity", ""), "gray"),
                        alpha=0.6, linewidth=1.0, linestyle=":" if e.get("kind") == "rejected" else "-")
     for i, e in enumerate(marks[:40]):  # labels beyond that would only be ink
         ax_soc.annotate(_short(s, e), xy=(e.get("t_s", 0.0), 1.0), xycoords=("data", "axes fraction"),
                         xytext=(2, -4 - 9 * (i % 6)), textcoords="offset points", fontsize="x-small",
-                        va="top", color=SEVERITY_COLOUR.get(e.get("severity"), "gray"))
+                        va="top", color=SEVERITY_COLOUR.get(e.get("severity", ""), "gray"))
     fig.suptitle(title)
     return fig
 

@@ -33,7 +33,7 @@ from common.connection import add_connection_args
 from common.messages import Event, decode
 from common.scenario import Scenario, ScenarioError, load_scenario, rover_id_of
 from common.scenario_player import Player, Write, describe_action, describe_trigger
-from lunaris.tooling import ToolError, describe_endpoint, open_session, require_rover
+from lunaris.tooling import ToolError, describe_endpoint, ignored, open_session, require_rover
 
 __all__ = ["add_arguments", "find_rover", "main"]
 
@@ -63,7 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     check.add_argument("--rover-file", metavar="FILE", help=rover_help)
 
 
-def find_rover(rover_id: str, explicit: str | None) -> tuple[Rover | None, str]:
+def find_rover(rover_id: str | None, explicit: str | None) -> tuple[Rover | None, str]:
     """The rover definition to check names against, and a note saying where it came from."""
     if explicit:
         try:
@@ -160,7 +160,8 @@ class _Run:
             return
         try:
             value = msgspec.json.decode(s.payload.to_bytes())
-        except msgspec.DecodeError:
+        except msgspec.DecodeError as exc:
+            ignored(str(s.key_expr), f"not JSON ({exc})")
             return
         with self.lock:
             self.latest[tuple(parts)] = value
@@ -170,8 +171,8 @@ class _Run:
     def _on_event(self, s: zenoh.Sample) -> None:
         try:
             self.events.put(decode(s.payload.to_bytes(), Event))
-        except (msgspec.DecodeError, msgspec.ValidationError):
-            pass
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            ignored(str(s.key_expr), f"not an event ({exc})")
 
     def lookup(self, parts: tuple[str, ...]) -> dict | None:
         with self.lock:
@@ -193,7 +194,7 @@ class _Run:
               flush=True)
         session = open_session(self.args, wait_s=self.args.wait, on_waiting=lambda: print(
             f"waiting for the Zenoh router at {describe_endpoint(self.args)} ...", flush=True))
-        keep = []
+        keep: list[zenoh.Subscriber[None] | zext.AdvancedSubscriber[None]] = []  # alive until closed
         try:
             root = keys.rover_prefix(self.rover)
             keep.append(zext.declare_advanced_subscriber(

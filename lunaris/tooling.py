@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import threading
 from collections.abc import Callable
 
@@ -18,7 +19,8 @@ import zenoh
 from common import keys
 from common.connection import CONFIG_ENV, DEFAULT_ENDPOINT, config_from_args
 
-__all__ = ["ToolError", "describe_endpoint", "live_rovers", "open_session", "require_rover"]
+__all__ = ["ToolError", "describe_endpoint", "ignored", "live_rovers", "open_session",
+           "require_rover"]
 
 
 class ToolError(Exception):
@@ -27,6 +29,17 @@ class ToolError(Exception):
     def __init__(self, message: str, code: int = 2):
         super().__init__(message)
         self.code = code
+
+
+_IGNORED: set[str] = set()
+
+
+def ignored(key: str, reason: str) -> None:
+    """Say, once per key, that a sample the tool cannot read is being skipped (a payload that
+    is not what its key carries: a foreign or forged publisher)."""
+    if key not in _IGNORED:
+        _IGNORED.add(key)
+        print(f"ignoring samples on {key}: {reason}", file=sys.stderr, flush=True)
 
 
 def describe_endpoint(args: argparse.Namespace) -> str:

@@ -39,7 +39,7 @@ from common.messages import (
     Event,
     decode,
 )
-from lunaris.tooling import ToolError, describe_endpoint, open_session
+from lunaris.tooling import ToolError, describe_endpoint, ignored, open_session
 from lunaris.watch_view import Connection, Snapshot, render
 
 __all__ = ["Connection", "Snapshot", "Store", "add_arguments", "main", "render"]
@@ -89,7 +89,8 @@ class Store:
         if family == "event":
             try:
                 ev = decode(payload, Event)
-            except (msgspec.DecodeError, msgspec.ValidationError):
+            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                ignored(key, f"not an event ({exc})")
                 return
             ident = (rover, ev.t_s, ev.source, ev.kind, ev.key, ev.message)
             with self._lock:
@@ -102,7 +103,8 @@ class Store:
         if family == "faults/active/*":
             try:
                 active = decode(payload, ActiveFaults)
-            except (msgspec.DecodeError, msgspec.ValidationError):
+            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                ignored(key, f"not a list of faults ({exc})")
                 return
             with self._lock:
                 self._faults.setdefault(rover, {})[active.service] = [

@@ -8,13 +8,14 @@ renderable out. ``lunaris.watch`` keeps the snapshot up to date from Zenoh.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import msgspec
 from rich import box
 from rich.columns import Columns
-from rich.console import Group, RenderableType
+from rich.console import Group, JustifyMethod, RenderableType
 from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
@@ -140,7 +141,7 @@ def _banner(conn: Connection, now: float) -> Text:
     return text
 
 
-def _kv(rows: list[tuple[str, Text | str]]) -> Table:
+def _kv(rows: Sequence[tuple[str, Text | str]]) -> Table:
     t = Table.grid(padding=(0, 1))
     t.add_column(style="bold", no_wrap=True)
     t.add_column(no_wrap=True)
@@ -162,7 +163,7 @@ def _battery_panel(snap: Snapshot, rover: str, faults: list[dict]) -> Panel:
                                                                              style="bold red")
     if b.faults:
         status.append(f"  {', '.join(b.faults)} (code {b.fault_code})", style=_sev(worst or "warning"))
-    rows = [
+    rows: list[tuple[str, Text | str]] = [
         ("energy", f"{b.energy_j / 1e3:8.1f} kJ of {b.capacity_j / 1e3:.1f} kJ"),
         ("state of charge", Text(f"{b.soc * 100:8.2f} %", style=soc_style)),
         ("voltage", f"{b.voltage_v:8.2f} V   (open circuit {b.ocv_v:.2f} V)"),
@@ -220,8 +221,10 @@ def _pdm_table(snap: Snapshot, rover: str) -> Table:
     loads = snap.named(rover, "load", "power", LoadPower)
     t = Table(title="PDM", box=box.SIMPLE_HEAD, padding=(0, 1), title_justify="left",
               title_style="bold")
-    for name, justify in (("rail / load", "left"), ("state", "left"), ("V", "right"), ("A", "right"),
-                          ("W", "right"), ("limit A", "right"), ("faults", "left")):
+    columns: tuple[tuple[str, JustifyMethod], ...] = (
+        ("rail / load", "left"), ("state", "left"), ("V", "right"), ("A", "right"), ("W", "right"),
+        ("limit A", "right"), ("faults", "left"))
+    for name, justify in columns:
         t.add_column(name, justify=justify, no_wrap=True)
     for rname, r in rails.items():
         style = RAIL_STYLE.get(r.state, "")
@@ -278,8 +281,8 @@ def _events_table(events: list[tuple[str, Event]], n: int, fleet: bool) -> Table
     t.add_column("message", overflow="ellipsis", no_wrap=True, ratio=1)
     for rover, ev in events[-n:] if n > 0 else []:
         style = _sev(ev.severity)
-        row = [f"{ev.t_s:.1f} s", Text(ev.severity, style=style), ev.source,
-               Text(ev.kind, style=style), ev.message]
+        row: list[RenderableType] = [f"{ev.t_s:.1f} s", Text(ev.severity, style=style), ev.source,
+                                     Text(ev.kind, style=style), ev.message]
         t.add_row(*([rover] if fleet else []), *row)
     return t
 

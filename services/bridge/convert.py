@@ -21,8 +21,9 @@ import msgspec
 from common import keys
 from common.config import Battery, Rover
 from common.messages import ActiveFault, BadInput, BatteryState
+from services.bridge.bindings import rover_names
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants
-from services.bridge.mapping import Mapping, rover_names
+from services.bridge.mapping import Mapping
 
 __all__ = [
     "DIAG_ERROR",
@@ -76,6 +77,7 @@ def out_value(m: Mapping, payload: msgspec.Struct) -> bool | int | float | None:
     """The value of a one-value mapping: ``payload.field x scale``, rounded half away from zero
     for integer types (or ``integer: true``) and clamped to the type's range. None (publish
     nothing) when the field is null and the mapping has no ``default``."""
+    assert m.field is not None  # a one-value mapping names its field (parse_mapping checks)
     return _scaled(m, getattr(payload, m.field))
 
 
@@ -110,6 +112,7 @@ def in_payload(m: Mapping, msg: dict) -> dict[str, Any]:
     else:
         if "data" not in msg:
             raise BadInput(f"{m.type} on {m.topic}: no data field")
+        assert m.field is not None  # a one-value mapping names its field (parse_mapping checks)
         pairs = [(m.field, msg["data"])]
     out: dict[str, Any] = {}
     for name, value in pairs:

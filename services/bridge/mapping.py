@@ -2,42 +2,34 @@
 
 :func:`parse_mapping` validates a whole mapping file and names every problem
 (``mappings[3].field: BatteryState has no field 'volts'``) as rover definitions do;
-:func:`expand` turns each mapping into one :class:`Binding` per rover and per component
-(``{load}``, ``{rail}``, ``{radio}``, ``{panel}`` placeholders run over the rover's
-components), checking the resulting ROS 2 names. The twin keys a mapping may name are the
-families of :mod:`common.keys`.
+the twin keys a mapping may name are the families of :mod:`common.keys`.
+:mod:`services.bridge.bindings` expands a mapping over the rovers it serves.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Annotated, Any, NamedTuple
 
 import msgspec
-import msgspec.inspect as mi
 
 from common import keys
-from common.config import Rover
-from common.datafile import ConfigError, Strict, field_kind, parse_yaml, read_text
+from common.datafile import ConfigError, Strict, doc, field_kind, parse_yaml, read_text, struct_fields
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants, typestore
 
 __all__ = [
     "CONVERTERS",
     "FLAVOURS",
     "PLACEHOLDERS",
-    "Binding",
+    "ROS_TOPIC",
     "BridgeOptions",
     "Mapping",
     "MappingFile",
-    "RoverNames",
-    "expand",
     "load_mapping",
     "parse_mapping",
     "ros_name",
-    "rover_names",
 ]
 
 FLAVOURS = ("ros2dds", "rmw_zenoh", "json")
@@ -48,67 +40,84 @@ _PLACEHOLDER = re.compile(r"\{([a-z_]*)\}")
 # == the mapping file ========================================================================
 
 
-class Ros2DdsOutput(Strict):
-    """Key = topic without the leading ``/``: what ``zenoh-bridge-ros2dds`` forwards to DDS."""
+class Ros2DdsOutput(Strict, frozen=True):
+    """Key = topic without the leading ``/``, CDR payload: what ``zenoh-bridge-ros2dds``
+    forwards to DDS."""
 
     enabled: bool = True
 
 
-class RmwZenohOutput(Strict):
+class RmwZenohOutput(Strict, frozen=True):
     """A ROS 2 node on ``rmw_zenoh``: keyed topics, attachments, liveliness tokens."""
 
     enabled: bool = True
-    domain_id: int = 0  # ROS_DOMAIN_ID
-    node: str = "lunaris_bridge"  # the node that owns the bridge's publishers
-    namespace: str = "/"
+    domain_id: Annotated[int, doc("ROS_DOMAIN_ID of the dashboard")] = 0
+    node: Annotated[str, doc("the node that owns the bridge's publishers")] = "lunaris_bridge"
+    namespace: Annotated[str, doc("the node's namespace")] = "/"
 
 
-class JsonOutput(Strict):
+class JsonOutput(Strict, frozen=True):
     """Key = ``prefix/`` + topic without the leading ``/``; the ROS message fields as JSON."""
 
     enabled: bool = True
-    prefix: str = "json"
+    prefix: Annotated[str, doc("before every key; keeps them apart from the ros2dds keys")] = "json"
 
 
-class Outputs(Strict):
+class Outputs(Strict, frozen=True):
+    """The flavours of the dashboard's topics on Zenoh; each can be disabled."""
+
     ros2dds: Ros2DdsOutput = Ros2DdsOutput()
     rmw_zenoh: RmwZenohOutput = RmwZenohOutput()
     json: JsonOutput = JsonOutput()
 
 
-class BridgeOptions(Strict):
-    ros_distro: str = "jazzy"  # jazzy: RIHS01 type hashes; humble: TypeHashNotSupported
-    topic_prefix: str = ""  # before every topic when the bridge serves one rover
-    fleet_topic_prefix: str = "/{rover}"  # instead, when it serves several
-    stamp: str = "wall"  # header stamps: wall clock (ROS default) or sim (the twin's t_s)
-    diagnostics_period_s: float = 1.0  # the DiagnosticArray is also republished this often
-    stale_after_s: float = 3.0  # a component silent this long is STALE
+class BridgeOptions(Strict, frozen=True):
+    """Options of the whole bridge."""
+
+    ros_distro: Annotated[str, doc("jazzy: rmw_zenoh keys carry RIHS01 type hashes; humble: "
+                                   "TypeHashNotSupported")] = "jazzy"
+    topic_prefix: Annotated[str, doc("before every topic when the bridge serves one rover")] = ""
+    fleet_topic_prefix: Annotated[str, doc("instead, when it serves several")] = "/{rover}"
+    stamp: Annotated[str, doc("header stamps: wall (the ROS default) or sim (the twin's t_s)")] = "wall"
+    diagnostics_period_s: Annotated[float, doc("the DiagnosticArray is also republished this "
+                                               "often [s]")] = 1.0
+    stale_after_s: Annotated[float, doc("a component whose telemetry is silent this long is "
+                                        "STALE [s]")] = 3.0
     outputs: Outputs = Outputs()
 
 
-class Mapping(Strict):
+class Mapping(Strict, frozen=True):
     """One line of the mapping: a twin key and a dashboard topic."""
 
-    topic: str  # absolute ROS 2 topic; may hold {rover} and the key's component placeholder
-    type: str  # ROS 2 message type, pkg/msg/Name
-    key: str  # twin key, lunaris/{rover}/...; {load} {rail} {radio} {panel} run over components
-    direction: str = "out"  # out: twin -> dashboard; in: dashboard -> twin
-    field: str | None = None  # the payload field of a one-value message (std_msgs data)
-    fields: list[str] | None = None  # the payload fields of a MultiArray, in order
-    scale: float = 1.0  # out: ROS value = twin value x scale; in: twin value = ROS value x scale
-    integer: bool | None = None  # round half away from zero; default: true for integer types
-    default: float | None = None  # published when the field is null; by default nothing is
-    convert: str | None = None  # a whole-message converter: battery_state, diagnostics
-    frame_id: str = ""  # header.frame_id of messages that have a header
-    options: dict[str, str] = {}  # converter options (battery_state: technology, location, ...)
-    label: str | None = None  # how the dashboard names the value (lunaris pdm)
-    unit: str | None = None
-    group: str | None = None  # pdm: part of the PDM device distribution
+    topic: Annotated[str, doc("absolute ROS 2 topic; may hold {rover} and the key's component "
+                              "placeholder (a name is made ROS-safe: mapp-1 -> mapp_1)")]
+    type: Annotated[str, doc("ROS 2 message type, pkg/msg/Name")]
+    key: Annotated[str, doc("twin key lunaris/{rover}/...; {load} {rail} {radio} {panel} in place "
+                            "of a name run over every such component: one topic each")]
+    direction: Annotated[str, doc("out: twin -> dashboard; in: dashboard -> twin input")] = "out"
+    field: Annotated[str | None, doc("the payload field of a one-value std_msgs type (its data)")] = None
+    fields: Annotated[list[str] | None, doc("the payload fields of a MultiArray, in order")] = None
+    scale: Annotated[float, doc("out: ROS value = twin value x scale (V -> mV: 1000); in: twin "
+                                "value = ROS value x scale")] = 1.0
+    integer: Annotated[bool | None, doc("round half away from zero; always so for integer "
+                                        "types")] = None
+    default: Annotated[float | None, doc("published while the field is null; else that sample "
+                                         "is not published")] = None
+    convert: Annotated[str | None, doc("a whole-message converter instead of field and scale "
+                                       "(see Converters)")] = None
+    frame_id: Annotated[str, doc("header.frame_id of messages that have a header")] = ""
+    options: Annotated[dict[str, str], doc("converter options")] = {}
+    label: Annotated[str | None, doc("how the dashboard names the value (lunaris pdm)")] = None
+    unit: Annotated[str | None, doc("the value's unit, as the dashboard shows it")] = None
+    group: Annotated[str | None, doc("pdm: part of the PDM device distribution")] = None
 
 
-class MappingFile(Strict):
+class MappingFile(Strict, frozen=True):
+    """A mapping file: the mappings and the bridge's options."""
+
     mappings: list[Mapping]
     bridge: BridgeOptions = BridgeOptions()
+
 
 class Converter(NamedTuple):
     type: str
@@ -125,7 +134,7 @@ CONVERTERS: dict[str, Converter] = {
 # -- parsing and validation ---------------------------------------------------------------------
 
 _ROS_TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
-_ROS_TOPIC = re.compile(rf"^(/{_ROS_TOKEN})+$")
+ROS_TOPIC = re.compile(rf"^(/{_ROS_TOKEN})+$")
 _ROS_NODE = re.compile(rf"^{_ROS_TOKEN}$")
 
 
@@ -224,14 +233,14 @@ def _topic_problems(topic: str, allow_empty: bool = False) -> list[str]:
     sample = _PLACEHOLDER.sub("x", topic)
     if not sample.startswith("/"):
         return [f"{topic!r} must start with '/' (an absolute ROS 2 name)"]
-    if not _ROS_TOPIC.match(sample):
+    if not ROS_TOPIC.match(sample):
         return [f"{topic!r} is not a ROS 2 name (tokens of letters, digits and '_', "
                 "not starting with a digit, separated by '/')"]
     return []
 
 
 def _payload_fields(payload: type[msgspec.Struct]) -> dict[str, Any]:
-    return {f.name: f for f in mi.type_info(payload).fields}
+    return {f.name: f for f in struct_fields(payload)}
 
 
 def _field_kind(field: Any) -> str:
@@ -341,97 +350,3 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
         if m.default is not None:
             problems.append("default: only outbound values can be null")
     return problems
-
-
-
-# -- expansion over rovers and components ------------------------------------------------------
-
-
-class RoverNames(NamedTuple):
-    """The component names a mapping's placeholders run over."""
-
-    id: str
-    load: tuple[str, ...] = ()
-    rail: tuple[str, ...] = ()
-    radio: tuple[str, ...] = ()
-    panel: tuple[str, ...] = ()
-
-
-def rover_names(rover: Rover) -> RoverNames:
-    """Components of a rover definition; the solar rail is a rail of the PDM too."""
-    return RoverNames(
-        rover.id,
-        load=tuple(x.name for x in rover.loads),
-        rail=tuple([x.name for x in rover.rails] + [rover.solar.rail.name]),
-        radio=tuple(x.name for x in rover.radios),
-        panel=tuple(x.name for x in rover.solar.panels),
-    )
-
-
-class Binding(NamedTuple):
-    """One mapping for one rover and one component: a concrete key and topic."""
-
-    index: int  # the mapping's position in the file
-    mapping: Mapping
-    rover: str
-    item: str | None  # the component ({load} ...) this binding is for
-    key: str  # twin key
-    topic: str  # absolute ROS 2 topic
-
-    @property
-    def label(self) -> str:
-        template = self.mapping.label or self.topic
-        return _fill(template, self.rover, self.item, self.mapping.key, lambda v: v)
-
-
-def _fill(template: str, rover: str, item: str | None, key_template: str, clean) -> str:
-    found = keys.family_of_template(key_template)
-    placeholder = found[0].placeholder if found else None
-    out = template.replace("{rover}", clean(rover))
-    if placeholder and item is not None:
-        out = out.replace(f"{{{placeholder}}}", clean(item))
-    return out
-
-
-def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mapping>") -> list[Binding]:
-    """Every binding of the mapping for these rovers; raise :class:`ConfigError` naming each
-    component a mapping names that a rover lacks, and each topic two bindings would share."""
-    rovers = list(rovers)
-    prefix = mf.bridge.topic_prefix if len(rovers) <= 1 else mf.bridge.fleet_topic_prefix
-    problems: list[str] = []
-    out: list[Binding] = []
-    owner: dict[tuple[str, str], str] = {}
-    for i, m in enumerate(mf.mappings):
-        found = keys.family_of_template(m.key)
-        assert found is not None, "parse_mapping checked the key"
-        shape, item = found
-        placeholder = shape.placeholder
-        for rover in rovers:
-            if placeholder is None:
-                items: tuple[str | None, ...] = (None,)
-            elif item is not None and item.startswith("{"):
-                items = getattr(rover, placeholder)
-            else:
-                have = getattr(rover, placeholder)
-                if item not in have:
-                    problems.append(f"mappings[{i}].key: rover {rover.id} has no {placeholder} "
-                                    f"{item!r} ({placeholder}s: {', '.join(have) or 'none'})")
-                    continue
-                items = (item,)
-            for it in items:
-                key = _fill(m.key, rover.id, it, m.key, lambda v: v)
-                topic = _fill(prefix + m.topic, rover.id, it, m.key, ros_name)
-                if not _ROS_TOPIC.match(topic):
-                    problems.append(f"mappings[{i}].topic: {topic!r} (rover {rover.id}) is not a "
-                                    "ROS 2 name: a token starts with a digit?")
-                    continue
-                where = f"mappings[{i}] for {rover.id}" + (f" {it}" if it else "")
-                first = owner.setdefault((m.direction, topic), where)
-                if first != where:
-                    problems.append(f"mappings[{i}].topic: {topic} of {where} is also the topic "
-                                    f"of {first}")
-                    continue
-                out.append(Binding(i, m, rover.id, it, key, topic))
-    if problems:
-        raise ConfigError(source, problems)
-    return out

@@ -29,6 +29,7 @@ from common import keys
 from common.config import ConfigError, Rover
 from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
+from services.bridge.bindings import Binding, expand, rover_names
 from services.bridge.cdr import decode_cdr, encode_cdr
 from services.bridge.convert import (
     battery_state_message,
@@ -39,7 +40,7 @@ from services.bridge.convert import (
     in_payload,
     out_message,
 )
-from services.bridge.mapping import Binding, MappingFile, expand, load_mapping, rover_names
+from services.bridge.mapping import MappingFile, load_mapping
 from services.bridge.rmw_zenoh import (
     attachment,
     entity_token,
@@ -88,7 +89,7 @@ class _Outlet:
             self.rmw_key = rmw_topic_key(r.domain_id, b.topic, self.type, self.distro)
             token = entity_token(r.domain_id, zid, 0, entity_id, "MP", r.namespace, r.node,
                                  b.topic, self.type, qos_keyexpr(True, PUBLISHER_DEPTH), self.distro)
-            rt.keep(rt.session.liveliness().declare_token(token))
+            rt.keep(rt.zenoh_session.liveliness().declare_token(token))
             self.gid = gid_of(token)
             self.sequence = 0
 
@@ -122,10 +123,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         raise SystemExit(2) from None
     opts = mf.bridge
     rover_cfg = {r.id: r for r in rovers}
-    zid = str(rt.session.info.zid())
+    zid = str(rt.zenoh_session.info.zid())
     rmw = opts.outputs.rmw_zenoh
     if rmw.enabled:
-        rt.keep(rt.session.liveliness().declare_token(
+        rt.keep(rt.zenoh_session.liveliness().declare_token(
             node_token(rmw.domain_id, zid, 0, rmw.namespace, rmw.node)))
 
     # -- outbound -----------------------------------------------------------------------------
@@ -242,13 +243,13 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         except BadInput as exc:
             rt.reject(b.rover, key, str(exc))
             return
-        rt.session.put(b.key, msgspec.json.encode(value), encoding=JSON)
+        rt.zenoh_session.put(b.key, msgspec.json.encode(value), encoding=JSON)
 
     def listen(b: Binding, flavour: str, keyexpr: str) -> None:
         def on_sample(s: zenoh.Sample) -> None:
             if s.kind == zenoh.SampleKind.PUT:
                 rt.call_soon(on_inbound, b, flavour, str(s.key_expr), s.payload.to_bytes())
-        rt.keep(rt.session.declare_subscriber(keyexpr, on_sample))
+        rt.keep(rt.zenoh_session.declare_subscriber(keyexpr, on_sample))
 
     for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction != "in":
@@ -262,7 +263,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             # Any type hash: a Humble node (TypeHashNotSupported) is heard as well as a Jazzy one.
             key = rmw_topic_key(rmw.domain_id, b.topic, b.mapping.type, opts.ros_distro)
             listen(b, "rmw_zenoh", key.rsplit("/", 1)[0] + "/*")
-            rt.keep(rt.session.liveliness().declare_token(entity_token(
+            rt.keep(rt.zenoh_session.liveliness().declare_token(entity_token(
                 rmw.domain_id, zid, 0, entity_id, "MS", rmw.namespace, rmw.node, b.topic,
                 b.mapping.type, qos_keyexpr(False, SUBSCRIPTION_DEPTH), opts.ros_distro)))
 

@@ -45,8 +45,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                                     "paused": c.paused} for r, c in clocks.items()})
 
     rt.subscribe(keys.clock_control("*"), on_control)
-    for rover, clock in clocks.items():
+    for rover_id, clock in clocks.items():
         # A clock that falls behind skips ahead rather than bursting (see Runtime.every).
-        rt.every(clock.period_s, ticker(rover, clock))
+        rt.every(clock.period_s, ticker(rover_id, clock))
     rt.every(1.0, persist)
     rt.on_exit(persist)

@@ -100,12 +100,12 @@ class PowerModel:
         self.battery_ok = operational
         self.bus_voltage_v = voltage_v
         for sw in self.switches.values():
-            shed_below = sw.cfg.shed_below_soc
-            if shed_below is None:
+            shed_below, restore = sw.cfg.shed_below_soc, sw.restore_soc
+            if shed_below is None or restore is None:  # restore_soc is None exactly when shed_below is
                 continue
             if not sw.shed and soc < shed_below:
                 sw.shed = True
-            elif sw.shed and soc >= sw.restore_soc:
+            elif sw.shed and soc >= restore:
                 sw.shed = False
 
     def apply_fault(self, fault: FaultKey, params: Params | None) -> None:

@@ -19,7 +19,8 @@ MODELS = sorted(str(p.relative_to(ROOT).with_suffix("")).replace("/", ".")
                 for p in (ROOT / "services").glob("*/model.py"))
 PURE = [*MODELS, "services.composed", "common.scenario", "common.conditions", "common.config",
         "common.faults", "common.keys", "common.messages", "services.bridge.mapping",
-        "services.bridge.convert", "services.bridge.cdr", "services.bridge.rmw_zenoh"]
+        "services.bridge.convert", "services.bridge.cdr", "services.bridge.rmw_zenoh",
+        "services.bridge.bindings"]
 MAX_LINES = 450
 REASON_MARK = "Longer than"  # how a module says why it is long, in its docstring
 
@@ -47,3 +48,10 @@ def test_no_module_is_too_long_without_saying_why():
             if lines > MAX_LINES and REASON_MARK not in text[:2000]:
                 long.append(f"{path.relative_to(ROOT)}: {lines} lines")
     assert not long, "split these, or say at the top why they are long: " + "; ".join(long)
+
+
+def test_the_committed_reference_is_generated_from_the_code():
+    from lunaris.reference import DOCS, pages
+    stale = [name for name, text in pages().items()
+             if not (DOCS / name).is_file() or (DOCS / name).read_text() != text]
+    assert not stale, f"docs/reference is stale: {stale}; run python -m lunaris.reference"

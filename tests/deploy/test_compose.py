@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path, PurePosixPath
 from typing import Any
 
@@ -122,13 +123,42 @@ def test_every_mounted_host_file_is_in_the_repository(compose: dict[str, Any]) -
             assert REPO in Path(source).parents, f"{name}: {source} is outside the repository"
 
 
-def test_the_image_installs_the_package_and_runs_lunaris() -> None:
-    dockerfile = (REPO / "deploy/Dockerfile").read_text()
+def _instructions() -> list[list[str]]:
+    dockerfile = (REPO / "deploy/Dockerfile").read_text().replace("\\\n", " ")
     instructions = [line.split(None, 1) for line in dockerfile.splitlines()
                     if line.strip() and not line.lstrip().startswith("#")]
-    first = [i for i in instructions if i[0].isupper()]
+    return [i for i in instructions if i[0].isupper()]
+
+
+def test_the_image_installs_the_dependencies_and_runs_lunaris_from_source() -> None:
+    first = _instructions()
     assert first[0] == ["FROM", "python:3.11-slim"]
-    assert ["ENTRYPOINT", '["lunaris"]'] in first
+    assert ["ENTRYPOINT", '["python", "-m", "lunaris.cli"]'] in first
     assert any(i[0] == "USER" and i[1] != "root" for i in first), "runs as root"
     assert ["VOLUME", f'["{STATE_DIR}"]'] in first
-    assert any(i[0] == "RUN" and "pip install ." in i[1] for i in first)
+    assert any(i[0] == "RUN" and "pip install -r" in i[1] for i in first)
+    # No package named "common" or "services" is installed into site-packages.
+    assert not any(i[0] == "RUN" and "pip install ." in i[1] for i in first)
+    assert ["ENV", "PYTHONPATH=/opt/lunaris"] in first
+
+
+def test_the_image_layout_runs_lunaris(tmp_path: Path) -> None:
+    """The image's /opt/lunaris, rebuilt from the Dockerfile's COPY lines, runs `lunaris check`
+    with the source on PYTHONPATH (the dependencies are this environment's)."""
+    root = tmp_path / "opt-lunaris"
+    for instr in _instructions():
+        if instr[0] == "COPY":
+            src, dst = instr[1].split()
+            target = root / dst
+            if (REPO / src).is_dir():
+                shutil.copytree(REPO / src, target, ignore=shutil.ignore_patterns("__pycache__"))
+            else:
+                target.mkdir(parents=True, exist_ok=True)  # COPY file ./ : into the WORKDIR
+                shutil.copy(REPO / src, target)
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    out = subprocess.run([sys.executable, "-m", "lunaris.cli", "check", "config/rovers/mapp.yaml"],
+                         cwd=root, env=env, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    where = subprocess.run([sys.executable, "-c", "import common; print(common.__file__)"],
+                           cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+    assert where.stdout.startswith(str(root)), where.stdout

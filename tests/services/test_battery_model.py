@@ -250,3 +250,13 @@ def test_discharge_current_is_limited_by_the_bms():
     assert_allclose((p.current_a, p.voltage_v), (30.0, 16.8 - 30.0 * 0.06), rtol=1e-12)
     assert {"over_current", "brownout"} <= set(pack.derived_faults())
     assert battery_fault_code(pack.reading().faults) == 4
+
+
+def test_every_derived_fault_is_in_the_catalogue_of_derived_faults():
+    from common.faults import DERIVED
+    pack = BatteryModel(battery_cfg())
+    pack.temperature_c = 200.0
+    pack.energy_j = 0.0
+    pack._update_latches()
+    pack.set_demand(1e6)
+    assert set(pack.derived_faults()) <= set(DERIVED["battery"])

@@ -12,6 +12,7 @@ from numpy.testing import assert_allclose
 
 from common.config import ConfigError, load_rover
 from common.messages import ActiveFault, BadInput, BatteryState, LoadPower, PowerSummary, RailState
+from services.bridge import bindings as bd
 from services.bridge import cdr, convert, rmw_zenoh
 from services.bridge import mapping as mp
 from tests import rosmsg
@@ -53,7 +54,7 @@ def battery_state(**kw) -> BatteryState:
 
 def test_default_mapping_covers_what_the_dashboard_uses():
     mf = mp.load_mapping(DEFAULT)
-    bindings = mp.expand(mf, [mp.rover_names(MAPP)])
+    bindings = bd.expand(mf, [bd.rover_names(MAPP)])
     out = {b.topic: b for b in bindings if b.mapping.direction == "out"}
     inbound = {b.topic: b for b in bindings if b.mapping.direction == "in"}
     assert out["/final_comms_radio_bool"].mapping.type == "std_msgs/msg/Bool"
@@ -78,7 +79,7 @@ def test_default_mapping_covers_what_the_dashboard_uses():
 
 def test_a_fleet_gets_prefixed_ros_safe_topics():
     mf = mp.load_mapping(DEFAULT)
-    bindings = mp.expand(mf, [mp.rover_names(MAPP), mp.rover_names(LTV)])
+    bindings = bd.expand(mf, [bd.rover_names(MAPP), bd.rover_names(LTV)])
     topics = {b.topic for b in bindings}
     assert "/mapp_1/final_comms_radio_bool" in topics
     assert "/ltv_1/pdm/rail_TRACTION_400V_voltage_mv" in topics
@@ -187,12 +188,12 @@ mappings:
      field: voltage_v, scale: 1000}
 """)
     with pytest.raises(ConfigError) as err:
-        mp.expand(mf, [mp.rover_names(MAPP)], source="m.yaml")
+        bd.expand(mf, [bd.rover_names(MAPP)], source="m.yaml")
     text = "\n".join(err.value.problems)
     assert "rover mapp-1 has no radio 'hls_relay' (radios: lander)" in text
     assert "'/12V_mv' (rover mapp-1) is not a ROS 2 name" in text
     link_only = mp.MappingFile(mappings=mf.mappings[:1])
-    assert mp.expand(link_only, [mp.rover_names(LTV)])[0].key == "lunaris/ltv-1/radio/hls_relay/link"
+    assert bd.expand(link_only, [bd.rover_names(LTV)])[0].key == "lunaris/ltv-1/radio/hls_relay/link"
 
 
 def test_placeholders_in_topics_become_ros_safe():
@@ -204,7 +205,7 @@ mappings:
   - {topic: "/load/{load}", type: std_msgs/msg/Float32, key: "lunaris/{rover}/load/{load}/power",
      field: power_w, label: "{load} on {rover}"}
 """)
-    b = mp.expand(mf, [mp.rover_names(MAPP)])[0]
+    b = bd.expand(mf, [bd.rover_names(MAPP)])[0]
     assert (b.topic, b.label) == ("/mapp_1/load/drive_motors", "drive_motors on mapp-1")
 
 
