@@ -51,6 +51,7 @@ __all__ = [
     "split",
     "telemetry_family",
     "umbilical_state",
+    "under",
 ]
 
 ROOT = "lunaris"
@@ -59,6 +60,11 @@ PLACEHOLDERS = ("load", "rail", "radio", "panel")  # the component kinds a key c
 
 def rover_prefix(rover: str) -> str:
     return f"{ROOT}/{rover}"
+
+
+def under(rover: str, tail: str = "**") -> str:
+    """A key expression under a rover: ``under("*", "fault/**")`` -> ``lunaris/*/fault/**``."""
+    return f"{ROOT}/{rover}/{tail}"
 
 
 def clock(rover: str) -> str:

@@ -200,7 +200,7 @@ def _record(args: argparse.Namespace, path: Path) -> int:
         samples.put((str(s.key_expr), s.payload.to_bytes(), s.kind == zenoh.SampleKind.DELETE,
                      time.time_ns()))
 
-    selector = f"{keys.ROOT}/{args.rover}/**" if args.rover else f"{keys.ROOT}/**"
+    selector = keys.under(args.rover or "*")
     tmp = path.with_name(path.name + ".part")
     out = open(tmp, "wb")  # closed in the finally below
     recorder = Recorder(out, describe_endpoint(args))

@@ -196,9 +196,8 @@ class _Run:
             f"waiting for the Zenoh router at {describe_endpoint(self.args)} ...", flush=True))
         keep: list[zenoh.Subscriber[None] | zext.AdvancedSubscriber[None]] = []  # alive until closed
         try:
-            root = keys.rover_prefix(self.rover)
             keep.append(zext.declare_advanced_subscriber(
-                session, f"{root}/**", self._on_sample,
+                session, keys.under(self.rover), self._on_sample,
                 history=zext.HistoryConfig(detect_late_publishers=True)))
             keep.append(session.declare_subscriber(keys.event(self.rover), self._on_event))
             require_rover(session, self.rover)  # also a round trip: our subscriptions are in place

@@ -88,7 +88,7 @@ def open_session(args: argparse.Namespace, wait_s: float | None = 10.0,
 def live_rovers(session: zenoh.Session, timeout_s: float = 2.0) -> dict[str, set[str]]:
     """Rover id -> the services that have declared a liveliness token for it."""
     out: dict[str, set[str]] = {}
-    for reply in session.liveliness().get(f"{keys.ROOT}/*/service/*", timeout=timeout_s):
+    for reply in session.liveliness().get(keys.service("*", "*"), timeout=timeout_s):
         if reply.ok is None:
             continue
         try:

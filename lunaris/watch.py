@@ -158,13 +158,13 @@ class _Watcher:
         except ToolError as exc:
             self.error = str(exc)
             return
-        root = f"{keys.ROOT}/{self.args.rover or '*'}"
+        rover = self.args.rover or "*"
         history = zext.HistoryConfig(detect_late_publishers=True)
         for family in keys.families("out"):
             self._keep.append(zext.declare_advanced_subscriber(
-                session, f"{root}/{family.name}", self.store.on_sample, history=history))
+                session, family.pattern(rover), self.store.on_sample, history=history))
         self._keep.append(session.liveliness().declare_subscriber(
-            f"{root}/service/*", self.store.on_token, history=True))
+            keys.service(rover, "*"), self.store.on_token, history=True))
         self.session = session
 
     def refresh_connection(self) -> None:

@@ -104,6 +104,6 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     rt.subscribe(keys.event("*"), on_event, history=True)
     for head in WRITABLE:
-        rt.subscribe(f"{keys.ROOT}/*/{head}", on_instructor_key, any_rover=True)
+        rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
