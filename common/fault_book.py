@@ -95,6 +95,15 @@ class FaultBook:
         for path, (fault, _) in list(self.injected[rover].items()):
             self._clear(rover, fault.key, parse_fault_key(path.split("/")))
 
+    def injected_faults(self, rover: str) -> list[ActiveFault]:
+        return [f for f, _ in self.injected[rover].values()]
+
+    def reinject(self, rover: str, fault: ActiveFault) -> None:
+        """Inject a fault as it was saved (a snapshot restored), journalled like any other."""
+        _, parts = keys.split(fault.key)
+        fk = parse_fault_key(parts[1:])
+        self._inject(rover, fault.key, fk, params_from_dict(fk, fault.params))
+
     def restore(self) -> None:
         """Re-apply the injected faults persisted by an earlier run of this service."""
         saved = self.rt.store.load("faults") or {}
@@ -148,6 +157,9 @@ class FaultBook:
         self.rt.store.save("faults", {
             r: {p: msgspec.structs.asdict(f) for p, (f, _) in fs.items()}
             for r, fs in self.injected.items()})
+        self._publish(rover)
+
+    def publish(self, rover: str) -> None:
         self._publish(rover)
 
     def _publish(self, rover: str) -> None:

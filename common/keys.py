@@ -29,6 +29,9 @@ __all__ = [
     "clock",
     "clock_control",
     "cmd_rail",
+    "control_reset",
+    "control_restore",
+    "control_snapshot",
     "event",
     "families",
     "family_of",
@@ -47,6 +50,8 @@ __all__ = [
     "rail_state",
     "rover_prefix",
     "service",
+    "snapshots",
+    "snapshots_of",
     "solar_power",
     "split",
     "telemetry_family",
@@ -145,6 +150,28 @@ def faults_active(rover: str, service: str) -> str:
 
 def faults_journal(rover: str) -> str:
     return f"{ROOT}/{rover}/faults/journal"
+
+
+def control_reset(rover: str) -> str:
+    return f"{ROOT}/{rover}/control/reset"
+
+
+def control_snapshot(rover: str, name: str) -> str:
+    return f"{ROOT}/{rover}/control/snapshot/{name}"
+
+
+def control_restore(rover: str, name: str) -> str:
+    return f"{ROOT}/{rover}/control/restore/{name}"
+
+
+def snapshots(rover: str) -> str:
+    """``get`` lists the rover's snapshots (gathered by the faults service)."""
+    return f"{ROOT}/{rover}/snapshots"
+
+
+def snapshots_of(rover: str, service: str) -> str:
+    """The snapshots one service holds of a rover (queryable)."""
+    return f"{ROOT}/{rover}/snapshots/{service}"
 
 
 def event(rover: str) -> str:

@@ -24,6 +24,7 @@ __all__ = [
     "Event",
     "EventKind",
     "Severity",
+    "SnapshotInfo",
     "LoadPower",
     "PowerSummary",
     "RadioLink",
@@ -59,6 +60,8 @@ class Clock(_Msg):
     seq: int
     time_scale: float
     paused: bool
+    epoch: int = 0  # counts the session's resets and restores
+    cause: str = ""  # what started this epoch: "reset" or "restore:<snapshot>"
 
 
 class BatteryState(_Msg):
@@ -130,7 +133,7 @@ class RadioLink(_Msg):
 # What an event says happened: a refused input, a fault's life, an accepted command or
 # input, a change of the clock, a bug in a service.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
-                    "fault_resolved", "command", "input", "clock", "internal_error"]
+                    "fault_resolved", "command", "input", "clock", "session", "internal_error"]
 
 
 class Event(_Msg):
@@ -163,6 +166,15 @@ class ActiveFaults(_Msg):
     t_s: float
     service: str
     faults: list[ActiveFault]
+
+
+class SnapshotInfo(_Msg):
+    """One saved snapshot of a rover, as ``get lunaris/<rover>/snapshots`` lists it."""
+
+    name: str
+    t_s: float  # the rover's sim time when it was saved
+    saved_at: float  # wall time when it was saved [s since the epoch]
+    services: list[str]  # the services that hold their part of it
 
 
 # -- inputs and commands (decoded strictly) -----------------------------------------------

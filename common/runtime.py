@@ -40,6 +40,7 @@ import zenoh.ext as zext
 from common import keys
 from common.fault_book import FaultBook
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
+from common.session import SessionKeeper, StateGet, StateReset, StateSet
 from common.state_store import StateStore
 
 __all__ = ["Runtime", "Sample"]
@@ -80,6 +81,7 @@ class Runtime:
         self._tick_handlers: list[TickHandler] = []
         self._keep: list[Any] = []  # subscribers, tokens, queryables
         self._faults: FaultBook | None = None
+        self._session_keeper: SessionKeeper | None = None
         self.session: zenoh.Session | None = None
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -91,6 +93,27 @@ class Runtime:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    @property
+    def has_faults(self) -> bool:
+        """Whether this service owns the faults of some component."""
+        return self._faults is not None
+
+    def own_state(self, get: StateGet, set_: StateSet, reset: StateReset, *,
+                  after: Callable[[str], None] | None = None,
+                  persist_every_s: float | None = 1.0) -> None:
+        """Hand the service's state to the session keeper (:mod:`common.session`): kept on
+        disk, reset by ``control/reset``, saved and restored by snapshots. ``after(rover)``
+        republishes once the state has changed by a control. The persisted state is read back
+        at once (call this before the first publish)."""
+        self._session_keeper = SessionKeeper(self, get, set_, reset, after, persist_every_s)
+
+    @property
+    def keeper(self) -> SessionKeeper:
+        """The session keeper of :meth:`own_state`."""
+        if self._session_keeper is None:
+            raise RuntimeError(f"{self.name}: own_state() first")
+        return self._session_keeper
 
     @property
     def faults(self) -> FaultBook:
@@ -105,6 +128,8 @@ class Runtime:
 
     def _on_clock(self, s: Sample) -> None:
         tick = decode(s.payload, Clock)
+        if self._session_keeper is not None and not self._session_keeper.follow(s.rover, tick):
+            return  # a tick from before a reset or restore
         self.t_s[s.rover] = tick.t_s
         for fn in self._tick_handlers:
             fn(s.rover, tick)

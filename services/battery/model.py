@@ -116,6 +116,21 @@ class BatteryModel:
         self.depleted = self.soc <= cfg.depleted_soc
         self.thermal_cutoff = False
 
+    # -- state ------------------------------------------------------------------------------
+
+    def state(self) -> dict[str, float | bool]:
+        """Everything that evolves (not the injected faults: their owner re-applies them)."""
+        return {"energy_j": self.energy_j, "temperature_c": self.temperature_c,
+                "demand_w": self.demand_w, "depleted": self.depleted,
+                "thermal_cutoff": self.thermal_cutoff}
+
+    def set_state(self, state: dict) -> None:
+        self.energy_j = float(state["energy_j"])
+        self.temperature_c = float(state["temperature_c"])
+        self.demand_w = float(state.get("demand_w", 0.0))
+        self.depleted = bool(state.get("depleted", self.depleted))
+        self.thermal_cutoff = bool(state.get("thermal_cutoff", False))
+
     # -- derived quantities -----------------------------------------------------------------
 
     @property

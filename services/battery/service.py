@@ -1,6 +1,14 @@
-"""Battery service: steps each pack on the clock, re-solves the bus when demand changes."""
+"""Battery service: steps each pack on the clock, re-solves the bus when demand changes.
+
+A pack integrates the simulated time since it last stepped (not only the tick's ``dt_s``),
+so time that passed while no tick could reach it (a restart of this service, a router
+outage) is integrated at the demand it was holding: the stored energy always equals the
+integral of the demand, and no stretch of time is integrated twice.
+"""
 
 from __future__ import annotations
+
+from typing import Any
 
 from common import keys
 from common.config import Rover
@@ -15,27 +23,22 @@ PERSIST_S = 0.2  # wall time between saves: what a killed battery service can lo
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
+    config = {r.id: r.battery for r in rovers}
     packs = {r.id: BatteryModel(r.battery) for r in rovers}
-    saved = rt.store.load("state") or {}
-    for rover, pack in packs.items():
-        s = saved.get(rover)
-        if s:  # resume after a restart: the store and the heat are not reset
-            pack.energy_j = s["energy_j"]
-            pack.temperature_c = s["temperature_c"]
-            pack.depleted = s.get("depleted", pack.depleted)
-            pack.thermal_cutoff = s.get("thermal_cutoff", False)
-            rt.t_s[rover] = s.get("t_s", 0.0)
+    stepped_t: dict[str, float] = dict.fromkeys(packs, 0.0)  # sim time each pack has reached
 
     def publish(rover: str) -> None:
         pack = packs[rover]
         r = pack.reading()
         rt.faults.sync_derived(rover, "battery", pack.derived_faults())
-        fields = r._asdict()
         rt.publish(keys.battery_state(rover), BatteryState(
-            t_s=rt.t_s[rover], fault_code=battery_fault_code(r.faults), **fields))
+            t_s=rt.t_s[rover], fault_code=battery_fault_code(r.faults), **r._asdict()))
 
     def on_tick(rover: str, tick: Clock) -> None:
-        packs[rover].step(tick.dt_s)
+        dt = tick.t_s - stepped_t[rover]
+        if dt > 0.0:
+            packs[rover].step(dt)
+            stepped_t[rover] = tick.t_s
         publish(rover)
 
     def on_summary(s: Sample) -> None:
@@ -49,19 +52,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         packs[rover].apply_fault(fk, params)
         publish(rover)
 
-    def persist() -> None:
-        rt.store.save("state", {
-            rover: {"energy_j": p.energy_j, "temperature_c": p.temperature_c,
-                    "depleted": p.depleted, "thermal_cutoff": p.thermal_cutoff,
-                    "t_s": rt.t_s[rover]}
-            for rover, p in packs.items()
-        })
+    def get_state(rover: str) -> dict[str, Any]:
+        return {**packs[rover].state(), "t_s": stepped_t[rover]}
+
+    def set_state(rover: str, state: dict[str, Any]) -> None:
+        packs[rover].set_state(state)
+        stepped_t[rover] = rt.t_s[rover] = float(state.get("t_s", 0.0))
+
+    def reset(rover: str) -> None:
+        packs[rover] = BatteryModel(config[rover])
+        stepped_t[rover] = 0.0
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.power_summary("*"), on_summary)
     rt.faults.own("battery", None, apply_fault)
+    rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S)
     rt.faults.restore()
-    rt.every(PERSIST_S, persist)
-    rt.on_exit(persist)
     for rover in packs:
         publish(rover)

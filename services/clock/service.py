@@ -2,30 +2,27 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 from common import keys
 from common.config import Rover
 from common.messages import BadInput, Clock, ClockControl, decode_input
 from common.runtime import Runtime, Sample
+from common.session import RESTORE, parse_control
 from services.clock.model import ClockModel, Tick
 
 __all__ = ["serve"]
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    saved = rt.store.load("clock") or {}
-    clocks: dict[str, ClockModel] = {}
-    for rover in rovers:
-        s = saved.get(rover.id, {})
-        clocks[rover.id] = ClockModel(rover.tick_hz, t_s=s.get("t_s", 0.0), seq=s.get("seq", 0),
-                                      time_scale=s.get("time_scale", 1.0),
-                                      paused=s.get("paused", False))
-        rt.t_s[rover.id] = clocks[rover.id].t_s
+    clocks = {r.id: ClockModel(r.tick_hz) for r in rovers}
 
     def publish(rover: str, tick: Tick) -> None:
         rt.t_s[rover] = tick.t_s
         rt.publish(keys.clock(rover), Clock(**tick._asdict()))
 
-    def ticker(rover: str, clock: ClockModel):
+    def ticker(rover: str, clock: ClockModel) -> Callable[[], None]:
         return lambda: publish(rover, clock.tick())
 
     def on_control(s: Sample) -> None:
@@ -40,13 +37,35 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.event(s.rover, "info", "clock", s.key,
                  f"clock {'paused' if clock.paused else 'running'} at x{clock.time_scale:g}")
 
-    def persist() -> None:
-        rt.store.save("clock", {r: {"t_s": c.t_s, "seq": c.seq, "time_scale": c.time_scale,
-                                    "paused": c.paused} for r, c in clocks.items()})
+    def on_session(s: Sample) -> None:
+        """The clock begins the new epoch of a reset or a restore; the others follow it."""
+        control = parse_control(s.parts)
+        if control is None or s.deleted or control[0] == "snapshot":
+            return  # a snapshot is saved by every service itself; bad keys: the faults service
+        action, name = control
+        clock, keeper = clocks[s.rover], rt.keeper
+        if action == "reset":
+            keeper.reset(s.rover)  # the clock's reset begins the new epoch
+        elif name in keeper.names(s.rover):
+            keeper.restore(s.rover, name)
+            clock.new_epoch(RESTORE + name)
+        else:
+            return  # no such snapshot: the faults service says so
+        keeper.epoch[s.rover] = clock.epoch
+        keeper.persist()
+        publish(s.rover, clock.mark())
+
+    def set_state(rover: str, state: dict[str, Any]) -> None:
+        clocks[rover].set_state(state)
+        rt.t_s[rover] = clocks[rover].t_s
 
     rt.subscribe(keys.clock_control("*"), on_control)
+    rt.subscribe(keys.control_reset("*"), on_session)
+    rt.subscribe(keys.control_restore("*", "*"), on_session)
+    # Saved every tick: a restarted clock goes on from its last tick, never back in time.
+    period = min(c.period_s for c in clocks.values())
+    rt.own_state(lambda rover: clocks[rover].state(), set_state,
+                 lambda rover: clocks[rover].reset(), persist_every_s=period)
     for rover_id, clock in clocks.items():
         # A clock that falls behind skips ahead rather than bursting (see Runtime.every).
         rt.every(clock.period_s, ticker(rover_id, clock))
-    rt.every(1.0, persist)
-    rt.on_exit(persist)

@@ -9,6 +9,10 @@
 - **The gatekeeper** for what no other service owns: an instructor key for a rover no
   service serves, a fault on an unknown component, an input or command the twin does not
   have. Each is rejected with an event, like every other bad input.
+- **Session controls** (``control/reset``, ``control/snapshot/<name>``,
+  ``control/restore/<name>``): every service acts on its own state (``common.session``);
+  this one answers each with the one ``session`` event that marks it in the journal, or
+  refuses it, and answers ``get lunaris/<rover>/snapshots`` from what the services hold.
 """
 
 from __future__ import annotations
@@ -21,15 +25,22 @@ import zenoh
 from common import keys
 from common.config import Rover
 from common.faults import check_component
-from common.messages import ActiveFault, ActiveFaults, BadInput, Event, decode
+from common.messages import ActiveFault, ActiveFaults, BadInput, Event, SnapshotInfo, decode
 from common.runtime import Runtime, Sample
+from common.session import parse_control
 from services.faults.model import Journal
 
 __all__ = ["serve"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
 # The heads of the keys that instructors, scenarios and dashboards write.
-WRITABLE = ("fault/**", "input/**", "cmd/**", "clock/control/**")
+WRITABLE = ("fault/**", "input/**", "cmd/**", "clock/control/**", "control/**")
+SESSION_MESSAGES = {
+    "reset": "session reset: every service back to the rover file's initial conditions, "
+             "injected faults cleared, the clock at 0",
+    "snapshot": "snapshot {name!r} saved",
+    "restore": "snapshot {name!r} restored",
+}
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
@@ -57,11 +68,50 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if s.parts[0] == "fault":
             check_component(s.parts[1:])  # the owner of a known component answers the rest
             return
+        if s.parts[0] == "control":
+            on_control(s)
+            return
         family = keys.family_of(s.parts)
         if family is None or family.direction != "in":
             writable = ", ".join(f.name for f in keys.families("in"))
             raise BadInput(f"no such input or command {'/'.join(s.parts)!r} (the twin reads: "
                            f"{writable}, fault/...)")
+
+    def on_control(s: Sample) -> None:
+        control = parse_control(s.parts)
+        if control is None:
+            raise BadInput(f"no such control {'/'.join(s.parts)!r} (control/reset, "
+                           "control/snapshot/<name>, control/restore/<name>; a name is letters, "
+                           "digits, '_', '-' and '.', at most 64)")
+        if s.deleted:
+            raise BadInput("a session control is a put, not a delete")
+        action, name = control
+        if action == "restore":
+            held = {i.name for i in gather_snapshots(s.rover)}
+            if name not in held:
+                raise BadInput(f"no snapshot {name!r} of {s.rover} "
+                               f"(snapshots: {', '.join(sorted(held)) or 'none'})")
+        rt.event(s.rover, "info", "session", s.key, SESSION_MESSAGES[action].format(name=name))
+
+    def gather_snapshots(rover: str) -> list[SnapshotInfo]:
+        merged: dict[str, SnapshotInfo] = {}
+        for reply in session.get(keys.snapshots_of(rover, "*"), timeout=GATHER_TIMEOUT_S,
+                                 consolidation=zenoh.ConsolidationMode.NONE):
+            if reply.ok is None:
+                continue
+            for info in msgspec.json.decode(reply.ok.payload.to_bytes(), type=list[SnapshotInfo]):
+                known = merged.setdefault(info.name, SnapshotInfo(info.name, info.t_s,
+                                                                  info.saved_at, []))
+                known.services.extend(info.services)
+        return [merged[n] for n in sorted(merged)]
+
+    def on_snapshots_query(q: zenoh.Query) -> None:
+        with q:
+            for rover in sorted(journals):
+                key = keys.snapshots(rover)
+                if zenoh.KeyExpr(key).intersects(q.key_expr):
+                    q.reply(key, msgspec.json.encode(gather_snapshots(rover)),
+                            encoding=zenoh.Encoding.APPLICATION_JSON)
 
     def on_journal_query(q: zenoh.Query) -> None:
         with q:
@@ -107,3 +157,4 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
+    rt.queryable(keys.snapshots("*"), on_snapshots_query)

@@ -41,4 +41,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.on_tick(on_tick)
     rt.subscribe(keys.rail_state("*", "*"), on_rail)
     rt.faults.own("load", lambda rover: models[rover].names, apply_fault)
+    # No state of its own (rail_on mirrors the PDM), but its faults follow resets and snapshots.
+    rt.own_state(lambda rover: {}, lambda rover, st: None, lambda rover: None,
+                 after=publish, persist_every_s=None)
     rt.faults.restore()

@@ -108,6 +108,24 @@ class PowerModel:
             elif sw.shed and soc >= restore:
                 sw.shed = False
 
+    def state(self) -> dict[str, dict[str, float | bool]]:
+        """The switches of every rail (a converter failure is re-applied by its owner)."""
+        return {name: {"commanded_on": sw.commanded_on, "tripped": sw.tripped,
+                       "trip_current_a": sw.trip_current_a, "shed": sw.shed}
+                for name, sw in self.switches.items()}
+
+    def set_state(self, state: dict) -> None:
+        for name, sw in self.switches.items():
+            saved = state.get(name, {})
+            sw.commanded_on = bool(saved.get("commanded_on", sw.cfg.initially_on))
+            sw.tripped = bool(saved.get("tripped", False))
+            sw.trip_current_a = float(saved.get("trip_current_a", 0.0))
+            sw.shed = bool(saved.get("shed", False))
+
+    def reset(self) -> None:
+        """Every rail as the rover file says: its initial switch, not tripped, not shed."""
+        self.set_state({})
+
     def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
         """Inject (``params``) or clear (None) a converter failure of one rail."""
         if fault.name == self.solar_rail.name:

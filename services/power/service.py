@@ -106,6 +106,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.umbilical_state("*"), on_umbilical)
     rt.subscribe(keys.cmd_rail("*", "*"), on_command)
     rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_fault)
+    rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),
+                 lambda rover: models[rover].reset(), after=publish)
     rt.faults.restore()
     # The loads of a rover arrive as a burst each tick: fold it into one recomputation.
     rt.after_batch(flush, linger_s=LINGER_S)

@@ -44,6 +44,12 @@ class RadioModel:
         self.failed = False
         self.range_scale = 1.0
 
+    def state(self) -> dict[str, float]:
+        return {"distance_m": self.distance_m, "angle_deg": self.angle_deg}
+
+    def set_state(self, state: dict) -> None:
+        self.set_position(float(state.get("distance_m", 0.0)), float(state.get("angle_deg", 0.0)))
+
     def set_position(self, distance_m: float, angle_deg: float) -> None:
         """The rover's position relative to this radio [m, deg]."""
         self.distance_m, self.angle_deg = distance_m, angle_deg

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from common import keys
 from common.config import Rover
@@ -49,8 +50,20 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         radios[rover][fk.name].apply_fault(fk, params)
         publish(rover, fk.name, force=True)
 
+    def get_state(rover: str) -> dict[str, Any]:
+        return {name: m.state() for name, m in radios[rover].items()}
+
+    def set_state(rover: str, state: dict[str, Any]) -> None:
+        for name, m in radios[rover].items():
+            m.set_state(state.get(name, {}))
+
+    def republish(rover: str) -> None:
+        for name in radios[rover]:
+            publish(rover, name, force=True)
+
     rt.subscribe(keys.input_radio_position("*", "*"), on_position)
     rt.faults.own("radio", lambda rover: radios[rover], apply_fault)
+    rt.own_state(get_state, set_state, lambda rover: set_state(rover, {}), after=republish)
     rt.faults.restore()
     rt.every(0.2, heartbeat)
     heartbeat()

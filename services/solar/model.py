@@ -32,6 +32,18 @@ class SolarModel:
         self.umbilical_plugged = rover.umbilical.connected
         self.umbilical_fault = False
 
+    def state(self) -> dict[str, float | bool]:
+        """The inputs that evolve (the panels' faults are re-applied by their owner)."""
+        return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged}
+
+    def set_state(self, state: dict) -> None:
+        self.sun_angle_deg = float(state.get("sun_angle_deg", self.cfg.sun_angle_deg))
+        self.umbilical_plugged = bool(state.get("umbilical_plugged", self.umbilical_cfg.connected))
+
+    def reset(self) -> None:
+        """The rover file's sun angle and umbilical."""
+        self.set_state({})
+
     def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
         """Inject (``params``) or clear (None) a fault of a panel or of the umbilical."""
         if fault.component == "umbilical":

@@ -45,6 +45,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.input_umbilical("*"), on_umbilical)
     rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_fault)
     rt.faults.own("umbilical", None, apply_fault)
+    rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),
+                 lambda rover: models[rover].reset(), after=publish)
     rt.faults.restore()
     for rover in models:
         publish(rover)
