@@ -16,7 +16,7 @@ from pathlib import Path
 import zenoh
 
 __all__ = ["DEFAULT_ENDPOINT", "ConnectionConfigError", "add_connection_args", "config_from_args",
-           "make_config"]
+           "make_config", "write"]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 CONFIG_ENV = "LUNARIS_ZENOH_CONFIG"
@@ -79,3 +79,16 @@ def make_config(
 
 def config_from_args(args: argparse.Namespace, mode: str = "client") -> zenoh.Config:
     return make_config(mode, connect=args.connect, listen=args.listen, config_file=args.config)
+
+
+def write(session: zenoh.Session, key: str, payload: bytes | str | None) -> None:
+    """An input, command or fault: a put (``payload``) or a delete (None), never dropped.
+
+    Zenoh drops a put under congestion unless it is sent with ``CongestionControl.BLOCK``;
+    a burst of instructor actions must arrive whole, so every Lunaris tool writes this way.
+    """
+    if payload is None:
+        session.delete(key, congestion_control=zenoh.CongestionControl.BLOCK)
+    else:
+        session.put(key, payload, encoding=zenoh.Encoding.APPLICATION_JSON,
+                    congestion_control=zenoh.CongestionControl.BLOCK)

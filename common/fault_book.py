@@ -163,7 +163,7 @@ class FaultBook:
         self._publish(rover)
 
     def _publish(self, rover: str) -> None:
-        self.rt.publish(keys.faults_active(rover, self.rt.name), self._message(rover))
+        self.rt.publish(keys.faults_active(rover, self.rt.name), self._message(rover), reliable=True)
 
     def _message(self, rover: str) -> ActiveFaults:
         return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover))

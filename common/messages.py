@@ -10,6 +10,8 @@ that overflows to one (``1e999``). A payload with one parameter may also be a ba
 
 from __future__ import annotations
 
+import json
+import math
 from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
@@ -37,6 +39,7 @@ __all__ = [
     "UmbilicalState",
     "decode",
     "decode_input",
+    "read_json",
     "encode",
     "is_telemetry",
 ]
@@ -144,6 +147,8 @@ class Event(_Msg):
     key: str
     message: str
     params: dict[str, Any] | None = None
+    source_id: str = ""  # the publishing session's Zenoh id: with seq, names an event uniquely
+    seq: int = 0  # counts the events a session has published, from 1
 
 
 FaultOrigin = Literal["injected", "derived"]
@@ -234,6 +239,74 @@ def decode(payload: bytes, typ: type[T]) -> T:
     return dec.decode(payload)
 
 
+MAX_INPUT_BYTES = 65536  # an input is a few numbers; anything this large is not one
+_MAX_DEPTH = 32  # an input nests an object or two; deeper is not an input
+
+
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise BadInput(f"malformed JSON: the key {key!r} appears twice")
+        out[key] = value
+    return out
+
+
+def _no_constant(name: str) -> Any:
+    raise BadInput(f"malformed JSON: {name} is not a JSON number")
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise BadInput(f"Number out of range: {text} overflows to infinity")
+    return value
+
+
+def _depth(text: bytes) -> int:
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):  # [ {
+            depth += 1
+            deepest = max(deepest, depth)
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return deepest
+
+
+def read_json(payload: bytes) -> Any:
+    """JSON from an untrusted input, strictly: UTF-8 text (no encoded surrogates), no NaN or
+    infinity, no key twice in an object, at most ``_MAX_DEPTH`` levels deep and
+    ``MAX_INPUT_BYTES`` long. Anything else is :class:`BadInput` saying what is wrong."""
+    data = bytes(payload)
+    if len(data) > MAX_INPUT_BYTES:
+        raise BadInput(f"payload of {len(data)} bytes is too large for an input "
+                       f"(at most {MAX_INPUT_BYTES})")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise BadInput(f"not UTF-8 text: {exc.reason} at byte {exc.start}") from None
+    if _depth(data) > _MAX_DEPTH:
+        raise BadInput(f"malformed JSON: nested more than {_MAX_DEPTH} levels deep")
+    try:
+        return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant,
+                          parse_float=_finite)
+    except json.JSONDecodeError as exc:
+        raise BadInput(f"malformed JSON: {exc}") from None
+    except RecursionError:
+        raise BadInput("malformed JSON: nested too deep") from None
+
+
 def decode_input(payload: bytes, typ: type[T], *, bare: str | None = None) -> T:
     """Decode an input strictly, raising :class:`BadInput` naming the problem.
 
@@ -246,10 +319,7 @@ def decode_input(payload: bytes, typ: type[T], *, bare: str | None = None) -> T:
             return typ()
         except TypeError:
             raise BadInput("empty payload; expected a JSON object") from None
-    try:
-        raw = msgspec.json.decode(text)
-    except msgspec.DecodeError as exc:
-        raise BadInput(f"malformed JSON: {exc}") from None
+    raw = read_json(text)
     if bare is not None and not isinstance(raw, dict | list | str) and raw is not None:
         raw = {bare: raw}
     if not isinstance(raw, dict):

@@ -23,6 +23,7 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
 
 from __future__ import annotations
 
+import fcntl
 import os
 import queue
 import signal
@@ -43,9 +44,13 @@ from common.messages import BadInput, Clock, Event, EventKind, Severity, decode,
 from common.session import SessionKeeper, StateGet, StateReset, StateSet
 from common.state_store import StateStore
 
-__all__ = ["Runtime", "Sample"]
+__all__ = ["AlreadyRunning", "Runtime", "Sample"]
 
 EVENT_CACHE = 256  # recent events kept for a late joiner
+
+
+class AlreadyRunning(RuntimeError):
+    """Another instance of the service serves the same rover, or holds its state."""
 
 
 class Sample(NamedTuple):
@@ -82,17 +87,61 @@ class Runtime:
         self._keep: list[Any] = []  # subscribers, tokens, queryables
         self._faults: FaultBook | None = None
         self._session_keeper: SessionKeeper | None = None
+        self._zid = ""
+        self._lock_file: Any = None
+        self._event_seq = 0
         self.session: zenoh.Session | None = None
 
     # -- lifecycle --------------------------------------------------------------------------
 
     def __enter__(self) -> Runtime:
         self.session = zenoh.open(self._conf)
+        self._zid = str(self.session.info.zid())
         self.subscribe(keys.clock("*"), self._on_clock)
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def claim(self, wait_s: float = 3.0) -> None:
+        """Refuse to run beside another instance of this service for the same rovers.
+
+        Two instances would each tick, step and write the same keys and state files (the
+        clock ticking twice as fast, the battery drained twice). The state directory is
+        locked, and a live token ``lunaris/<rover>/service/<name>`` means another instance
+        serves that rover: :class:`AlreadyRunning` (``lunaris run`` exits with status 3). A
+        token still up after ``wait_s`` is a live instance, not the last one going away (a
+        restart right after a crash: the router drops a dead session's tokens at once).
+        """
+        if self.store.dir is not None:
+            self.store.dir.mkdir(parents=True, exist_ok=True)
+            self._lock_file = open(self.store.dir / f"{self.name}.lock", "w")  # noqa: SIM115
+            try:
+                fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise AlreadyRunning(f"another {self.name} service holds {self.store.dir}") from None
+        wanted = {keys.service(rover, self.name) for rover in self.rovers}
+        deadline = time.monotonic() + wait_s
+        while True:
+            live = {str(r.ok.key_expr) for r in self.zenoh_session.liveliness().get(
+                keys.service("*", self.name), timeout=2.0) if r.ok is not None}
+            taken = sorted(wanted & live)
+            if not taken or time.monotonic() >= deadline:
+                break
+            time.sleep(0.2)
+        if taken:
+            rovers = ", ".join(keys.split(k)[0] for k in taken)
+            raise AlreadyRunning(f"another {self.name} service already serves {rovers} "
+                                 "(its liveliness token is up)")
+
+    def watch_parent(self, pid: int) -> None:
+        """Stop when the supervisor that started this service is gone (it was killed): the
+        service must not live on as an orphan beside the next supervisor's."""
+        def check() -> None:
+            if os.getppid() != pid:
+                print(f"{self.name}: supervisor {pid} is gone; stopping", file=sys.stderr, flush=True)
+                self.stop()
+        self.every(0.5, check)
 
     @property
     def has_faults(self) -> bool:
@@ -156,6 +205,9 @@ class Runtime:
                 self._guard(hook)
 
     def close(self) -> None:
+        if self._lock_file is not None:
+            self._lock_file.close()
+            self._lock_file = None
         self._keep.clear()
         self._publishers.clear()
         if self.session is not None:
@@ -209,6 +261,13 @@ class Runtime:
             sample = args[0] if args and isinstance(args[0], Sample) else None
             if sample is not None:
                 self.reject(sample.rover, sample.key, str(exc))
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            # A payload that is not what its key carries (a foreign or forged publisher): bad
+            # input like any other, not a bug of this service.
+            sample = args[0] if args and isinstance(args[0], Sample) else None
+            if sample is None:
+                raise
+            self.reject(sample.rover, sample.key, f"not a valid payload for this key: {exc}")
         except Exception as exc:  # a bug must not take a training session down
             traceback.print_exc(file=sys.stderr)
             sample = args[0] if args and isinstance(args[0], Sample) else None
@@ -273,23 +332,29 @@ class Runtime:
             self.zenoh_session.declare_queryable(keyexpr, lambda q: self._queue.put((handler, q)))
         )
 
-    def publish(self, key: str, msg: msgspec.Struct) -> None:
-        self.publish_bytes(key, encode(msg), zenoh.Encoding.APPLICATION_JSON)
+    def publish(self, key: str, msg: msgspec.Struct, *, reliable: bool = False) -> None:
+        """Publish a payload on an advanced publisher that caches the last sample. Telemetry
+        may drop a sample under congestion (the next one replaces it); ``reliable`` blocks
+        instead, for what must never be lost (events, the faults in effect)."""
+        self.publish_bytes(key, encode(msg), zenoh.Encoding.APPLICATION_JSON, reliable=reliable)
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
-                      attachment: bytes | None = None) -> None:
+                      attachment: bytes | None = None, *, reliable: bool = False) -> None:
         """Publish an already encoded payload (CDR for the bridge), with the same last-value
         cache as :meth:`publish`."""
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._declare_publisher(key, 1, encoding)
+            pub = self._declare_publisher(key, 1, encoding, reliable)
         pub.put(payload, attachment=attachment)
 
     def _declare_publisher(self, key: str, cache: int,
-                           encoding: zenoh.Encoding = zenoh.Encoding.APPLICATION_JSON) -> Any:
+                           encoding: zenoh.Encoding = zenoh.Encoding.APPLICATION_JSON,
+                           reliable: bool = False) -> Any:
         pub = zext.declare_advanced_publisher(
             self.zenoh_session, key,
             encoding=encoding,
+            congestion_control=(zenoh.CongestionControl.BLOCK if reliable
+                                else zenoh.CongestionControl.DROP),
             cache=zext.CacheConfig(max_samples=cache),
             publisher_detection=True,
         )
@@ -300,12 +365,21 @@ class Runtime:
 
     def event(self, rover: str, severity: Severity, kind: EventKind, key: str, message: str,
               params: dict | None = None) -> None:
+        """Publish an event of a rover. Events are never dropped under congestion (the journal
+        is complete). A rover this service does not serve (a rejection of a key naming an
+        unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
         ekey = keys.event(rover)
+        self._event_seq += 1
+        ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,
+                   key=key, message=message, params=params, source_id=self._zid,
+                   seq=self._event_seq)
+        if rover not in self.rovers:
+            self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
+                                   congestion_control=zenoh.CongestionControl.BLOCK)
+            return
         if ekey not in self._publishers:
-            self._declare_publisher(ekey, EVENT_CACHE)
-        self.publish(ekey, Event(t_s=self.t_s.get(rover, 0.0), severity=severity,
-                                 source=self.name, kind=kind, key=key, message=message,
-                                 params=params))
+            self._declare_publisher(ekey, EVENT_CACHE, reliable=True)
+        self.publish(ekey, ev)
 
     def reject(self, rover: str, key: str, reason: str) -> None:
         """Refuse an input: nothing changes, and a warning event says why."""

@@ -22,7 +22,7 @@ import msgspec
 import zenoh
 
 from common import keys
-from common.connection import add_connection_args
+from common.connection import add_connection_args, write
 from common.faults import CATALOGUE, FaultKey, parse_fault_key, parse_params
 from common.messages import BadInput, Event, decode
 from lunaris.tooling import ToolError, open_session, require_rover
@@ -117,10 +117,7 @@ def send_fault(session: zenoh.Session, rover: str, key: str, payload: bytes | No
         # The router handles a client's messages in order: once this query is answered it
         # has our subscription, so the answer to the write below will reach us.
         list(session.liveliness().get(keys.service(rover, "*"), timeout=min(2.0, timeout_s)))
-        if payload is None:
-            session.delete(key)
-        else:
-            session.put(key, payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+        write(session, key, payload)
         deadline = time.monotonic() + timeout_s
         while True:
             remaining = deadline - time.monotonic()
@@ -188,7 +185,7 @@ def _list(args: argparse.Namespace) -> int:
         "waiting for the Zenoh router ...", file=sys.stderr, flush=True))
     try:
         active = _get_json(session, keys.faults(args.rover), args.timeout)
-        journal = (_get_json(session, keys.faults_journal(args.rover), args.timeout)
+        journal = (_get_json(session, f"{keys.faults_journal(args.rover)}?last={args.journal}", args.timeout)
                    if args.journal else [])
     finally:
         session.close()

@@ -4,13 +4,19 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from common.config import ConfigError, Rover, load_rover
 from common.connection import add_connection_args, config_from_args
-from common.runtime import Runtime
+from common.runtime import AlreadyRunning, Runtime
 
-__all__ = ["SERVICES", "add_arguments", "load_rovers", "main"]
+__all__ = ["ALREADY_RUNNING", "CONFIG_ERROR", "SERVICES", "SUPERVISOR_ENV", "add_arguments",
+           "load_rovers", "main"]
+
+CONFIG_ERROR = 2  # exit status: a rover file, mapping or option that cannot work (do not retry)
+ALREADY_RUNNING = 3  # exit status: another instance serves these rovers (do not retry)
+SUPERVISOR_ENV = "LUNARIS_SUPERVISOR_PID"  # set by `lunaris up`: a service dies with it
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
 
@@ -41,7 +47,7 @@ def load_rovers(paths: list[str]) -> list[Rover]:
         print(f"rover id used by more than one file: {', '.join(dup)}", file=sys.stderr)
         failed = True
     if failed:
-        raise SystemExit(2)
+        raise SystemExit(CONFIG_ERROR)
     return rovers
 
 
@@ -53,6 +59,14 @@ def main(args: argparse.Namespace) -> int:
         options["mapping_file"] = args.bridge_config
     with Runtime(args.service, [r.id for r in rovers], config_from_args(args),
                  args.state_dir) as rt:
+        try:
+            rt.claim()
+        except AlreadyRunning as exc:
+            print(f"lunaris {args.service}: not starting: {exc}", file=sys.stderr, flush=True)
+            return ALREADY_RUNNING
+        supervisor = os.environ.get(SUPERVISOR_ENV)
+        if supervisor and supervisor.isdigit():
+            rt.watch_parent(int(supervisor))
         module.serve(rt, rovers, **options)
         print(f"lunaris {args.service}: serving {', '.join(r.id for r in rovers)}", flush=True)
         rt.run()

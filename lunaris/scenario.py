@@ -29,7 +29,7 @@ import zenoh.ext as zext
 
 from common import keys
 from common.config import ConfigError, Rover, load_rover
-from common.connection import add_connection_args
+from common.connection import add_connection_args, write
 from common.messages import Event, decode
 from common.scenario import Scenario, ScenarioError, load_scenario, rover_id_of
 from common.scenario_player import Player, Write, describe_action, describe_trigger
@@ -228,7 +228,7 @@ class _Run:
                   flush=True)
 
     def _put(self, key: str, body: dict) -> None:
-        self.session.put(key, json.dumps(body), encoding=zenoh.Encoding.APPLICATION_JSON)
+        write(self.session, key, json.dumps(body))
 
     def _play(self) -> int:
         player = self.player
@@ -276,10 +276,7 @@ class _Run:
             elif before[i] == "ramping" and r.status == "done":
                 self.say(f"step {i + 1} {r.label!r}: ramp complete")
         for w in writes:
-            if w.payload is None:
-                self.session.delete(w.key)
-            else:
-                self.session.put(w.key, w.payload, encoding=zenoh.Encoding.APPLICATION_JSON)
+            write(self.session, w.key, w.payload)
             if self.scenario.steps[w.step].clock is not None:
                 self.clock_changed = True
             if w.final:
@@ -368,7 +365,7 @@ class _Run:
         if not self.injected:
             return
         for key in list(self.injected):
-            self.session.delete(key)
+            write(self.session, key, None)
             self.pending.append(_Pending(Write(key, None, self.injected[key], "fault_cleared"),
                                          time.monotonic() + self.args.timeout))
         print(f"clearing {len(self.injected)} fault(s) the scenario injected", flush=True)

@@ -9,6 +9,7 @@ status line per rover is shown; Ctrl-C stops everything.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import os
 import shutil
 import signal
@@ -24,11 +25,12 @@ import zenoh
 from common import keys
 from common.connection import DEFAULT_ENDPOINT, make_config
 from common.messages import BatteryState, RailState, decode
-from lunaris.run import SERVICES, load_rovers
+from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV, load_rovers
 
 __all__ = ["Supervisor", "add_arguments", "main"]
 
 DEFAULT_ROVER = "config/rovers/mapp.yaml"
+PR_SET_PDEATHSIG = 1  # prctl(2)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,6 +46,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-status", action="store_true", help="no live status display")
 
 
+def _die_with_parent() -> None:
+    """In the child, before exec: the kernel sends SIGTERM when the supervisor dies, even by
+    kill -9, so no service outlives it (Linux; elsewhere the service watches its parent)."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass  # not Linux: the service's own watch of its parent pid stops it
+
+
 class Supervisor:
     """Starts the services and restarts any that exit while it runs."""
 
@@ -56,6 +68,7 @@ class Supervisor:
         self.seed = seed
         self.procs: dict[str, subprocess.Popen] = {}
         self.restarts: dict[str, int] = dict.fromkeys(services, 0)
+        self.failed: dict[str, str] = {}  # service -> why it is not restarted
         self._next_start: dict[str, float] = {}
 
     def command(self, service: str) -> list[str]:
@@ -67,23 +80,48 @@ class Supervisor:
             cmd += ["--seed", str(self.seed)]
         return cmd
 
+    def log_path(self, service: str) -> Path:
+        return self.state_dir / "logs" / f"{service}.log"
+
     def start(self, service: str) -> None:
-        # The service's own banner would scroll the status lines away; errors still show.
-        proc = subprocess.Popen(self.command(service), stdin=subprocess.DEVNULL,
-                                stdout=subprocess.DEVNULL, start_new_session=True)
+        # What a service says goes to its log (a banner would scroll the status lines away);
+        # when it exits, the end of its log is shown.
+        log = self.log_path(service)
+        log.parent.mkdir(parents=True, exist_ok=True)
+        env = {**os.environ, SUPERVISOR_ENV: str(os.getpid())}
+        with log.open("ab") as out:
+            proc = subprocess.Popen(self.command(service), stdin=subprocess.DEVNULL, stdout=out,
+                                    stderr=subprocess.STDOUT, env=env, start_new_session=True,
+                                    preexec_fn=_die_with_parent)
         self.procs[service] = proc
         print(f"[up] {service} started (pid {proc.pid})", flush=True)
+
+    def _tail(self, service: str, lines: int = 8) -> str:
+        try:
+            text = self.log_path(service).read_text(errors="replace")
+        except OSError:
+            return ""
+        return "\n".join(f"      {line}" for line in text.strip().splitlines()[-lines:])
 
     def start_all(self) -> None:
         for service in self.services:
             self.start(service)
 
     def poll(self) -> None:
-        """Restart the services that have exited, backing off when one keeps failing."""
+        """Restart the services that have exited, backing off when one keeps failing. A
+        service that cannot work as configured (exit 2) or finds another instance already
+        serving its rovers (exit 3) is not restarted: it is shown as failed, with its error,
+        once."""
         now = time.monotonic()
         for service, proc in list(self.procs.items()):
             code = proc.poll()
-            if code is None:
+            if code is None or service in self.failed:
+                continue
+            if code in (CONFIG_ERROR, ALREADY_RUNNING):
+                why = "configuration error" if code == CONFIG_ERROR else "already running"
+                self.failed[service] = why
+                print(f"[up] {service} (pid {proc.pid}) FAILED ({why}, exit {code}); not "
+                      f"restarting it. It said:\n{self._tail(service)}", flush=True)
                 continue
             due = self._next_start.get(service)
             if due is None:
@@ -91,7 +129,7 @@ class Supervisor:
                 delay = min(5.0, 0.2 * 2 ** min(self.restarts[service] - 1, 5))
                 self._next_start[service] = now + delay
                 print(f"[up] {service} (pid {proc.pid}) exited with {code}; "
-                      f"restarting in {delay:.1f} s", flush=True)
+                      f"restarting in {delay:.1f} s\n{self._tail(service, 4)}", flush=True)
             elif now >= due:
                 del self._next_start[service]
                 self.start(service)
@@ -137,13 +175,15 @@ class _Status:
         live = self.services.setdefault(rover, set())
         (live.add if s.kind == zenoh.SampleKind.PUT else live.discard)(parts[-1])
 
-    def lines(self, expected: int) -> list[str]:
+    def lines(self, expected: int, failed: dict[str, str] | None = None) -> list[str]:
         out = []
+        failing = (" FAILED: " + ", ".join(f"{s} ({why})" for s, why in sorted(failed.items()))
+                   if failed else "")
         for rover in self.rails:
             b = self.battery.get(rover)
             rails = self.rails[rover]
             on = sum(1 for s in rails.values() if s == "on")
-            svc = f"services {len(self.services.get(rover, ()))}/{expected}"
+            svc = f"services {len(self.services.get(rover, ()))}/{expected}{failing}"
             if b is None:
                 out.append(f"{rover:<12} waiting for the battery ...  {svc}")
                 continue
@@ -191,14 +231,14 @@ def main(args: argparse.Namespace) -> int:
             if args.no_status:
                 continue
             if tty and now - last_print >= 1.0:
-                lines = status.lines(len(services))
+                lines = status.lines(len(services), sup.failed)
                 if shown:
                     sys.stdout.write(f"\x1b[{shown}F")
                 sys.stdout.write("".join(f"\x1b[2K{line}\n" for line in lines))
                 sys.stdout.flush()
                 shown, last_print = len(lines), now
             elif not tty and now - last_print >= 10.0:
-                print("\n".join(status.lines(len(services))), flush=True)
+                print("\n".join(status.lines(len(services), sup.failed)), flush=True)
                 last_print = now
     finally:
         print("[up] stopping ...", flush=True)

@@ -27,6 +27,7 @@ import zenoh
 
 from common import keys
 from common.config import ConfigError, Rover
+from common.connection import write
 from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
 from services.bridge.bindings import Binding, expand, rover_names
@@ -243,7 +244,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         except BadInput as exc:
             rt.reject(b.rover, key, str(exc))
             return
-        rt.zenoh_session.put(b.key, msgspec.json.encode(value), encoding=JSON)
+        write(rt.zenoh_session, b.key, msgspec.json.encode(value))
 
     def listen(b: Binding, flavour: str, keyexpr: str) -> None:
         def on_sample(s: zenoh.Sample) -> None:

@@ -1,6 +1,8 @@
 """Faults service: the session's journal, ``get lunaris/<rover>/faults``, and the gatekeeper.
 
-- **The journal**: every event of the rover, answered to ``get lunaris/<rover>/faults/journal``.
+- **The journal**: every event of the rover, kept on disk for the whole session (a flood of
+  rejections is summarised, and the summary says so), answered to
+  ``get lunaris/<rover>/faults/journal`` (``?last=N`` for the latest N).
 - **The faults in effect**: ``get lunaris/<rover>/faults`` is answered by asking each owning
   service for its own record (``lunaris/<rover>/faults/active/<service>``, see
   ``common.fault_book``) at the time of the query and merging the answers. A fault whose
@@ -18,6 +20,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import msgspec
 import zenoh
@@ -28,7 +31,7 @@ from common.faults import check_component
 from common.messages import ActiveFault, ActiveFaults, BadInput, Event, SnapshotInfo, decode
 from common.runtime import Runtime, Sample
 from common.session import parse_control
-from services.faults.model import Journal
+from services.faults.journal import Journal
 
 __all__ = ["serve"]
 
@@ -44,7 +47,9 @@ SESSION_MESSAGES = {
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    journals = {r.id: Journal() for r in rovers}
+    folder = rt.store.dir
+    journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None)
+                for r in rovers}
     live_rovers: set[str] = set()
     session = rt.session
     assert session is not None
@@ -58,7 +63,11 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         keys.service("*", "*"), on_token, history=True))
 
     def on_event(s: Sample) -> None:
-        journals[s.rover].record(decode(s.payload, Event))
+        journals[s.rover].record(decode(s.payload, Event), time.monotonic())
+
+    def end_floods(force: bool = False) -> None:
+        for journal in journals.values():
+            journal.tick(time.monotonic() if not force else float("inf"))
 
     def on_instructor_key(s: Sample) -> None:
         if s.rover not in rt.rovers and s.rover not in live_rovers:
@@ -115,10 +124,18 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     def on_journal_query(q: zenoh.Query) -> None:
         with q:
+            last = q.parameters.get("last")
+            if last is not None and not last.isdigit():
+                q.reply_err(f"last={last!r}: give a whole number of events")
+                return
             for rover, journal in journals.items():
                 key = keys.faults_journal(rover)
                 if zenoh.KeyExpr(key).intersects(q.key_expr):
-                    q.reply(key, msgspec.json.encode(list(journal.events)))
+                    lines = journal.lines()
+                    if last is not None:
+                        lines = lines[-int(last):] if int(last) else []
+                    q.reply(key, b"[" + b",".join(lines) + b"]",
+                            encoding=zenoh.Encoding.APPLICATION_JSON)
 
     def on_faults_query(q: zenoh.Query) -> None:
         # Answered on Zenoh's thread: the owners are asked at once, and the query is
@@ -153,6 +170,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     timeout=GATHER_TIMEOUT_S)
 
     rt.subscribe(keys.event("*"), on_event, history=True)
+    rt.every(1.0, end_floods)
+    rt.on_exit(lambda: end_floods(force=True))
     for head in WRITABLE:
         rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))

@@ -1,0 +1,81 @@
+"""The journal of a rover's session on disk: every event, in order, bounded only by the disk.
+
+One JSON line per event in ``<state-dir>/faults-journal-<rover>.jsonl``, appended as events
+come and read back when the faults service restarts, so the whole session's history
+survives restarts of any service. A flood of rejections is summarised
+(:class:`~services.faults.model.FloodGate`). Events replayed from the publishers' caches
+after a restart are recognised and not written twice. Without a state directory the
+journal is kept in memory for the life of the service.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import msgspec
+
+from common.messages import Event
+from services.faults.model import FloodGate
+
+__all__ = ["Journal"]
+
+_RECENT = 4096  # identities of the latest events, to recognise a replayed cache
+
+
+def _identity(ev: Event) -> tuple:
+    return (ev.source_id, ev.seq) if ev.source_id else (ev.t_s, ev.source, ev.kind, ev.key, ev.message)
+
+
+class Journal:
+    def __init__(self, path: Path | None = None, gate: FloodGate | None = None):
+        self.path = path
+        self.gate = gate or FloodGate()
+        self._memory: list[bytes] = []
+        self._recent: deque[tuple] = deque(maxlen=_RECENT)
+        self._recent_set: set[tuple] = set()
+        self.count = 0
+        self.summarised = 0
+        if path is not None and path.is_file():
+            for line in path.read_bytes().splitlines():
+                self._note(msgspec.json.decode(line, type=Event))
+
+    def _note(self, ev: Event) -> None:
+        ident = _identity(ev)
+        if len(self._recent) == self._recent.maxlen:
+            self._recent_set.discard(self._recent[0])
+        self._recent.append(ident)
+        self._recent_set.add(ident)
+        self.count += 1
+        self.summarised += int((ev.params or {}).get("summarised", 0)) if ev.kind == "rejected" else 0
+
+    def record(self, ev: Event, now_s: float) -> None:
+        """Journal ``ev``, received at wall time ``now_s``, unless it is already in."""
+        if ev.source_id and _identity(ev) in self._recent_set:
+            return  # replayed from a cache after a restart
+        self._write(self.gate.offer(ev, now_s))
+
+    def tick(self, now_s: float) -> None:
+        """Write the summary of a flood that has ended."""
+        self._write(self.gate.flush(now_s))
+
+    def _write(self, events: list[Event]) -> None:
+        if not events:
+            return
+        lines = [msgspec.json.encode(ev) for ev in events]
+        for ev in events:
+            self._note(ev)
+        if self.path is None:
+            self._memory.extend(lines)
+            return
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("ab") as f:
+            f.write(b"".join(line + b"\n" for line in lines))
+
+    def lines(self) -> list[bytes]:
+        """Every journalled event as its JSON text, oldest first."""
+        if self.path is None:
+            return list(self._memory)
+        if not self.path.is_file():
+            return []
+        return self.path.read_bytes().splitlines()
