@@ -98,7 +98,26 @@ class Runtime:
         self.session = zenoh.open(self._conf)
         self._zid = str(self.session.info.zid())
         self.subscribe(keys.clock("*"), self._on_clock)
+        self._learn_time()
         return self
+
+    def _learn_time(self, wait_s: float = 0.5) -> None:
+        """Start at the running clock's time, so that what the service publishes before its
+        first tick is handled does not carry a time older than the twin's (a restart)."""
+        seen: dict[str, float] = {}
+        done = threading.Event()
+
+        def on_tick(s: zenoh.Sample) -> None:
+            rover, _ = keys.split(str(s.key_expr))
+            if rover in self.rovers and rover not in seen:
+                seen[rover] = decode(s.payload.to_bytes(), Clock).t_s
+                if len(seen) == len(self.rovers):
+                    done.set()
+
+        sub = self.zenoh_session.declare_subscriber(keys.clock("*"), on_tick)
+        done.wait(wait_s)  # a running clock ticks every 0.1 s; none at all: a fresh twin
+        sub.undeclare()
+        self.t_s.update(seen)
 
     def __exit__(self, *exc: object) -> None:
         self.close()

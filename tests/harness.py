@@ -126,6 +126,7 @@ class Probe:
     """A test's own client session: watch keys, put, delete, get; wait on conditions."""
 
     def __init__(self, endpoint: str):
+        self.endpoint = endpoint
         self.session = zenoh.open(make_config("client", connect=[endpoint]))
         self.latest: dict[str, Any] = {}
         self.history: dict[str, list[Any]] = {}

@@ -57,7 +57,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     def set_state(rover: str, state: dict[str, Any]) -> None:
         packs[rover].set_state(state)
-        stepped_t[rover] = rt.t_s[rover] = float(state.get("t_s", 0.0))
+        stepped_t[rover] = float(state.get("t_s", 0.0))
 
     def reset(rover: str) -> None:
         packs[rover] = BatteryModel(config[rover])
@@ -69,4 +69,5 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S)
     rt.faults.restore()
     for rover in packs:
-        publish(rover)
+        if stepped_t[rover] == 0.0:  # a fresh start; after a restart the first tick publishes,
+            publish(rover)           # with its own time, never the older saved one

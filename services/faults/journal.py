@@ -34,6 +34,7 @@ class Journal:
         self._memory: list[bytes] = []
         self._recent: deque[tuple] = deque(maxlen=_RECENT)
         self._recent_set: set[tuple] = set()
+        self._spans: dict[str, list[tuple[int, int]]] = {}  # summarised seqs per source
         self.count = 0
         self.summarised = 0
         if path is not None and path.is_file():
@@ -41,18 +42,33 @@ class Journal:
                 self._note(msgspec.json.decode(line, type=Event))
 
     def _note(self, ev: Event) -> None:
-        ident = _identity(ev)
+        self._remember(_identity(ev))
+        self.count += 1
+        params = ev.params or {}
+        if ev.kind == "rejected" and "summarised" in params:
+            self.summarised += int(params["summarised"])
+            for source_id, (lo, hi) in (params.get("seq") or {}).items():
+                self._spans.setdefault(source_id, []).append((int(lo), int(hi)))
+
+    def _remember(self, ident: tuple) -> None:
         if len(self._recent) == self._recent.maxlen:
             self._recent_set.discard(self._recent[0])
         self._recent.append(ident)
         self._recent_set.add(ident)
-        self.count += 1
-        self.summarised += int((ev.params or {}).get("summarised", 0)) if ev.kind == "rejected" else 0
+
+    def _known(self, ev: Event) -> bool:
+        """Already journalled, one by one or in a summary (a cache replayed after a restart)."""
+        if not ev.source_id:
+            return False
+        if _identity(ev) in self._recent_set:
+            return True
+        return any(lo <= ev.seq <= hi for lo, hi in self._spans.get(ev.source_id, ()))
 
     def record(self, ev: Event, now_s: float) -> None:
         """Journal ``ev``, received at wall time ``now_s``, unless it is already in."""
-        if ev.source_id and _identity(ev) in self._recent_set:
+        if self._known(ev):
             return  # replayed from a cache after a restart
+        self._remember(_identity(ev))  # written now, or counted into a summary to come
         self._write(self.gate.offer(ev, now_s))
 
     def tick(self, now_s: float) -> None:

@@ -46,11 +46,15 @@ class FloodGate:
             return []
         first, last = self._held[0], self._held[-1]
         top = ", ".join(f"{k} x{n}" for k, n in self._keys.most_common(3))
+        spans: dict[str, list[int]] = {}  # source_id -> [first seq, last seq] summarised
+        for ev in self._held:
+            span = spans.setdefault(ev.source_id, [ev.seq, ev.seq])
+            span[0], span[1] = min(span[0], ev.seq), max(span[1], ev.seq)
         summary = Event(
             t_s=last.t_s, severity="warning", source=first.source, kind="rejected", key=last.key,
             message=f"{len(self._held)} more rejections summarised (sim t {first.t_s:.1f} to "
                     f"{last.t_s:.1f} s; {top}); the last: {last.message}",
             params={"summarised": len(self._held), "from_t_s": first.t_s, "to_t_s": last.t_s,
-                    "keys": dict(self._keys.most_common(10))})
+                    "keys": dict(self._keys.most_common(10)), "seq": spans})
         self._held, self._keys = [], Counter()
         return [summary]

@@ -170,10 +170,20 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     timeout=GATHER_TIMEOUT_S)
 
     rt.subscribe(keys.event("*"), on_event, history=True)
+    for rover, journal in journals.items():
+        if journal.count == 0:  # a new session: its first line
+            rt.event(rover, "info", "session", keys.faults_journal(rover),
+                     f"journal opened: the session of {rover} begins")
     rt.every(1.0, end_floods)
     rt.on_exit(lambda: end_floods(force=True))
+    def on_one_chunk(s: Sample) -> None:
+        if s.parts[0] in ("clock", "event") or any(h.startswith(s.parts[0] + "/") for h in WRITABLE):
+            return  # telemetry (its writer is the router's to check), or answered above
+        on_instructor_key(s)
+
     for head in WRITABLE:
         rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
+    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True)
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
     rt.queryable(keys.snapshots("*"), on_snapshots_query)

@@ -1,0 +1,69 @@
+"""What the reliability suite shares: a whole twin, process sizes, kill -9 and restart.
+
+Every test here is bounded in count and time, runs on loopback only, and stops what it
+starts, pass or fail (the fixtures of ``tests/conftest.py``).
+"""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from tests.harness import ALL_SERVICES, ROVERS, Probe, Twin, wait_for
+
+R = "mapp-1"
+MAPP = ROVERS / "mapp.yaml"
+WITH_BRIDGE = (*ALL_SERVICES, "bridge")
+
+
+def rss_kib(pid: int) -> int:
+    """Resident set size of a process [KiB], from /proc."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    raise AssertionError(f"no VmRSS for pid {pid}")
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(") ", 1)[1][0]
+    except (FileNotFoundError, IndexError):
+        return False
+    return state != "Z"
+
+
+def kill9(twin: Twin, service: str) -> None:
+    proc = twin.procs[service]
+    proc.kill()
+    proc.wait(10)
+
+
+def restart(twin: Twin, probe: Probe, service: str, rover: str = R) -> subprocess.Popen:
+    """kill -9 a service, start it again, wait for its token."""
+    kill9(twin, service)
+    proc = twin.start(service)
+    probe.wait_services(rover, (service,))
+    return proc
+
+
+@pytest.fixture
+def whole_twin(twin_factory, probe_solo):
+    """(probe, twin): every service of mapp-1, bridge included, the probe watching every key."""
+    probe_solo.watch("lunaris/**")
+    twin = twin_factory([MAPP], services=WITH_BRIDGE)
+    probe_solo.wait_services(R, WITH_BRIDGE)
+    probe_solo.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
+    return probe_solo, twin
+
+
+def events(p: Probe, kind: str | None = None, key: str | None = None) -> list[dict]:
+    return [e for e in p.samples(keys.event(R))
+            if (kind is None or e["kind"] == kind) and (key is None or e["key"] == key)]
+
+
+def wait_events(p: Probe, n: int, kind: str, key: str | None = None, timeout_s: float = 30.0) -> None:
+    wait_for(lambda: len(events(p, kind, key)) >= n, timeout_s,
+             lambda: f"{n} {kind} events (have {len(events(p, kind, key))})", poll_s=0.05)

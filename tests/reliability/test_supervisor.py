@@ -1,0 +1,150 @@
+"""Nothing doubled: services die with their supervisor, and never run twice for a rover.
+
+Found by killing `lunaris up` with kill -9: its services lived on (their own session,
+retrying forever), and the next `lunaris up` on the same port ran two of each - the
+clock ticking 20 times a second, the battery drained twice.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from lunaris.up import Supervisor
+from tests.harness import ALL_SERVICES, ROOT, Probe, free_endpoint, lunaris_cmd, wait_for
+from tests.reliability.conftest import MAPP, R, alive
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().split(") ", 1)[1].split()
+        except (FileNotFoundError, IndexError):
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def start_up(endpoint: str, state_dir: Path) -> subprocess.Popen:
+    return subprocess.Popen(
+        lunaris_cmd("up", "--rover", str(MAPP), "--listen", endpoint, "--state-dir", str(state_dir),
+                    "--services", ",".join(ALL_SERVICES), "--no-status"),
+        cwd=ROOT, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True)
+
+
+def tick_rate(p: Probe, seconds: float = 2.0) -> float:
+    """Clock samples per second of wall time on mapp-1's clock key."""
+    key = keys.clock(R)
+    before = len(p.samples(key))
+    time.sleep(seconds)  # a measurement window, not a synchronisation
+    return (len(p.samples(key)) - before) / seconds
+
+
+def test_kill_9_of_up_leaves_no_orphan_and_the_next_up_runs_one_of_each(tmp_path):
+    endpoint = free_endpoint()
+    first = start_up(endpoint, tmp_path / "state")
+    second = None
+    try:
+        with Probe(endpoint) as p:  # connects once the up's router is there
+            p.watch(keys.clock(R))
+            p.wait_services(R, ALL_SERVICES, timeout_s=60)
+            services = children(first.pid)
+            assert len(services) == len(ALL_SERVICES), services
+            first.send_signal(signal.SIGKILL)
+            first.wait(10)
+            wait_for(lambda: not any(alive(pid) for pid in services), 10,
+                     lambda: f"the services of the killed up to stop: "
+                             f"{[pid for pid in services if alive(pid)]}")
+        second = start_up(endpoint, tmp_path / "state")
+        with Probe(endpoint) as p:
+            p.watch(keys.clock(R))
+            p.wait_services(R, ALL_SERVICES, timeout_s=60)
+            p.wait_value(keys.clock(R))
+            assert 8.0 <= tick_rate(p) <= 12.0  # one clock, not two
+    finally:
+        for proc in (first, second):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(20)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+
+
+def test_a_second_instance_of_a_service_refuses_to_start(twin_factory, probe_solo, tmp_path):
+    twin_factory([MAPP], services=("clock",))
+    probe_solo.watch(keys.clock(R))
+    probe_solo.wait_services(R, ("clock",))
+    out = subprocess.run(
+        lunaris_cmd("run", "clock", "--rover", str(MAPP), "--connect", probe_solo.endpoint,
+                    "--state-dir", str(tmp_path / "other")),
+        cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 3, out.stderr
+    assert "another clock service already serves mapp-1" in out.stderr
+    assert 8.0 <= tick_rate(probe_solo) <= 12.0
+
+
+def test_two_instances_on_one_state_directory_are_refused(twin_factory, probe_solo):
+    twin = twin_factory([MAPP], services=("clock",))
+    probe_solo.wait_services(R, ("clock",))
+    out = subprocess.run(
+        lunaris_cmd("run", "clock", "--rover", str(MAPP), "--connect", probe_solo.endpoint,
+                    "--state-dir", str(twin.state_dir)),
+        cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 3 and f"holds {twin.state_dir}" in out.stderr, out.stderr
+
+
+class _Exits(Supervisor):
+    """A supervisor whose every service exits at once with a given status."""
+
+    def __init__(self, code: int, tmp: Path):
+        super().__init__(["bridge"], [], "tcp/127.0.0.1:1", tmp, None)
+        self.code = code
+
+    def command(self, service: str) -> list[str]:
+        return [sys.executable, "-c", f"import sys; print('mapping problem'); sys.exit({self.code})"]
+
+
+@pytest.mark.parametrize("code, restarted", [(2, False), (3, False), (1, True)])
+def test_a_service_that_cannot_work_is_shown_failed_not_restarted(tmp_path, capsys, code, restarted):
+    sup = _Exits(code, tmp_path)
+    sup.start_all()
+    first = sup.procs["bridge"]
+    first.wait(10)
+    deadline = time.monotonic() + 3.0
+    while time.monotonic() < deadline and sup.procs["bridge"] is first:
+        sup.poll()
+        time.sleep(0.05)  # the supervisor's own poll period
+    out = capsys.readouterr().out
+    assert (sup.procs["bridge"] is not first) == restarted
+    assert ("bridge" in sup.failed) == (not restarted)
+    if not restarted:
+        assert "FAILED" in out and "mapping problem" in out
+    sup.stop_all()
+
+
+def test_a_service_stops_when_its_supervisor_is_gone(router, tmp_path):
+    """Belt and braces beside the kernel's parent-death signal: the service's own watch."""
+    env = {**os.environ, "LUNARIS_SUPERVISOR_PID": "1"}  # a parent it does not have
+    proc = subprocess.Popen(lunaris_cmd("run", "clock", "--rover", str(MAPP), "--connect", router,
+                                        "--state-dir", str(tmp_path)),
+                            cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+    try:
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0 and "supervisor 1 is gone" in out
