@@ -54,6 +54,7 @@ def make_config(
         if not path.is_file():
             raise ConnectionConfigError(f"Zenoh configuration {str(path)!r} does not exist")
         conf = zenoh.Config.from_file(str(path))
+        _refuse_demo_password(conf, path)
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
@@ -79,6 +80,21 @@ def make_config(
 
 def config_from_args(args: argparse.Namespace, mode: str = "client") -> zenoh.Config:
     return make_config(mode, connect=args.connect, listen=args.listen, config_file=args.config)
+
+
+DEMO_MARK = "CHANGE-ME"
+
+
+def _refuse_demo_password(conf: zenoh.Config, path: Path) -> None:
+    """A shipped demo password is public: a client configuration holding one is refused."""
+    try:
+        password = json.loads(conf.get_json("transport/auth/usrpwd/password"))
+    except (zenoh.ZError, ValueError):
+        return
+    if isinstance(password, str) and DEMO_MARK in password:
+        raise ConnectionConfigError(
+            f"{path} holds a shipped demo password: make the deployment's secrets with "
+            "`lunaris deploy secrets DIR` and use its client configurations")
 
 
 def write(session: zenoh.Session, key: str, payload: bytes | str | None) -> None:

@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record": ("lunaris.record", "record every lunaris key to an MCAP file"),
     "report": ("lunaris.report", "draw a recorded session for the debrief"),
     "scenario": ("lunaris.scenario", "play a scripted training scenario"),
+    "deploy": ("lunaris.deploy", "a deployment's router access control, secrets and their check"),
 }
 
 

@@ -2,11 +2,13 @@
 
 No Docker engine runs here (SPEC §11), so the router's configuration is exercised by an
 embedded Zenoh router (a Python session in router mode) that reads the same JSON5 file,
-in a subprocess, on a free port of 127.0.0.1.
+in a subprocess, on a free port of 127.0.0.1, over TLS, with the secrets that
+``lunaris deploy secrets`` makes (a fresh set per test module, never the repository's).
 """
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import select
@@ -27,7 +29,6 @@ import zenoh
 REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
 ROUTER_CONFIG = DEPLOY / "zenohd.json5"
-CREDENTIALS = DEPLOY / "credentials.txt"
 
 READY_TIMEOUT_S = 20.0
 
@@ -58,7 +59,14 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def read_credentials(path: Path = CREDENTIALS) -> dict[str, str]:
+def make_test_secrets(folder: Path) -> Path:
+    """A deployment's secrets for a router on 127.0.0.1 (TLS certificate included)."""
+    from lunaris.deploy import make_secrets
+    make_secrets(folder, ["localhost", "127.0.0.1"], "tls/127.0.0.1:7447")
+    return folder
+
+
+def read_credentials(path: Path) -> dict[str, str]:
     """The ``user:password`` dictionary zenohd reads (the password may contain ':')."""
     users = {}
     for line in path.read_text().splitlines():
@@ -93,9 +101,11 @@ def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> None:
 class Router:
     """A running router subprocess and the client configurations that reach it."""
 
-    def __init__(self, port: int):
+    def __init__(self, port: int, secrets: Path):
         self.port = port
-        self.endpoint = f"tcp/127.0.0.1:{port}"
+        self.secrets = secrets
+        self.endpoint = f"tls/127.0.0.1:{port}"
+        self.credentials = read_credentials(secrets / "credentials.txt")
         self._sessions: list[zenoh.Session] = []
 
     def client_config(
@@ -112,6 +122,10 @@ class Router:
         refuses the session, instead of retrying.
         """
         conf = zenoh.Config.from_file(str(base)) if base else zenoh.Config()
+        if base is None:  # the deployment's CA, so that TLS works
+            ca = (self.secrets / "tls" / "ca.crt").read_text()
+            conf.insert_json5("transport/link/tls/root_ca_certificate_base64",
+                              json.dumps(base64.b64encode(ca.encode()).decode()))
         conf.insert_json5("mode", '"client"')
         conf.insert_json5("connect/endpoints", json.dumps([self.endpoint]))
         conf.insert_json5("listen/endpoints", "[]")
@@ -126,8 +140,8 @@ class Router:
         return conf
 
     def open(self, user: str) -> zenoh.Session:
-        """A session authenticated as ``user`` with its password from credentials.txt."""
-        session = zenoh.open(self.client_config(user, read_credentials()[user]))
+        """A session authenticated as ``user``, from its generated client configuration."""
+        session = zenoh.open(self.client_config(base=self.secrets / f"client-{user}.json5"))
         self._sessions.append(session)
         return session
 
@@ -137,13 +151,15 @@ class Router:
 
 
 @contextmanager
-def running_router(overrides: dict[str, Any] | None = None,
+def running_router(secrets: Path, overrides: dict[str, Any] | None = None,
                    config: Path = ROUTER_CONFIG) -> Iterator[Router]:
-    """deploy/zenohd.json5 served on a free loopback port, its dictionary path made absolute."""
+    """deploy/zenohd.json5 served over TLS on a free loopback port, with ``secrets``."""
     port = free_port()
     settings = {
-        "listen/endpoints": [f"tcp/127.0.0.1:{port}"],
-        "transport/auth/usrpwd/dictionary_file": str(CREDENTIALS),
+        "listen/endpoints": [f"tls/127.0.0.1:{port}"],
+        "transport/auth/usrpwd/dictionary_file": str(secrets / "credentials.txt"),
+        "transport/link/tls/listen_certificate": str(secrets / "tls" / "router.crt"),
+        "transport/link/tls/listen_private_key": str(secrets / "tls" / "router.key"),
         "scouting/multicast/enabled": False,
         **(overrides or {}),
     }
@@ -154,7 +170,7 @@ def running_router(overrides: dict[str, Any] | None = None,
         )
         try:
             _wait_ready(proc, stderr)
-            yield Router(port)
+            yield Router(port, secrets)
         finally:
             stop_process(proc)
             proc.stdout.close()
@@ -177,8 +193,13 @@ def _wait_ready(proc: subprocess.Popen, stderr) -> None:
 
 
 @pytest.fixture(scope="module")
-def router_process() -> Iterator[Router]:
-    with running_router() as router:
+def secrets(tmp_path_factory) -> Path:
+    return make_test_secrets(tmp_path_factory.mktemp("secrets"))
+
+
+@pytest.fixture(scope="module")
+def router_process(secrets: Path) -> Iterator[Router]:
+    with running_router(secrets) as router:
         yield router
 
 
@@ -208,9 +229,9 @@ class Collector:
             return list(self._items)
 
 
-def service_env() -> dict[str, str]:
-    """Environment of a Lunaris service subprocess using the shipped service identity."""
+def service_env(secrets: Path, service: str) -> dict[str, str]:
+    """Environment of a Lunaris service subprocess with its own identity, as a container."""
     env = dict(os.environ)
-    env["LUNARIS_ZENOH_CONFIG"] = str(DEPLOY / "client-service.json5")
+    env["LUNARIS_ZENOH_CONFIG"] = str(secrets / f"client-lunaris-{service}.json5")
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
     return env

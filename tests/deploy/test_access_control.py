@@ -1,10 +1,10 @@
-"""The router's roles (SPEC §9), exercised on deploy/zenohd.json5 itself.
+"""The router's roles (SPEC §9), exercised on deploy/zenohd.json5 itself, over TLS.
 
-Every "not received" check has a positive control: after the denied operation an
-allowed one goes the same way, and the test waits for the allowed one before it
-asserts that the denied one never arrived. A round trip of the denied client to the
-router (a query) sits in between, so the router has dealt with the denied message
-before the allowed one is even sent.
+Every "not received" check has a positive control: after the denied operations an allowed
+one goes the same way, and the test waits for the allowed one before it asserts that the
+denied ones never arrived. A round trip of the denied client to the router (a query) sits
+in between, so the router has dealt with the denied message before the allowed one is
+even sent.
 """
 
 from __future__ import annotations
@@ -17,12 +17,15 @@ import pytest
 import zenoh
 import zenoh.ext as zext
 
+from common import keys
+from lunaris.deploy import IDENTITIES, SERVICES, render_router_config
+from services.bridge.mapping import load_mapping
+from services.bridge.service import DEFAULT_MAPPING
 from tests.deploy.conftest import (
     DEPLOY,
     REPO,
     Collector,
     Router,
-    read_credentials,
     running_router,
     service_env,
     stop_process,
@@ -30,73 +33,113 @@ from tests.deploy.conftest import (
 )
 
 ROVER = "mapp-1"
-INSTRUCTOR_KEYS = [
-    f"lunaris/{ROVER}/fault/battery/heating",
-    f"lunaris/{ROVER}/cmd/rail/12V",
-    f"lunaris/{ROVER}/input/sun_angle",
-    f"lunaris/{ROVER}/clock/control",
-]
+INSTRUCTOR_KEYS = [keys.fault(ROVER, "battery", "heating"), keys.cmd_rail(ROVER, "12V"),
+                   keys.input_sun_angle(ROVER), keys.clock_control(ROVER),
+                   keys.control_reset(ROVER)]
+# One key of every family a service publishes, and its owner.
+OWNED = [(f.pattern(ROVER).replace("*", "x"), f.owner) for f in keys.FAMILIES
+         if f.direction == "out" and f.owner != "*"]
+OWNED += [(keys.faults_active(ROVER, s), s) for s in ("battery", "loads")]
 
 
 def _barrier(session: zenoh.Session) -> None:
     """Return once the router has handled everything ``session`` sent before."""
-    list(session.get(f"lunaris/{ROVER}/faults", timeout=5.0))
+    list(session.liveliness().get(keys.service(ROVER, "*"), timeout=5.0))
 
 
 def _received(collector: Collector) -> list[tuple[str, bytes]]:
     return [(str(s.kind), s.payload.to_bytes()) for s in collector.items]
 
 
-def _get(conf: zenoh.Config, path: str):
-    return json.loads(conf.get_json(path))
-
-
 def _wait_subscribed(publisher: zenoh.Publisher, what: str) -> None:
     wait_for(lambda: publisher.matching_status.matching, what)
+
+
+def test_the_committed_router_configuration_is_generated_from_the_code() -> None:
+    assert (DEPLOY / "zenohd.json5").read_text() == render_router_config(load_mapping(DEFAULT_MAPPING))
 
 
 # -- writing ---------------------------------------------------------------------------------
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("intruder", ["observer", "dashboard"])
-@pytest.mark.parametrize("key", INSTRUCTOR_KEYS)
-def test_only_an_instructor_writes_faults_commands_inputs_and_time(
-        router: Router, key: str, intruder: str) -> None:
-    service = router.open("lunaris-service")
+@pytest.mark.parametrize("intruder", ["observer", "dashboard", "debrief", "lunaris-battery"])
+def test_only_an_instructor_writes_faults_commands_inputs_time_and_sessions(
+        router: Router, intruder: str) -> None:
+    service = router.open("lunaris-faults")
     denied = router.open(intruder)
-    instructor = router.open("instructor")
     got = Collector()
-    service.declare_subscriber(key, got)
-    pub = instructor.declare_publisher(key)
-    _wait_subscribed(pub, "the instructor's publisher to see the service's subscriber")
+    for key in INSTRUCTOR_KEYS:
+        service.declare_subscriber(key, got)
+    for writer in ("instructor", "console"):
+        allowed = router.open(writer)
+        pubs = [allowed.declare_publisher(k) for k in INSTRUCTOR_KEYS]
+        for pub in pubs:
+            _wait_subscribed(pub, f"the {writer}'s publisher to see the service's subscriber")
+        for key in INSTRUCTOR_KEYS:
+            denied.put(key, b"intruder")
+            denied.delete(key)
+        _barrier(denied)
+        for pub in pubs:
+            pub.put(writer.encode())
+        wait_for(lambda w=writer: [p for _, p in _received(got)].count(w.encode()) == len(INSTRUCTOR_KEYS),
+                 f"the {writer}'s puts")
+    assert b"intruder" not in [p for _, p in _received(got)]
+    assert not [k for k, _ in _received(got) if k == "SampleKind.DELETE"]
 
-    denied.put(key, b"intruder")
-    denied.delete(key)
-    denied.declare_publisher(key).put(b"intruder-publisher")
-    _barrier(denied)
-    pub.put(b"instructor")
-    wait_for(lambda: ("SampleKind.PUT", b"instructor") in _received(got),
-             "the instructor's put")
-    pub.delete()
-    wait_for(lambda: any(kind == "SampleKind.DELETE" for kind, _ in _received(got)),
-             "the instructor's delete")
 
-    assert _received(got) == [("SampleKind.PUT", b"instructor"), ("SampleKind.DELETE", b"")]
+@pytest.mark.timeout(90)
+def test_no_identity_forges_another_services_telemetry_tokens_or_answers(router: Router) -> None:
+    """Every identity puts on every service's keys, announces every service and answers its
+    queries; only the owner's get through."""
+    reader = router.open("debrief")
+    got = Collector()
+    reader.declare_subscriber(keys.under(ROVER), got)
+    sessions = {who: router.open(who) for who in IDENTITIES}
+    tokens, queryables = [], []
+    for who, session in sessions.items():
+        for key, owner in OWNED:
+            if who != f"lunaris-{owner}":
+                session.put(key, f"forged by {who}")
+        for service in SERVICES:
+            if who != f"lunaris-{service}":
+                tokens.append(session.liveliness().declare_token(keys.service(ROVER, service)))
+                queryables.append(session.declare_queryable(
+                    keys.snapshots_of(ROVER, service),
+                    lambda q, who=who: q.reply(q.key_expr, json.dumps(f"forged by {who}"))))
+        _barrier(session)
+    for key, owner in OWNED:
+        sessions[f"lunaris-{owner}"].put(key, f"from {owner}")
+    wait_for(lambda: len(_received(got)) >= len(OWNED), "every owner's sample")
+    assert sorted(p.decode() for _, p in _received(got)) == sorted(f"from {o}" for _, o in OWNED)
+    tokens_seen = [str(r.ok.key_expr) for r in reader.liveliness().get(
+        keys.service(ROVER, "*"), timeout=5.0) if r.ok is not None]
+    answers = [r.ok.payload.to_bytes() for r in reader.get(
+        keys.snapshots_of(ROVER, "*"), consolidation=zenoh.ConsolidationMode.NONE, timeout=3.0)
+        if r.ok is not None]
+    assert tokens_seen == [] and answers == [], (tokens_seen, answers)
+    owner = sessions["lunaris-battery"]
+    token = owner.liveliness().declare_token(keys.service(ROVER, "battery"))
+    wait_for(lambda: [str(r.ok.key_expr) for r in reader.liveliness().get(
+        keys.service(ROVER, "*"), timeout=5.0) if r.ok is not None] == [keys.service(ROVER, "battery")],
+        "the battery's own token")
+    del token, tokens, queryables
 
 
 @pytest.mark.timeout(60)
-def test_the_dashboard_sends_the_rover_position_and_nothing_else(router: Router) -> None:
-    service = router.open("lunaris-service")
+def test_the_dashboard_sends_its_inbound_topic_and_nothing_else(router: Router) -> None:
+    bridge = router.open("lunaris-bridge")
     dashboard = router.open("dashboard")
-    observer = router.open("observer")
     inbound = Collector()
-    service.declare_subscriber("curr_to_receiving_radio_m", inbound)
+    bridge.declare_subscriber("curr_to_receiving_radio_m", inbound)
+    bridge.declare_subscriber("json/**", inbound)
+    bridge.declare_subscriber(keys.under(ROVER), inbound)
     pub = dashboard.declare_publisher("curr_to_receiving_radio_m")
     _wait_subscribed(pub, "the dashboard's publisher to see the bridge's subscriber")
-
-    observer.put("curr_to_receiving_radio_m", b"observer")
-    _barrier(observer)
+    for key in (keys.input_sun_angle(ROVER), keys.fault(ROVER, "battery", "heating"),
+                "json/battery_state"):
+        dashboard.put(key, b"dashboard-forged")
+    _barrier(dashboard)
     pub.put(b"dashboard")
     wait_for(lambda: _received(inbound), "the dashboard's rover position")
     assert _received(inbound) == [("SampleKind.PUT", b"dashboard")]
@@ -106,16 +149,15 @@ def test_the_dashboard_sends_the_rover_position_and_nothing_else(router: Router)
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("reader", ["observer", "instructor", "dashboard"])
+@pytest.mark.parametrize("reader", ["observer", "instructor", "debrief", "console"])
 def test_readers_receive_telemetry_live_and_as_late_joiners(router: Router, reader: str) -> None:
-    key = f"lunaris/{ROVER}/battery/state"
-    service = router.open("lunaris-service")
+    key = keys.battery_state(ROVER)
+    service = router.open("lunaris-battery")
     viewer = router.open(reader)
     pub = zext.declare_advanced_publisher(
         service, key, encoding=zenoh.Encoding.APPLICATION_JSON,
         cache=zext.CacheConfig(max_samples=1), publisher_detection=True)
     pub.put(json.dumps({"t_s": 1.0}))
-
     got = Collector()
     zext.declare_advanced_subscriber(
         viewer, key, got, history=zext.HistoryConfig(detect_late_publishers=True))
@@ -123,7 +165,6 @@ def test_readers_receive_telemetry_live_and_as_late_joiners(router: Router, read
     # through the advanced publisher's "@adv" queryable and liveliness token.
     wait_for(lambda: json.dumps({"t_s": 1.0}).encode() in [p for _, p in _received(got)],
              "the cached sample (late joiner)")
-
     probe = service.declare_publisher(key)
     _wait_subscribed(probe, "the service to see the reader's subscriber")
     pub.put(json.dumps({"t_s": 2.0}))
@@ -132,149 +173,136 @@ def test_readers_receive_telemetry_live_and_as_late_joiners(router: Router, read
 
 
 @pytest.mark.timeout(60)
-def test_readers_receive_the_dashboard_topics(router: Router) -> None:
-    service = router.open("lunaris-service")
-    readers = {name: router.open(name) for name in ("observer", "dashboard")}
-    got = {name: Collector() for name in readers}
-    for name, session in readers.items():
-        session.declare_subscriber("final_comms_radio_bool", got[name])
-    pub = service.declare_publisher("final_comms_radio_bool")
-    wait_for(lambda: pub.matching_status.matching, "the bridge to see the dashboard readers")
-    # Both subscribers are known once each reader's declaration went through the router.
+def test_the_crew_reads_effects_not_the_instructors_faults(router: Router) -> None:
+    """The observer (the crew's identity) and the dashboard never see a fault put, the events
+    that name it, the faults in effect or the journal; the debrief identity does, by choice."""
+    instructor = router.open("instructor")
+    battery = router.open("lunaris-battery")
+    faults = router.open("lunaris-faults")
+    seen = {who: Collector() for who in ("observer", "dashboard", "debrief")}
+    readers = {who: router.open(who) for who in seen}
+    for who, session in readers.items():  # the widest each may ask for
+        session.declare_subscriber("**" if who == "dashboard" else keys.under(ROVER), seen[who])
+    faults.declare_queryable(keys.faults(ROVER), lambda q: q.reply(q.key_expr, b"[]"))
     for session in readers.values():
         _barrier(session)
+    instructor.put(keys.fault(ROVER, "battery", "heating"), b"40")
+    battery.put(keys.event(ROVER), b'{"kind": "fault_injected"}')
+    battery.put(keys.faults_active(ROVER, "battery"), b'{"faults": []}')
+    battery.put(keys.battery_state(ROVER), b'{"temperature_c": 30}')  # the effect
+    wait_for(lambda: len(seen["debrief"].items) >= 4, "the debrief identity's samples")
+    wait_for(lambda: seen["observer"].items, "the observer's telemetry")
+    assert [str(s.key_expr) for s in seen["observer"].items] == [keys.battery_state(ROVER)]
+    assert seen["dashboard"].items == []
+    asked = {who: [r.ok for r in s.get(keys.faults(ROVER), timeout=2.0) if r.ok is not None]
+             for who, s in readers.items()}
+    assert asked["observer"] == [] and asked["dashboard"] == [] and len(asked["debrief"]) == 1
+
+
+@pytest.mark.timeout(60)
+def test_the_dashboard_reads_the_bridges_topics(router: Router) -> None:
+    bridge = router.open("lunaris-bridge")
+    dashboard = router.open("dashboard")
+    got = Collector()
+    dashboard.declare_subscriber("final_comms_radio_bool", got)
+    pub = bridge.declare_publisher("final_comms_radio_bool")
+    wait_for(lambda: pub.matching_status.matching, "the bridge to see the dashboard")
     pub.put(b"\x00\x01\x00\x00\x01")
-    for name in readers:
-        wait_for(lambda name=name: _received(got[name]), f"the {name}'s dashboard sample")
+    wait_for(lambda: _received(got), "the dashboard's sample")
+
+
+# -- authentication and TLS ------------------------------------------------------------------
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("impostor", ["observer", "instructor", "dashboard"])
-def test_only_services_answer_queries_and_announce_themselves(
-        router: Router, impostor: str) -> None:
-    faults_key = f"lunaris/{ROVER}/faults"
-    service = router.open("lunaris-service")
-    fake = router.open(impostor)
-    asker = router.open("observer" if impostor != "observer" else "instructor")
-
-    fake.declare_queryable(faults_key, lambda q: q.reply(q.key_expr, b'["fake"]'))
-    fake_token = fake.liveliness().declare_token(f"lunaris/{ROVER}/service/battery")
-    _barrier(fake)
-    service.declare_queryable(faults_key, lambda q: q.reply(q.key_expr, b'["real"]'))
-    token = service.liveliness().declare_token(f"lunaris/{ROVER}/service/faults")
-
-    def answers() -> list[bytes]:
-        # Every reply of every queryable: the same key would otherwise be consolidated.
-        replies = asker.get(faults_key, target=zenoh.QueryTarget.ALL,
-                            consolidation=zenoh.ConsolidationMode.NONE, timeout=5.0)
-        return [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
-
-    def tokens() -> list[str]:
-        replies = asker.liveliness().get(f"lunaris/{ROVER}/service/*", timeout=5.0)
-        return [str(r.ok.key_expr) for r in replies if r.ok is not None]
-
-    assert wait_for(answers, "the faults service's reply") == [b'["real"]']
-    assert wait_for(tokens, "the faults service's token") == [f"lunaris/{ROVER}/service/faults"]
-    del fake_token, token
-
-
-# -- authentication --------------------------------------------------------------------------
-
-
-@pytest.mark.timeout(60)
-@pytest.mark.parametrize(("user", "password"), [
-    (None, None),
-    ("observer", "not-the-password"),
-    ("instructor", read_credentials()["observer"]),
-    ("intruder", "whatever"),
-], ids=["no-credentials", "wrong-password", "another-users-password", "unknown-user"])
-def test_a_client_without_valid_credentials_cannot_open_a_session(
-        router: Router, user: str | None, password: str | None) -> None:
+@pytest.mark.parametrize("case", ["no-credentials", "wrong-password", "another-users-password",
+                                  "unknown-user"])
+def test_a_client_without_valid_credentials_cannot_open_a_session(router: Router, case: str) -> None:
+    user, password = {"no-credentials": (None, None),
+                      "wrong-password": ("observer", "not-the-password"),
+                      "another-users-password": ("instructor", router.credentials["observer"]),
+                      "unknown-user": ("intruder", "whatever")}[case]
     with pytest.raises(zenoh.ZError):
         zenoh.open(router.client_config(user, password, fail_fast=True)).close()
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("user", sorted(read_credentials()))
-def test_every_user_of_the_dictionary_opens_a_session(router: Router, user: str) -> None:
-    conf = router.client_config(user, read_credentials()[user], fail_fast=True)
-    zenoh.open(conf).close()  # the same fail-fast settings as the refused clients
+def test_every_generated_client_configuration_opens_a_session_over_tls(router: Router) -> None:
+    for user in IDENTITIES:
+        conf = router.client_config(base=router.secrets / f"client-{user}.json5", fail_fast=True)
+        zenoh.open(conf).close()
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("config", [
-    "client-instructor.json5", "client-observer.json5", "client-service.json5",
-    "zenoh-bridge-ros2dds.json5",
-])
-def test_the_shipped_client_configurations_authenticate(router: Router, config: str) -> None:
-    shipped = zenoh.Config.from_file(str(DEPLOY / config))
-    assert _get(shipped, "mode") == "client"
-    assert _get(shipped, "scouting/multicast/enabled") is False
-    assert _get(shipped, "transport/auth/usrpwd/user") in read_credentials()
-    zenoh.open(router.client_config(base=DEPLOY / config, fail_fast=True)).close()
+def test_a_client_that_does_not_trust_the_deployments_ca_is_refused(router: Router, tmp_path) -> None:
+    conf = json.loads((router.secrets / "client-instructor.json5").read_text())
+    del conf["transport"]["link"]
+    path = tmp_path / "no-ca.json5"
+    path.write_text(json.dumps(conf))
+    with pytest.raises(zenoh.ZError):
+        zenoh.open(router.client_config(base=path, fail_fast=True)).close()
 
 
-def test_the_router_configuration_denies_by_default() -> None:
+def test_the_router_configuration_denies_by_default_and_knows_every_identity() -> None:
     conf = zenoh.Config.from_file(str(DEPLOY / "zenohd.json5"))
-    assert _get(conf, "mode") == "router"
-    assert _get(conf, "listen/endpoints") == ["tcp/0.0.0.0:7447"]
-    assert _get(conf, "scouting/multicast/enabled") is False
-    assert _get(conf, "transport/auth/usrpwd/dictionary_file") == "/etc/zenoh/credentials.txt"
-    acl = _get(conf, "access_control")
-    assert acl["enabled"] is True
-    assert acl["default_permission"] == "deny"
+
+    def get(path: str):
+        return json.loads(conf.get_json(path))
+    assert get("mode") == "router"
+    assert get("listen/endpoints") == ["tls/0.0.0.0:7447"]
+    assert get("scouting/multicast/enabled") is False
+    acl = get("access_control")
+    assert acl["enabled"] is True and acl["default_permission"] == "deny"
     users = {u for subject in acl["subjects"] for u in subject["usernames"]}
-    assert users == set(read_credentials())
+    assert users == set(IDENTITIES)
 
 
 # -- the real services behind the router -----------------------------------------------------
 
 
-@pytest.mark.timeout(60)
-def test_services_run_with_the_service_identity() -> None:
-    """clock and battery as containers run them: LUNARIS_ZENOH_CONFIG=client-service.json5."""
-    with running_router() as router:
+@pytest.mark.timeout(90)
+def test_services_run_with_their_own_identities(secrets) -> None:
+    """clock, battery and faults as containers run them, each with its own client
+    configuration; an instructor's fault reaches the battery, and the debrief sees it."""
+    with running_router(secrets) as router:
         procs = [
             subprocess.Popen(
                 [sys.executable, "-m", "lunaris.cli", "run", name,
-                 "--rover", str(REPO / "config/rovers/mapp.yaml"),
-                 "--connect", router.endpoint],
-                env=service_env(), cwd=REPO,
+                 "--rover", str(REPO / "config/rovers/mapp.yaml"), "--connect", router.endpoint],
+                env=service_env(secrets, name), cwd=REPO,
                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            for name in ("clock", "battery")
+            for name in ("clock", "battery", "faults")
         ]
         try:
+            debrief = router.open("debrief")
             observer = router.open("observer")
             instructor = router.open("instructor")
-            state = Collector()
-            events = Collector()
+            state, events = Collector(), Collector()
             zext.declare_advanced_subscriber(
-                observer, f"lunaris/{ROVER}/battery/state", state,
+                observer, keys.battery_state(ROVER), state,
                 history=zext.HistoryConfig(detect_late_publishers=True))
             zext.declare_advanced_subscriber(
-                observer, f"lunaris/{ROVER}/event", events,
+                debrief, keys.event(ROVER), events,
                 history=zext.HistoryConfig(detect_late_publishers=True))
 
             def running() -> list[str]:
-                replies = observer.liveliness().get(f"lunaris/{ROVER}/service/*", timeout=5.0)
-                return sorted(str(r.ok.key_expr).rsplit("/", 1)[1]
-                              for r in replies if r.ok is not None)
+                replies = debrief.liveliness().get(keys.service(ROVER, "*"), timeout=5.0)
+                return sorted(str(r.ok.key_expr).rsplit("/", 1)[1] for r in replies if r.ok is not None)
 
-            wait_for(lambda: running() == ["battery", "clock"], "both services' tokens", 30)
+            wait_for(lambda: running() == ["battery", "clock", "faults"], "the services' tokens", 30)
             wait_for(lambda: len(state.items) >= 2, "battery telemetry on the clock", 30)
-
-            fault = instructor.declare_publisher(f"lunaris/{ROVER}/fault/battery/heating")
+            fault = instructor.declare_publisher(keys.fault(ROVER, "battery", "heating"))
             _wait_subscribed(fault, "the battery service's fault subscriber")
-            observer.put(f"lunaris/{ROVER}/fault/battery/disconnect", b"")
-            _barrier(observer)
             fault.put(b"40")
 
             def event_keys() -> list[str]:
                 return [json.loads(s.payload.to_bytes())["key"] for s in events.items]
 
-            wait_for(lambda: f"lunaris/{ROVER}/fault/battery/heating" in event_keys(),
+            wait_for(lambda: keys.fault(ROVER, "battery", "heating") in event_keys(),
                      "the battery service's event for the instructor's fault")
-            assert f"lunaris/{ROVER}/fault/battery/disconnect" not in event_keys()
+            (listed,) = [json.loads(r.ok.payload.to_bytes())
+                         for r in debrief.get(keys.faults(ROVER), timeout=5.0) if r.ok is not None]
+            assert [f["key"] for f in listed] == [keys.fault(ROVER, "battery", "heating")]
         finally:
             router.close_sessions()
             for proc in procs:

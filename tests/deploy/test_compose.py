@@ -1,7 +1,8 @@
 """docker-compose.yml as docker-compose itself resolves it (`docker-compose config`).
 
 No Docker engine runs here (SPEC §11): the file is validated and its services, profile
-and mounts are checked, with every mounted file looked up in the repository.
+and mounts are checked, with every mounted file looked up in the repository, or among the
+secrets `lunaris deploy secrets` makes (deploy/secrets/ is never in the repository).
 """
 
 from __future__ import annotations
@@ -16,7 +17,10 @@ from typing import Any
 import pytest
 import yaml
 
-from tests.deploy.conftest import REPO
+from lunaris.deploy import check_secrets
+from tests.deploy.conftest import REPO, make_test_secrets
+
+SECRETS = REPO / "deploy" / "secrets"
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
 STATE_DIR = "/var/lib/lunaris"
@@ -61,17 +65,54 @@ def _host_path(mounts: dict[str, str], container_path: str, workdir: str) -> Pat
     raise AssertionError(f"{path} is not mounted from the host")
 
 
+@pytest.fixture(scope="module")
+def made_secrets(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return make_test_secrets(tmp_path_factory.mktemp("secrets"))
+
+
+def _exists(source: str, made: Path) -> bool:
+    """A mounted host file: in the repository, or one the secrets command makes."""
+    path = Path(source)
+    if SECRETS in path.parents or path == SECRETS:
+        return (made / path.relative_to(SECRETS)).exists()
+    return path.exists()
+
+
 def test_the_router_is_zenohd_with_the_deploy_configuration(compose: dict[str, Any]) -> None:
     router = compose["services"]["router"]
     assert router["image"].startswith("eclipse/zenoh:")
     assert router["restart"] == "unless-stopped"
-    assert [p["target"] for p in router["ports"]] == [7447]
+    # Loopback unless LUNARIS_BIND says otherwise (docker-compose v1 writes a short form).
+    assert router["ports"] in (["127.0.0.1:7447:7447/tcp"],
+                               [{"host_ip": "127.0.0.1", "published": "7447", "target": 7447,
+                                 "protocol": "tcp", "mode": "ingress"}])
     mounts = _mounts(router)
     command = router["command"]
     config = command[command.index("-c") + 1]
     assert Path(mounts[config]) == REPO / "deploy/zenohd.json5"
-    assert Path(mounts["/etc/zenoh/credentials.txt"]) == REPO / "deploy/credentials.txt"
-    assert "/etc/zenoh/credentials.txt" in (REPO / "deploy/zenohd.json5").read_text()
+    assert Path(mounts["/etc/zenoh/secrets/credentials.txt"]) == SECRETS / "credentials.txt"
+    assert Path(mounts["/etc/zenoh/secrets/tls"]) == SECRETS / "tls"
+    text = (REPO / "deploy/zenohd.json5").read_text()
+    assert "/etc/zenoh/secrets/credentials.txt" in text and "/etc/zenoh/secrets/tls/router.crt" in text
+
+
+def test_nothing_starts_before_the_secrets_are_checked(compose: dict[str, Any], made_secrets: Path,
+                                                       tmp_path: Path) -> None:
+    pre = compose["services"]["preflight"]
+    assert pre["command"] == ["deploy", "check", "/etc/lunaris/secrets"]
+    assert Path(_mounts(pre)["/etc/lunaris/secrets"]) == SECRETS
+    for name, service in compose["services"].items():
+        if name in ("preflight", "zenoh-bridge-ros2dds"):
+            continue
+        assert service["depends_on"]["preflight"]["condition"] == "service_completed_successfully", name
+    assert check_secrets(made_secrets) == []
+    demo = tmp_path / "demo"
+    shutil.copytree(made_secrets, demo)
+    text = (demo / "credentials.txt").read_text().splitlines()
+    text[0] = text[0].split(":")[0] + ":demo-service-CHANGE-ME"
+    (demo / "credentials.txt").write_text("\n".join(text) + "\n")
+    problems = check_secrets(demo)
+    assert any("demo password" in p for p in problems), problems
 
 
 @pytest.mark.parametrize("name", SERVICES)
@@ -82,7 +123,6 @@ def test_each_service_runs_from_the_one_image(compose: dict[str, Any], name: str
     assert service["image"] == compose["services"]["clock"]["image"]
     assert service["restart"] == "unless-stopped"
     assert "router" in service["depends_on"]
-
     command = service["command"]
     assert command[:2] == ["run", name]
     mounts = _mounts(service)
@@ -96,7 +136,7 @@ def test_each_service_runs_from_the_one_image(compose: dict[str, Any], name: str
         assert _host_path(mounts, mapping, workdir).parent.is_dir(), mapping
 
     zenoh_config = service["environment"]["LUNARIS_ZENOH_CONFIG"]
-    assert Path(mounts[zenoh_config]) == REPO / "deploy/client-service.json5"
+    assert Path(mounts[zenoh_config]) == SECRETS / f"client-lunaris-{name}.json5"  # its own identity
 
     assert command[command.index("--state-dir") + 1] == STATE_DIR
     assert mounts[STATE_DIR] in compose["volumes"], "state is not on a named volume"
@@ -111,15 +151,16 @@ def test_the_ros2dds_bridge_is_an_optional_profile(compose: dict[str, Any]) -> N
     assert "router" in bridge["depends_on"]
     command = bridge["command"]
     config = command[command.index("-c") + 1]
-    assert Path(_mounts(bridge)[config]) == REPO / "deploy/zenoh-bridge-ros2dds.json5"
+    assert Path(_mounts(bridge)[config]) == SECRETS / "zenoh-bridge-ros2dds.json5"
 
 
-def test_every_mounted_host_file_is_in_the_repository(compose: dict[str, Any]) -> None:
+def test_every_mounted_host_file_is_in_the_repository(compose: dict[str, Any],
+                                                     made_secrets: Path) -> None:
     for name, service in compose["services"].items():
         for target, source in _mounts(service).items():
             if source in compose.get("volumes", {}):
                 continue
-            assert Path(source).exists(), f"{name}: {source} (for {target}) does not exist"
+            assert _exists(source, made_secrets), f"{name}: {source} (for {target}) does not exist"
             assert REPO in Path(source).parents, f"{name}: {source} is outside the repository"
 
 
