@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record": ("lunaris.record", "record every lunaris key to an MCAP file"),
     "report": ("lunaris.report", "draw a recorded session for the debrief"),
     "scenario": ("lunaris.scenario", "play a scripted training scenario"),
+    "traverse": ("lunaris.traverse", "send a rover on a traverse, or stop it"),
 }
 
 

@@ -30,6 +30,7 @@ from collections.abc import Iterable, Sequence
 from typing import Any, NamedTuple
 
 from common.config import Drive
+from common.messages import DriveStatus
 from common.traverse import Leg
 
 __all__ = [
@@ -99,7 +100,7 @@ class DriveReading(NamedTuple):
     odometer_m: float
     waypoint: int | None
     moving: bool
-    status: str
+    status: DriveStatus
     waypoints: int
     remaining_m: float
     energy_j: float
@@ -126,7 +127,7 @@ class DriveModel:
         self.energy_j = 0.0
         self.legs: list[Leg] = []
         self.leg = 0
-        self.status = "parked"
+        self.status: DriveStatus = "parked"
         self._suffix: list[float] = [0.0]
         self._idle()
 

@@ -11,12 +11,13 @@ from numpy.testing import assert_allclose
 from common.config import Rover, load_rover
 from common.faults import fault_of
 from services.composed import ComposedTwin, run_budget
-from tests.harness import ROOT, ROVERS, lunaris_cmd
+from tests.harness import ROOT, ROVERS, lunaris_cmd, static_rover
 
 
 @pytest.fixture
 def mapp() -> Rover:
-    return load_rover(ROVERS / "mapp.yaml")
+    """The MAPP rover without its drive: the budget of the first release (drive_motors ~40 W)."""
+    return load_rover(static_rover("mapp.yaml"))
 
 
 def small_pack(rover: Rover, capacity_j: float) -> Rover:
