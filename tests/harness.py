@@ -30,7 +30,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import yaml
 import zenoh
 
 from common import keys
@@ -43,12 +42,20 @@ ALL_SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults"
 
 
 def rover_without_drive(src: Path, folder: Path) -> Path:
-    """``src`` without its drive section, written to ``folder`` under the same name."""
-    data = load_yaml(src.read_text(), str(src))
-    data.pop("drive", None)
+    """``src`` without its drive section (the top-level ``drive:`` block, cut from the text so
+    the rest reads as written), written to ``folder`` under the same name."""
+    kept, inside = [], False
+    for line in src.read_text().splitlines(keepends=True):
+        if line.startswith("drive:"):
+            inside = True
+        elif inside and line.strip() and not line[0].isspace() and not line.startswith("#"):
+            inside = False
+        if not inside:
+            kept.append(line)
     folder.mkdir(parents=True, exist_ok=True)
     dst = folder / src.name
-    dst.write_text(yaml.safe_dump(data, sort_keys=False))
+    dst.write_text("".join(kept))
+    assert load_yaml(dst.read_text(), str(dst)).get("drive") is None, dst
     return dst
 
 

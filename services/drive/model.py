@@ -82,7 +82,9 @@ def leg_energy_j(force_n: float, distance_m: float, speed_m_per_s: float, effici
 def motors_powered(load_on: bool, load_faults: Iterable[str]) -> bool:
     """Whether the drive load supplies the motors: its rail is on and it is neither open nor
     shorted (a ``stuck`` load misreports its power, the wheels still turn)."""
-    return load_on and not ({"open", "short"} & set(load_faults))
+    if not load_on:
+        return False
+    return not any(f == "open" or f == "short" for f in load_faults)
 
 
 class DriveReading(NamedTuple):

@@ -36,7 +36,7 @@ pytestmark = pytest.mark.timeout(120)
 
 R = "mapp-1"
 NO_DRIVE = "ltv-1"  # the LTV without its drive section rides along
-SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "drive")
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "drive", "bridge")
 START = (5.0, 0.0, 0.0)
 FLAT_W, UPHILL_W, IDLE_W = 9.5, 20.2236696, 3.0
 TRAVERSE = keys.input_drive_traverse(R)
@@ -52,6 +52,7 @@ def twin(tmp_path_factory):
         with Twin(endpoint, [ROVERS / "mapp.yaml", ltv], tmp_path_factory.mktemp("twin"),
                   services=SERVICES) as t, Probe(endpoint) as p:
             p.watch("lunaris/**")
+            p.watch("json/**")  # the bridge's json flavour
             p.wait_services(R, SERVICES)
             p.wait_services(NO_DRIVE, tuple(s for s in SERVICES if s != "drive"))
             p.wait_value(STATE)
@@ -115,6 +116,12 @@ def test_a_traverse_moves_the_rover_and_the_drive_load_follows_the_grade(probe):
     # the path went north and up, through both waypoints, never backwards
     ys = [s["y_m"] for s in p.samples(STATE)]
     assert ys == sorted(ys) and len(set(ys)) > 20
+    # ... and the dashboard sees it as an Odometry in the site frame (the bridge's json flavour;
+    # serving two rovers, the bridge puts each one's topics under /<rover>)
+    assert not [k for k in p.latest if k.startswith("json/ltv_1/") and "odom" in k]  # no drive
+    odom = p.wait_value("json/mapp_1/odom",
+                        lambda m: m["pose"]["pose"]["position"]["y"] == pytest.approx(20.0))
+    assert odom["header"]["frame_id"] == "site" and odom["twist"]["twist"]["linear"]["x"] == 0.0
 
 
 def test_the_radio_link_follows_the_rover_and_flips_at_the_computed_distance(probe):
