@@ -200,7 +200,7 @@ class DriveModel:
         remaining_s = dt_s
         while True:
             travel_m = self._speed * remaining_s
-            if travel_m < self._to_go:  # stays on this leg
+            if travel_m + _EPS_M < self._to_go:  # stays on this leg (a nanometre short arrives)
                 self.x_m += self._ux * travel_m
                 self.y_m += self._uy * travel_m
                 self.z_m += self._uz * travel_m
@@ -208,7 +208,7 @@ class DriveModel:
                 self.odometer_m += travel_m
                 self.energy_j += self._power_w * remaining_s
                 return
-            reach_s = self._to_go / self._speed
+            reach_s = min(remaining_s, self._to_go / self._speed)
             self.odometer_m += self._to_go
             self.energy_j += self._power_w * reach_s
             remaining_s -= reach_s

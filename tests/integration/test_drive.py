@@ -13,6 +13,7 @@ idle 3 W), derived by hand:
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 
@@ -24,6 +25,7 @@ from tests.harness import (
     ROVERS,
     Probe,
     Twin,
+    env_without_zenoh_config,
     free_endpoint,
     lunaris_cmd,
     open_router,
@@ -234,23 +236,85 @@ def test_reset_and_a_restarted_drive_service(probe, twin):
     p.wait_value(keys.radio_link(R, "lander"), lambda v: v["x_m"] == 5.0 and v["in_range"])
 
 
-def test_a_drive_service_for_rovers_that_do_not_drive_exits_at_once(tmp_path):
+def _up_lines(rover_file, until: str) -> str:
+    """Run ``lunaris up`` with the clock and the drive until a line holds ``until``."""
+    up = subprocess.Popen(lunaris_cmd("up", "--rover", str(rover_file), "--listen", free_endpoint(),
+                                      "--no-status", "--services", "clock,drive"),
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+    lines: list[str] = []
+    try:
+        def seen() -> bool:
+            line = up.stdout.readline()
+            lines.append(line)
+            return until in line or not line
+        wait_for(seen, 30, f"lunaris up to say {until!r}")
+    finally:
+        stop_process(up, timeout_s=15)
+    return "".join(lines) + (up.stdout.read() or "")
+
+
+def test_lunaris_up_starts_the_drive_only_for_rovers_that_drive(tmp_path):
     static = rover_without_drive(ROVERS / "mapp.yaml", tmp_path)
     done = subprocess.run(lunaris_cmd("run", "drive", "--rover", str(static), "--connect",
                                       free_endpoint()),
                           capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert done.returncode == 0 and "no rover to serve" in done.stdout
-    up = subprocess.Popen(lunaris_cmd("up", "--rover", str(static), "--listen", free_endpoint(),
-                                      "--no-status", "--services", "clock,drive"),
-                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
-    lines: list[str] = []
-    try:
-        def started() -> bool:
-            line = up.stdout.readline()
-            lines.append(line)
-            return "clock started" in line or not line
-        wait_for(started, 30, "lunaris up to start the clock")
-    finally:
-        stop_process(up, timeout_s=15)
-    out = "".join(lines) + (up.stdout.read() or "")
+    out = _up_lines(static, "clock started")
     assert "drive not started: no rover needs it" in out and "drive started" not in out
+    out = _up_lines(ROVERS / "mapp.yaml", "drive started")
+    assert "drive started" in out and "not started" not in out
+
+
+def _tool(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(lunaris_cmd(*args), capture_output=True, text=True, timeout=60, cwd=ROOT,
+                          env=env_without_zenoh_config())
+
+
+def test_lunaris_traverse_sends_stops_and_reports_the_answer(probe, twin):
+    p, ep = probe, twin[1].endpoint
+    done = _tool("traverse", R, "--to", "5", "30", "0", "--speed", "0.05", "--connect", ep)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.startswith("accepted: input") and "1 waypoint(s), 30.0 m" in done.stdout
+    p.wait_value(STATE, lambda s: s["moving"] and s["speed_m_per_s"] == 0.05)
+    done = _tool("traverse", R, "--stop", "--connect", ep)
+    assert done.returncode == 0 and "traverse stopped" in done.stdout, done.stdout + done.stderr
+    done = _tool("traverse", R, "--to", "5", "30", "20", "--connect", ep)
+    assert done.returncode == 1 and "rejected" in done.stdout and "steeper" in done.stdout
+    done = _tool("traverse", R, str(ROOT / "config" / "traverses" / "mapp-crater-rim.yaml"),
+                 "--connect", ep)
+    assert done.returncode == 0 and "8 waypoint(s)" in done.stdout, done.stdout + done.stderr
+    done = _tool("traverse", NO_DRIVE, "--to", "1", "1", "0", "--connect", ep)
+    assert done.returncode == 1 and "has no drive section" in done.stdout
+    done = _tool("traverse", R, str(ROOT / "no-such.yaml"), "--connect", ep)
+    assert done.returncode == 1 and "cannot read file" in done.stderr
+
+
+def test_a_scenario_drives_and_stops_the_rover_on_a_drive_condition(probe, twin, tmp_path):
+    ep = twin[1].endpoint
+    path = tmp_path / "drive.yaml"
+    path.write_text("""
+scenario: {name: drive and stop}
+rover: mapp-1
+time_scale: 50
+steps:
+  - name: go north
+    at_s: 0
+    traverse: {speed_m_per_s: 0.1, waypoints: [{x_m: 5, y_m: 50, z_m: 0}]}
+  - name: far enough
+    when: drive.odometer_m > 2
+    timeout_s: 300
+    traverse: stop
+  - name: parked
+    after_s: 0
+    when: drive.status == parked
+    timeout_s: 60
+    note: stopped
+""")
+    summary_path = tmp_path / "summary.json"
+    done = _tool("scenario", "run", str(path), "--connect", ep, "--json-summary", str(summary_path))
+    assert done.returncode == 0, done.stdout + done.stderr
+    steps = json.loads(summary_path.read_text())["steps"]
+    assert [(s["status"], s["outcome"]) for s in steps] == [
+        ("fired", "accepted"), ("fired", "accepted"), ("fired", "reached")]
+    state = probe.wait_value(STATE, lambda s: s["status"] == "parked")
+    assert 2.0 < state["odometer_m"] < 10.0
