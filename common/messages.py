@@ -234,11 +234,13 @@ Coordinate = Annotated[float, msgspec.Meta(ge=-1e7, le=1e7)]  # site frame [m]: 
 
 
 class TraverseWaypoint(_Input):
-    x_m: Coordinate
-    y_m: Coordinate
-    z_m: Annotated[float, msgspec.Meta(ge=-1e5, le=1e5)]
-    # the speed of the leg that ends here; default: the traverse's speed
-    speed_m_per_s: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] | None = None
+    x_m: Annotated[Coordinate, msgspec.Meta(description="east of the site origin [m]")]
+    y_m: Annotated[Coordinate, msgspec.Meta(description="north of the site origin [m]")]
+    z_m: Annotated[float, msgspec.Meta(ge=-1e5, le=1e5, description="up [m]")]
+    speed_m_per_s: Annotated[
+        Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] | None,
+        msgspec.Meta(description="the speed of the leg that ends here [m/s]; default the "
+                                 "traverse's")] = None
 
 
 class DriveTraverse(_Input):

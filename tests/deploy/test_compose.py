@@ -18,7 +18,7 @@ import yaml
 
 from tests.deploy.conftest import REPO
 
-SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
 STATE_DIR = "/var/lib/lunaris"
 DOCKER_COMPOSE = shutil.which("docker-compose")
 
