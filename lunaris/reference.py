@@ -4,8 +4,8 @@ Every page is made from what the code checks against, so the reference cannot sa
 thing while the code does another: the rover file from :mod:`common.config`, the keys and
 payloads from :data:`common.keys.FAMILIES`, the faults from :data:`common.faults.CATALOGUE`
 and its ``fault_code`` table, the bridge mapping from :mod:`services.bridge.mapping`, the
-scenario format from :mod:`common.scenario`, the traverse file from :mod:`common.traverse`. ``tests/architecture`` fails when the
-committed pages are stale.
+scenario format from :mod:`common.scenario`, the traverse file from :mod:`common.traverse`.
+``tests/architecture`` fails when the committed pages are stale.
 
     python -m lunaris.reference            # rewrite docs/reference/*.md
     python -m lunaris.reference --check    # exit 1 if a committed page differs

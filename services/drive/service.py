@@ -72,8 +72,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                  {"waypoints": len(legs), "length_m": length, "duration_s": duration})
 
     def on_load(s: Sample) -> None:
-        r = configs.get(s.rover)
-        if r is None or r.drive is None or s.parts[1] != r.drive.load or s.deleted:
+        if s.deleted:
             return
         p = decode(s.payload, LoadPower)
         if models[s.rover].set_powered(motors_powered(p.on, p.faults)):
@@ -92,7 +91,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.input_drive_traverse("*"), on_traverse)
-    rt.subscribe(keys.load_power("*", "*"), on_load)
+    for rover_id, r in configs.items():  # each rover's drive load only, not every load's samples
+        assert r.drive is not None
+        rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load)
     rt.own_state(get_state, set_state, reset, after=publish)
     for rover in models:
         publish(rover)
