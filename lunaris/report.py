@@ -191,9 +191,12 @@ def draw(s: Session, title: str):
 
 
 def _draw_path(fig, ax, s: Session) -> None:
-    """The path in the site frame, each position coloured by the drive's power then."""
+    """The path in the site frame, each position coloured by the drive's power then (the
+    hottest drawn last, so a grade driven both ways shows the climb)."""
     xs, ys, power = s.path
-    dots = ax.scatter(xs, ys, c=power, cmap="plasma", s=8, linewidths=0)
+    order = sorted(range(len(xs)), key=power.__getitem__)
+    dots = ax.scatter([xs[i] for i in order], [ys[i] for i in order], c=[power[i] for i in order],
+                      cmap="plasma", s=10, linewidths=0)
     fig.colorbar(dots, ax=ax, label="drive power [W]")
     ax.plot(xs[:1], ys[:1], marker="o", color="tab:green", linestyle="", label="first position")
     ax.plot(xs[-1:], ys[-1:], marker="s", color="black", linestyle="", label="last position")

@@ -170,4 +170,4 @@ def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
     assert len(fig.axes) == 8  # the five plots, the current's twin axis, the path and its colour bar
     path_ax = fig.axes[5]
     assert path_ax.get_xlabel() == "x, east [m]" and "drive's power" in path_ax.get_title()
-    assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]
+    assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last
