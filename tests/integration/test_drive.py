@@ -318,3 +318,26 @@ steps:
         ("fired", "accepted"), ("fired", "accepted"), ("fired", "reached")]
     state = probe.wait_value(STATE, lambda s: s["status"] == "parked")
     assert 2.0 < state["odometer_m"] < 10.0
+
+
+def test_a_snapshot_restores_the_position_and_the_traverse(probe):
+    p = probe
+    p.put(keys.clock_control(R), {"time_scale": 50})
+    answer(p, R, TRAVERSE, {"waypoints": waypoints((5, 500, 0), (5, 600, 0))})
+    p.wait_value(STATE, lambda s: s["odometer_m"] > 2.0)
+    p.put(keys.clock_control(R), {"paused": True})
+    paused = p.wait_value(keys.clock(R), lambda c: c["paused"])
+    saved = p.wait_value(STATE, lambda s: s["t_s"] == paused["t_s"])
+    p.put(keys.control_snapshot(R, "mid-traverse"), b"")
+    p.wait_event(R, lambda e: e["kind"] == "session" and "mid-traverse" in e["message"])
+    wait_for(lambda: any(s["name"] == "mid-traverse" and "drive" in s["services"]
+                         for (got,) in [p.get_json(keys.snapshots(R))] for s in got), 5, "the snapshot")
+    p.put(keys.clock_control(R), {"paused": False})
+    answer(p, R, TRAVERSE, None, delete=True)  # stopped, then the snapshot brings the traverse back
+    p.wait_value(STATE, lambda s: s["status"] == "parked")
+    p.put(keys.control_restore(R, "mid-traverse"), b"")
+    back = p.wait_value(STATE, lambda s: s["status"] == "driving" and s["t_s"] == saved["t_s"])
+    assert (back["x_m"], back["y_m"], back["odometer_m"], back["waypoint"], back["waypoints"]) == (
+        saved["x_m"], saved["y_m"], saved["odometer_m"], 0, 2)
+    p.put(keys.clock_control(R), {"paused": False})
+    p.wait_value(STATE, lambda s: s["odometer_m"] > saved["odometer_m"])
