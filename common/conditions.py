@@ -3,7 +3,7 @@
 ``<source>.<field> <op> <value>`` joined by ``and``; ``op`` is one of
 ``< <= > >= == !=``; ``value`` a number, ``true``/``false``, or a word for text fields
 (``rail.12V.state == tripped``). Sources: ``battery``, ``summary``, ``clock``,
-``umbilical``, ``rail.<name>``, ``load.<name>``, ``solar.<panel>``, ``radio.<name>``.
+``umbilical``, ``drive``, ``rail.<name>``, ``load.<name>``, ``solar.<panel>``, ``radio.<name>``.
 Field names and value types are checked against the payload Structs of SPEC §5. No
 ``eval``: the text is matched against this grammar only.
 """
@@ -30,6 +30,7 @@ SOURCES: dict[str, keys.Family] = {
             ("summary", "power/summary"),
             ("clock", "clock"),
             ("umbilical", "umbilical/state"),
+            ("drive", "drive/state"),
             ("rail", "rail/{rail}/state"),
             ("load", "load/{load}/power"),
             ("solar", "solar/{panel}/power"),

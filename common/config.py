@@ -33,10 +33,13 @@ from common.datafile import (
 __all__ = [
     "Battery",
     "ConfigError",
+    "Drive",
+    "DriveStart",
     "Load",
     "OcvCurve",
     "Panel",
     "Radio",
+    "RadioSite",
     "Rail",
     "Rover",
     "RoverInfo",
@@ -159,6 +162,14 @@ class Umbilical(Strict, frozen=True):
     power_w: Annotated[NonNegative, doc("what the connection can supply [W]")] = 0.0
 
 
+class RadioSite(Strict, frozen=True):
+    """Where a radio stands in the site frame (x east, y north). With a drive section, the
+    distance and bearing from here to the rover replace the radio's position input."""
+
+    x_m: Annotated[float, doc("east of the site origin [m]")]
+    y_m: Annotated[float, doc("north of the site origin [m]")]
+
+
 class Radio(Strict, frozen=True):
     """A radio the rover talks to: in range inside an ellipse around it."""
 
@@ -167,6 +178,40 @@ class Radio(Strict, frozen=True):
     b_m: Annotated[Positive, doc("ellipse semi-axis along y [m]")]
     offset_x_m: Annotated[float, doc("ellipse centre offset along x [m]")] = 0.0
     offset_y_m: Annotated[float, doc("ellipse centre offset along y [m]")] = 0.0
+    site: Annotated[RadioSite | None, doc(
+        "where the radio stands in the site frame; on a rover with a drive section the radio "
+        "then follows the rover's position (drive/state) and refuses the position input")] = None
+
+
+class DriveStart(Strict, frozen=True):
+    """Where the rover is at the start and after a session reset, in the site frame."""
+
+    x_m: Annotated[float, doc("east of the site origin [m]")] = 0.0
+    y_m: Annotated[float, doc("north of the site origin [m]")] = 0.0
+    z_m: Annotated[float, doc("up [m]")] = 0.0
+    heading_deg: Annotated[float, doc("compass heading, clockwise from north [deg]")] = 0.0
+
+
+class Drive(Strict, frozen=True):
+    """The rover moves: drive power and position from physics (SPEC §4, Drive). On a leg of
+    grade theta at speed v: F = m g (c_rr cos(theta) + sin(theta)), wheel torque F r, and the
+    drive load draws max(0, F v) / drivetrain_efficiency + idle_w, at most its max_w (the rover
+    then slows down)."""
+
+    load: Annotated[Name, doc("the load whose power the drive sets while this section exists")]
+    mass_kg: Annotated[Positive, doc("mass of the loaded vehicle [kg]")]
+    wheel_radius_m: Annotated[Positive, doc("wheel radius [m]")]
+    rolling_resistance: Annotated[Fraction, doc("rolling resistance coefficient c_rr on regolith")]
+    drivetrain_efficiency: Annotated[Efficiency, doc("wheel power / battery-side power")]
+    idle_w: Annotated[NonNegative, doc("motor controllers on, wheels still [W]; drawn moving too")]
+    max_speed_m_per_s: Annotated[Positive, doc("fastest commanded speed [m/s]")]
+    gravity_m_per_s2: Annotated[Positive, doc("surface gravity [m/s^2] (the Moon: 1.625)")] = 1.625
+    start: Annotated[DriveStart, doc("where the rover is at the start and after a reset")] = DriveStart()
+    regen_efficiency: Annotated[Fraction, doc(
+        "fraction of the braking wheel power (F v < 0, steep downhill) returned to the bus; "
+        "0: no regeneration, the drive draws idle_w")] = 0.0
+    max_grade_deg: Annotated[float, msgspec.Meta(gt=0.0, lt=90.0), doc(
+        "the steepest leg a traverse may have; a steeper traverse is refused [deg]")] = 30.0
 
 
 class Rover(Strict, frozen=True):
@@ -180,6 +225,7 @@ class Rover(Strict, frozen=True):
     loads: list[Load] = []
     umbilical: Umbilical = Umbilical()
     radios: list[Radio] = []
+    drive: Annotated[Drive | None, doc("optional: the rover moves (see Drive)")] = None
 
     @property
     def id(self) -> str:
@@ -197,6 +243,15 @@ def budget_warnings(rover: Rover) -> list[str]:
                 f"rails.{rail.name}: its loads can draw {peak_w / rail.voltage_v:.1f} A "
                 f"(sum of max_w {peak_w:g} W at {rail.voltage_v:g} V), above current_limit_a "
                 f"{rail.current_limit_a:g} A: it may trip in normal operation")
+    d = rover.drive
+    load = next((ld for ld in rover.loads if d is not None and ld.name == d.load), None)
+    if d is not None and load is not None:
+        force_n = d.mass_kg * d.gravity_m_per_s2 * d.rolling_resistance
+        need_w = force_n * d.max_speed_m_per_s / d.drivetrain_efficiency + d.idle_w
+        if need_w > load.max_w:
+            warnings.append(
+                f"drive: on the flat at max_speed_m_per_s the drive needs {need_w:.1f} W, above "
+                f"the max_w {load.max_w:g} W of load {load.name}: the rover never reaches full speed")
     return warnings
 
 
@@ -256,6 +311,9 @@ def _semantic_problems(d: dict) -> list[str]:
     if solar is not None:
         _unique("solar.panels", [p.name for p in solar.panels], problems)
     _unique("radios", [r.name for r in radios], problems)
+    drive = _typed(d.get("drive"), Drive)
+    if drive is not None and len(loads) == len(_list(d.get("loads"))):
+        _drive_rules(drive, loads, problems)
     return problems
 
 
@@ -303,6 +361,16 @@ def _load_rules(i: int, ld: Load, rail_names: list[str], rails_known: bool,
     if ld.nominal_w > ld.max_w:
         problems.append(f"loads[{i}].nominal_w: must not exceed max_w ({ld.max_w}), "
                         f"got {ld.nominal_w}")
+
+
+def _drive_rules(drive: Drive, loads: list[Load], problems: list[str]) -> None:
+    load = next((ld for ld in loads if ld.name == drive.load), None)
+    if load is None:
+        problems.append(f"drive.load: no load named {drive.load!r} "
+                        f"(loads: {', '.join(ld.name for ld in loads) or 'none'})")
+    elif drive.idle_w >= load.max_w:
+        problems.append(f"drive.idle_w: must be below the max_w of load {load.name} "
+                        f"({load.max_w:g} W), or the rover could never move; got {drive.idle_w:g}")
 
 
 def _unique(path: str, names: list[str], problems: list[str]) -> None:

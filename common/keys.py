@@ -32,6 +32,7 @@ __all__ = [
     "control_reset",
     "control_restore",
     "control_snapshot",
+    "drive_state",
     "event",
     "families",
     "family_of",
@@ -41,6 +42,7 @@ __all__ = [
     "faults",
     "faults_active",
     "faults_journal",
+    "input_drive_traverse",
     "input_radio_position",
     "input_sun_angle",
     "input_umbilical",
@@ -106,6 +108,14 @@ def umbilical_state(rover: str) -> str:
 
 def radio_link(rover: str, radio: str) -> str:
     return f"{ROOT}/{rover}/radio/{radio}/link"
+
+
+def drive_state(rover: str) -> str:
+    return f"{ROOT}/{rover}/drive/state"
+
+
+def input_drive_traverse(rover: str) -> str:
+    return f"{ROOT}/{rover}/input/drive/traverse"
 
 
 def input_sun_angle(rover: str) -> str:
@@ -236,11 +246,13 @@ FAMILIES: tuple[Family, ...] = (
     _f("solar/{panel}/power", m.SolarPower, "solar"),
     _f("umbilical/state", m.UmbilicalState, "solar"),
     _f("radio/{radio}/link", m.RadioLink, "radio"),
+    _f("drive/state", m.DriveState, "drive"),
     _f("event", m.Event, "*"),
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),
     _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
     _f("input/umbilical", m.UmbilicalInput, "solar"),
+    _f("input/drive/traverse", m.DriveTraverse, "drive"),
     _f("cmd/rail/{rail}", m.RailCommand, "power"),
     _f("clock/control", m.ClockControl, "clock"),
 )

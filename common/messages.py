@@ -23,6 +23,9 @@ __all__ = [
     "BatteryState",
     "Clock",
     "ClockControl",
+    "DriveState",
+    "DriveStatus",
+    "DriveTraverse",
     "Event",
     "EventKind",
     "Severity",
@@ -35,6 +38,7 @@ __all__ = [
     "RailState",
     "SolarPower",
     "SunAngle",
+    "TraverseWaypoint",
     "UmbilicalInput",
     "UmbilicalState",
     "decode",
@@ -133,6 +137,34 @@ class RadioLink(_Msg):
     faults: list[str] = []
 
 
+DriveStatus = Literal["parked", "driving", "power_limited", "unpowered", "arrived"]
+
+
+class DriveState(_Msg):
+    """``drive/state``: where the rover is in the site frame (x east, y north, z up) and what
+    its drive does. ``status``: ``parked`` (no traverse), ``driving``, ``power_limited`` (slowed
+    by the drive load's max_w), ``unpowered`` (halted: the drive load has no power), ``arrived``
+    (at the last waypoint)."""
+
+    t_s: float
+    x_m: float
+    y_m: float
+    z_m: float
+    speed_m_per_s: float  # along the ground
+    heading_deg: float  # compass: clockwise from north (y)
+    grade_deg: float  # of the leg being driven, positive uphill
+    tractive_force_n: float  # F = m g (c_rr cos(grade) + sin(grade)); 0 at a standstill
+    wheel_torque_nm: float  # F r, shared by the wheels
+    power_w: float  # what the drive load draws (battery side of the drivetrain)
+    odometer_m: float
+    waypoint: int | None  # index of the waypoint driven to; null when not on a traverse
+    moving: bool
+    status: DriveStatus = "parked"
+    waypoints: int = 0  # in the traverse being driven (or the last one)
+    remaining_m: float = 0.0  # along the traverse, to its last waypoint
+    energy_j: float = 0.0  # drawn by the drive since the start (or the last reset)
+
+
 # What an event says happened: a refused input, a fault's life, an accepted command or
 # input, a change of the clock, a bug in a service.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
@@ -201,6 +233,29 @@ class SunAngle(_Input):
 class RadioPosition(_Input):
     distance_m: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
     angle_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
+
+
+Coordinate = Annotated[float, msgspec.Meta(ge=-1e7, le=1e7)]  # site frame [m]: within 10,000 km
+
+
+class TraverseWaypoint(_Input):
+    x_m: Annotated[Coordinate, msgspec.Meta(description="east of the site origin [m]")]
+    y_m: Annotated[Coordinate, msgspec.Meta(description="north of the site origin [m]")]
+    z_m: Annotated[float, msgspec.Meta(ge=-1e5, le=1e5, description="up [m]")]
+    speed_m_per_s: Annotated[
+        Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] | None,
+        msgspec.Meta(description="the speed of the leg that ends here [m/s]; default the "
+                                 "traverse's")] = None
+
+
+class DriveTraverse(_Input):
+    """``input/drive/traverse``: drive through the waypoints in order, from where the rover
+    is, at ``speed_m_per_s`` (default: the rover's max_speed_m_per_s); with
+    ``return_to_start``, back through them to where the traverse began."""
+
+    waypoints: list[TraverseWaypoint]
+    speed_m_per_s: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] | None = None
+    return_to_start: bool = False
 
 
 class UmbilicalInput(_Input):

@@ -20,9 +20,16 @@ A scenario::
         timeout_s: 600        # give up if it has not held 600 s after being armed
         rail: {name: 5V_CH2, on: false}
 
+      - when: drive.odometer_m > 200
+        traverse: {speed_m_per_s: 0.1, waypoints: [{x_m: 5, y_m: 0, z_m: 0}]}   # or: stop
+      - after_s: 0
+        traverse: {file: ../traverses/mapp-crater-rim.yaml}   # a traverse file (common.traverse)
+
 A step has a time gate (``at_s`` or ``after_s``, optional), a condition (``when``,
 optional; at least one of the two), and one action: ``inject``, ``clear``,
-``sun_angle``, ``position``, ``umbilical``, ``clock`` or ``rail``. A step with
+``sun_angle``, ``position``, ``umbilical``, ``clock``, ``rail`` or ``traverse`` (what
+``input/drive/traverse`` takes, or ``{file: PATH}`` naming a traverse file, relative to the
+scenario's folder; ``stop`` deletes it, and the rover stops). A step with
 both waits for its time, then for its condition; ``after_s: 0`` with a ``when``
 therefore waits for the condition only once the previous step has fired. A step
 with a ``note`` and no action is a checkpoint: it marks, in the run's report,
@@ -43,9 +50,19 @@ import msgspec
 
 from common.conditions import parse_condition
 from common.config import Rover
-from common.datafile import ID_PATTERN, ConfigError, Name, Strict, load_yaml, parse_yaml, read_text
+from common.datafile import (
+    ID_PATTERN,
+    ConfigError,
+    Name,
+    Strict,
+    check_structure,
+    load_yaml,
+    parse_yaml,
+    read_text,
+)
 from common.faults import FaultKey, parse_fault_key, parse_params
-from common.messages import BadInput
+from common.messages import BadInput, DriveTraverse
+from common.traverse import TraverseError, load_traverse, plan
 
 __all__ = [
     "ACTIONS",
@@ -108,6 +125,7 @@ class Step(Strict, frozen=True):
     umbilical: bool | None = None
     clock: ClockAction | None = None
     rail: RailAction | None = None
+    traverse: Any = None  # what input/drive/traverse takes, or "stop"
 
 
 class Scenario(Strict, frozen=True):
@@ -118,7 +136,8 @@ class Scenario(Strict, frozen=True):
     duration_s: Positive | None = None
 
 
-ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail")
+ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail", "traverse")
+STOP = "stop"
 
 
 class ScenarioError(ConfigError):
@@ -146,6 +165,7 @@ def parse_scenario(text: str, source: str = "<scenario>", rover: Rover | None = 
     """Validate scenario YAML; raise :class:`ScenarioError` listing every problem. With
     ``rover`` the names of loads, rails, panels and radios are checked too."""
     data, problems = parse_yaml(text, source, Scenario, ScenarioError)
+    base = Path(source).parent if Path(source).is_file() else Path.cwd()  # of traverse files
     if isinstance(data, dict):
         if rover is not None and data.get("rover") not in (None, rover.id):
             problems.append(f"rover: the scenario is for {data.get('rover')!r}, "
@@ -156,7 +176,7 @@ def parse_scenario(text: str, source: str = "<scenario>", rover: Rover | None = 
                 problems.append("steps: a scenario needs at least one step")
             for i, step in enumerate(steps):
                 if isinstance(step, dict):
-                    _step_problems(step, f"steps[{i}]", rover, problems)
+                    _step_problems(step, f"steps[{i}]", rover, problems, base)
     if problems:
         raise ScenarioError(source, problems)
     return msgspec.convert(data, Scenario)
@@ -182,7 +202,8 @@ def _check_name(kind: str, name: str, rover: Rover | None, path: str, problems: 
                         f"(known: {', '.join(known) or 'none'})")
 
 
-def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[str]) -> None:
+def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[str],
+                   base: Path) -> None:
     if "at_s" in step and "after_s" in step:
         problems.append(f"{path}: give at_s or after_s, not both")
     if not any(k in step for k in ("at_s", "after_s", "when")):
@@ -201,6 +222,8 @@ def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[st
             problems.append(f"{path}.when: {exc}")
         else:
             for c in cond.comparisons:
+                if c.source == "drive":
+                    _check_drives(rover, f"{path}.when", problems)
                 if c.name is not None:
                     kind = {"load": "load", "rail": "rail", "solar": "solar", "radio": "radio"}[c.source]
                     _check_name(kind, c.name, rover, f"{path}.when", problems)
@@ -225,15 +248,64 @@ def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[st
             _number_or_ramp(pos["angle_deg"], f"{path}.position.angle_deg", -360.0, 360.0, problems)
         if isinstance(pos.get("radio"), str):
             _check_name("radio", pos["radio"], rover, f"{path}.position.radio", problems)
+            if rover is not None and rover.drive is not None and any(
+                    r.name == pos["radio"] and r.site is not None for r in rover.radios):
+                problems.append(f"{path}.position.radio: radio {pos['radio']} of {rover.id} follows "
+                                "the rover's drive (it has a site): move the rover with a traverse step")
     clk = step.get("clock")
     if isinstance(clk, dict) and clk.get("time_scale") is None and clk.get("paused") is None:
         problems.append(f"{path}.clock: give time_scale (> 0) or paused (true or false)")
+    if isinstance(step.get("traverse"), dict) and "file" in step["traverse"]:
+        step["traverse"] = _traverse_file(step["traverse"], f"{path}.traverse", base, problems)
+    if step.get("traverse") is not None:
+        _traverse_problems(step["traverse"], f"{path}.traverse", rover, problems)
     rail = step.get("rail")
     if isinstance(rail, dict):
         if rail.get("on") is None and not rail.get("reset"):
             problems.append(f"{path}.rail: give on: true|false or reset: true")
         if isinstance(rail.get("name"), str):
             _check_name("switchable rail", rail["name"], rover, f"{path}.rail.name", problems)
+
+
+def _check_drives(rover: Rover | None, path: str, problems: list[str]) -> None:
+    if rover is not None and rover.drive is None:
+        problems.append(f"{path}: rover {rover.id} has no drive section: it does not drive")
+
+
+def _traverse_file(value: dict, path: str, base: Path, problems: list[str]) -> Any:
+    """The traverse of ``{file: PATH}``, as ``input/drive/traverse`` takes it; or None with
+    the problems noted."""
+    if set(value) != {"file"} or not isinstance(value["file"], str):
+        problems.append(f"{path}: a traverse from a file is {{file: PATH}} alone, got {value!r}")
+        return None
+    try:
+        traverse = load_traverse(base / value["file"])
+    except TraverseError as exc:
+        problems += [f"{path}.file: {exc.source}: {p}" for p in exc.problems]
+        return None
+    return msgspec.to_builtins(traverse.command())
+
+
+def _traverse_problems(value: Any, path: str, rover: Rover | None, problems: list[str]) -> None:
+    """A traverse step: ``stop``, or what ``input/drive/traverse`` takes. Its speeds and the
+    grades between its waypoints are checked against the rover's drive; the first leg starts
+    wherever the rover is when the step fires, so it is checked then, by the drive."""
+    _check_drives(rover, path, problems)
+    if value == STOP:
+        return
+    if not isinstance(value, dict):
+        problems.append(f"{path}: expected {STOP} or a traverse (waypoints, speed_m_per_s, "
+                        f"return_to_start), got {value!r}")
+        return
+    found: list[str] = []
+    check_structure(value, DriveTraverse, found)
+    problems += [f"{path}.{p}" for p in found]
+    if found or rover is None or rover.drive is None:
+        return
+    cmd = msgspec.convert(value, DriveTraverse)
+    first = cmd.waypoints[0] if cmd.waypoints else None
+    start = (first.x_m, first.y_m, first.z_m) if first is not None else (0.0, 0.0, 0.0)
+    problems += [f"{path}.{p}" for p in plan(cmd, rover.drive, start)[1]]
 
 
 def _fault_problems(a: dict, path: str, rover: Rover | None, problems: list[str]) -> FaultKey | None:

@@ -95,6 +95,13 @@ def describe_action(step: Step) -> str:
     if step.rail is not None:
         switch = "reset" if step.rail.reset else ("on" if step.rail.on else "off")
         return f"rail {step.rail.name} {switch}"
+    if step.traverse is not None:
+        t = step.traverse
+        if not isinstance(t, dict):
+            return "traverse stop"
+        speed = f" at {t['speed_m_per_s']:g} m/s" if t.get("speed_m_per_s") is not None else ""
+        back = ", and back" if t.get("return_to_start") else ""
+        return f"traverse through {len(t.get('waypoints', []))} waypoint(s){speed}{back}"
     return "checkpoint"
 
 
@@ -247,4 +254,7 @@ class Player:
             body = {k: v for k, v in msgspec.structs.asdict(step.rail).items()
                     if k != "name" and v is not None}
             return [Write(keys.cmd_rail(rover, step.rail.name), json.dumps(body).encode(), i, "command")]
+        if step.traverse is not None:
+            traverse = json.dumps(step.traverse).encode() if isinstance(step.traverse, dict) else None
+            return [Write(keys.input_drive_traverse(rover), traverse, i, "input")]
         return []

@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("lunaris.report", "draw a recorded session for the debrief"),
     "scenario": ("lunaris.scenario", "play a scripted training scenario"),
     "deploy": ("lunaris.deploy", "a deployment's router access control, secrets and their check"),
+    "traverse": ("lunaris.traverse", "send a rover on a traverse, or stop it"),
 }
 
 

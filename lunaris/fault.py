@@ -94,14 +94,15 @@ def fault_key(rover: str, component: str, kind: str, check: bool = True) -> tupl
 
 
 def send_fault(session: zenoh.Session, rover: str, key: str, payload: bytes | None,
-               timeout_s: float) -> Event | None:
+               timeout_s: float, accepted: str | None = None) -> Event | None:
     """Put (``payload`` bytes) or delete (``payload`` None) a fault key and return the event
-    that answers it, or None when nothing answers within ``timeout_s``.
+    that answers it, or None when nothing answers within ``timeout_s``. ``accepted`` is the
+    event kind that accepts the write, for keys other than faults (``input``).
 
     The event subscriber is declared, and a round trip to the router made, before the
     write, so the answer cannot be missed.
     """
-    wanted = {"rejected", ACCEPTED["clear" if payload is None else "inject"]}
+    wanted = {"rejected", accepted or ACCEPTED["clear" if payload is None else "inject"]}
     answers: queue.SimpleQueue[Event] = queue.SimpleQueue()
 
     def on_event(s: zenoh.Sample) -> None:

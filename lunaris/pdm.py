@@ -95,7 +95,9 @@ class PdmView:
                     self.names[fam.placeholder].append(name)
 
     def bindings(self) -> list[Binding]:
-        names = RoverNames(self.rover, **{p: tuple(v) for p, v in self.names.items()})
+        n = self.names
+        names = RoverNames(self.rover, load=tuple(n["load"]), rail=tuple(n["rail"]),
+                           radio=tuple(n["radio"]), panel=tuple(n["panel"]))
         try:
             return expand(self.mf, [names])
         except ConfigError:  # a mapping naming a component this rover lacks: show the rest

@@ -4,8 +4,8 @@ Every page is made from what the code checks against, so the reference cannot sa
 thing while the code does another: the rover file from :mod:`common.config`, the keys and
 payloads from :data:`common.keys.FAMILIES`, the faults from :data:`common.faults.CATALOGUE`
 and its ``fault_code`` table, the bridge mapping from :mod:`services.bridge.mapping`, the
-scenario format from :mod:`common.scenario`. ``tests/architecture`` fails when the
-committed pages are stale.
+scenario format from :mod:`common.scenario`, the traverse file from :mod:`common.traverse`.
+``tests/architecture`` fails when the committed pages are stale.
 
     python -m lunaris.reference            # rewrite docs/reference/*.md
     python -m lunaris.reference --check    # exit 1 if a committed page differs
@@ -28,6 +28,7 @@ from common.config import Rover
 from common.datafile import struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, NoParams
 from common.scenario import Scenario
+from common.traverse import TraverseFile
 from services.bridge.mapping import CONVERTERS, MappingFile
 
 __all__ = ["DOCS", "main", "pages"]
@@ -153,7 +154,8 @@ def rover_page() -> str:
             "from 0.0 to 1.0, `volts` never decreasing; a load's `rail` names a rail of the "
             "file; `nominal_w <= max_w`; `restore_above_soc` needs `shed_below_soc` and is "
             "above it; an essential rail is never shed; names are unique among rails (the "
-            "solar rail included), loads, panels and radios.\n")
+            "solar rail included), loads, panels and radios; `drive.load` names a load of the "
+            "file and `drive.idle_w` is below that load's `max_w`.\n")
 
 
 def _payload_fields(cls: type[msgspec.Struct]) -> str:
@@ -259,12 +261,29 @@ def scenario_page() -> str:
             + _table(("source", "key", "fields"), sources))
 
 
+def traverse_page() -> str:
+    return (f"# Traverse files\n\n{GENERATED}"
+            "A traverse file (YAML, `config/traverses/` ships examples) is what "
+            "`input/drive/traverse` carries, with a name: `lunaris sim FILE --traverse T.yaml` "
+            "drives it in an accelerated run, `lunaris traverse ROVER T.yaml` sends it to the live "
+            "twin, and a scenario step `traverse: {file: T.yaml}` plays it. Waypoints are in the "
+            "site frame (x east, y north, z up) [m]; the rover drives from where it is through "
+            "each in turn, along straight legs.\n\n"
+            + struct_table(TraverseFile)
+            + "\nChecked against the rover that drives it: every speed at most its "
+            "`drive.max_speed_m_per_s`, every leg at most `drive.max_grade_deg` steep (the first "
+            "from where the rover is), at least one waypoint; a rover without a `drive` section "
+            "cannot follow a traverse. With `return_to_start` the rover comes back over the same "
+            "legs, each at the speed it was driven out at.\n")
+
+
 PAGES: dict[str, Callable[[], str]] = {
     "rover-file.md": rover_page,
     "keys.md": keys_page,
     "faults.md": faults_page,
     "bridge-mapping.md": mapping_page,
     "scenarios.md": scenario_page,
+    "traverses.md": traverse_page,
 }
 
 

@@ -4,7 +4,8 @@ One figure per rover against simulated time: state of charge, battery voltage
 and current, battery temperature, the power of each load, generation (each
 solar panel, the umbilical and the total) against the load, and the session's
 fault events as marks across every plot (injected, cleared, raised, resolved,
-rejected), coloured by severity. ``.html`` embeds the figure and adds the event
+rejected), coloured by severity. A rover that drove also gets its path in the site
+frame, coloured by the drive's power. ``.html`` embeds the figure and adds the event
 table. Drawn with matplotlib's Agg backend: no display needed.
 """
 
@@ -51,6 +52,7 @@ class Session:
     panels: dict[str, Series] = field(default_factory=lambda: defaultdict(lambda: ([], [])))
     summary: dict[str, Series] = field(default_factory=lambda: defaultdict(lambda: ([], [])))
     umbilical: Series = field(default_factory=lambda: ([], []))
+    path: tuple[list[float], list[float], list[float]] = field(default_factory=lambda: ([], [], []))
     events: list[dict] = field(default_factory=list)
 
     @property
@@ -104,6 +106,10 @@ def load_session(path: Path) -> dict[str, Session]:
                 _add(s.summary[name], t, v.get(name))
         elif family == "umbilical/state":
             _add(s.umbilical, t, v.get("power_w"))
+        elif family == "drive/state":
+            if None not in (v.get("x_m"), v.get("y_m"), v.get("power_w")):
+                for series, name in zip(s.path, ("x_m", "y_m", "power_w"), strict=True):
+                    series.append(float(v[name]))
         elif family == "event":
             ident = (rover, t, v.get("kind"), v.get("key"), v.get("message"))
             if ident not in seen_events:  # a cache replayed after a reconnection
@@ -130,7 +136,13 @@ def draw(s: Session, title: str):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(5, 1, figsize=(13, 16), sharex=True, constrained_layout=True)
+    drove = len(s.path[0]) > 0
+    fig, all_axes = plt.subplots(6 if drove else 5, 1, figsize=(13, 24 if drove else 16),
+                                 constrained_layout=True,
+                                 gridspec_kw={"height_ratios": [1] * 5 + ([2.2] if drove else [])})
+    axes = all_axes[:5]  # against time
+    for ax in axes[1:]:
+        ax.sharex(axes[0])
     ax_soc, ax_vi, ax_temp, ax_loads, ax_gen = axes
     b = s.battery
     ax_soc.plot(b["soc"][0], [x * 100 for x in b["soc"][1]], color="tab:green")
@@ -172,8 +184,28 @@ def draw(s: Session, title: str):
         ax_soc.annotate(_short(s, e), xy=(e.get("t_s", 0.0), 1.0), xycoords=("data", "axes fraction"),
                         xytext=(2, -4 - 9 * (i % 6)), textcoords="offset points", fontsize="x-small",
                         va="top", color=SEVERITY_COLOUR.get(e.get("severity", ""), "gray"))
+    if drove:
+        _draw_path(fig, all_axes[5], s)
     fig.suptitle(title)
     return fig
+
+
+def _draw_path(fig, ax, s: Session) -> None:
+    """The path in the site frame, each position coloured by the drive's power then (the
+    hottest drawn last, so a grade driven both ways shows the climb)."""
+    xs, ys, power = s.path
+    order = sorted(range(len(xs)), key=power.__getitem__)
+    dots = ax.scatter([xs[i] for i in order], [ys[i] for i in order], c=[power[i] for i in order],
+                      cmap="plasma", s=10, linewidths=0)
+    fig.colorbar(dots, ax=ax, label="drive power [W]")
+    ax.plot(xs[:1], ys[:1], marker="o", color="tab:green", linestyle="", label="first position")
+    ax.plot(xs[-1:], ys[-1:], marker="s", color="black", linestyle="", label="last position")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x, east [m]")
+    ax.set_ylabel("y, north [m]")
+    ax.set_title("path in the site frame, coloured by the drive's power", fontsize="medium")
+    ax.legend(loc="upper left", fontsize="small")
+    ax.grid(True, alpha=0.3)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -215,7 +247,8 @@ def main(args: argparse.Namespace) -> int:
         out.write_bytes(png.getvalue())
     else:
         out.write_text(_html(s, title, png.getvalue()))
-    print(f"wrote {out}: {rover}, {t1 - t0:.0f} s of sim time, {len(s.loads)} loads, "
+    drove = f", a path of {len(s.path[0])} positions" if s.path[0] else ""
+    print(f"wrote {out}: {rover}, {t1 - t0:.0f} s of sim time, {len(s.loads)} loads{drove}, "
           f"{len(_marks(s))} fault event(s), {len(s.events)} event(s) in all")
     return 0
 

@@ -1,4 +1,10 @@
-"""``lunaris run SERVICE --rover FILE``: one service, as a container runs it."""
+"""``lunaris run SERVICE --rover FILE``: one service, as a container runs it.
+
+A service module may define ``serves(rover) -> bool``: the rovers it has nothing to do for
+are left out (the drive serves only rovers with a ``drive`` section). When that leaves no
+rover, the service says so and exits 0 at once: ``lunaris up`` does not start it then, and a
+container of it stops cleanly instead of serving nothing.
+"""
 
 from __future__ import annotations
 
@@ -12,13 +18,13 @@ from common.connection import add_connection_args, config_from_args
 from common.runtime import AlreadyRunning, Runtime
 
 __all__ = ["ALREADY_RUNNING", "CONFIG_ERROR", "SERVICES", "SUPERVISOR_ENV", "add_arguments",
-           "load_rovers", "main"]
+           "load_rovers", "main", "served"]
 
 CONFIG_ERROR = 2  # exit status: a rover file, mapping or option that cannot work (do not retry)
 ALREADY_RUNNING = 3  # exit status: another instance serves these rovers (do not retry)
 SUPERVISOR_ENV = "LUNARIS_SUPERVISOR_PID"  # set by `lunaris up`: a service dies with it
 
-SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -51,9 +57,19 @@ def load_rovers(paths: list[str]) -> list[Rover]:
     return rovers
 
 
+def served(service: str, rovers: list[Rover]) -> list[Rover]:
+    """The rovers a service has something to do for (see the module's docstring)."""
+    serves = getattr(importlib.import_module(f"services.{service}.service"), "serves", None)
+    return [r for r in rovers if serves is None or serves(r)]
+
+
 def main(args: argparse.Namespace) -> int:
-    rovers = load_rovers(args.rover)
+    rovers = served(args.service, load_rovers(args.rover))
     module = importlib.import_module(f"services.{args.service}.service")
+    if not rovers:
+        print(f"lunaris {args.service}: no rover to serve (none of {', '.join(args.rover)} "
+              f"needs it); exiting", flush=True)
+        return 0
     options: dict[str, object] = {"seed": args.seed}
     if args.service == "bridge":
         options["mapping_file"] = args.bridge_config

@@ -1,7 +1,10 @@
-"""``lunaris sim FILE --hours H``: an accelerated run of the composed models, no Zenoh.
+"""``lunaris sim FILE [--hours H] [--traverse TRAVERSE.yaml]``: accelerated runs, no Zenoh.
 
-For the vehicle engineer checking a power budget: state of charge over the run,
-when rails are shed, when (if ever) the pack is depleted.
+For the vehicle engineer checking a power budget: state of charge over the run, when rails
+are shed, when (if ever) the pack is depleted. With ``--traverse`` the rover drives a
+traverse file from its start (``--return``: and back) and the run answers "can this rover
+do this traverse and come back with the reserve left?" plainly; the exit status is then 0
+for yes and 1 for no.
 """
 
 from __future__ import annotations
@@ -10,35 +13,50 @@ import argparse
 import sys
 import time
 
+from common.traverse import TraverseError, load_traverse
 from lunaris.run import load_rovers
 from services.composed import run_budget
+from services.drive.budget import TraverseBudget, run_traverse
 
 __all__ = ["add_arguments", "main"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE", help="rover definition")
-    p.add_argument("--hours", type=float, default=8.0, help="simulated hours (default 8)")
+    p.add_argument("--hours", type=float, default=None,
+                   help="simulated hours (default 8; with --traverse: a time limit, default "
+                        "three times the planned duration plus an hour)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the loads")
+    p.add_argument("--traverse", metavar="TRAVERSE.yaml", help="drive this traverse file")
+    p.add_argument("--return", dest="back", action="store_true",
+                   help="with --traverse: then drive back through its waypoints to the start")
+    p.add_argument("--reserve", type=float, default=0.2, metavar="SOC",
+                   help="with --traverse: the state of charge to keep, 0..1 (default 0.2)")
 
 
 def _hms(t_s: float) -> str:
-    h, rem = divmod(int(t_s), 3600)
+    h, rem = divmod(int(round(t_s)), 3600)
     return f"{h:d}:{rem // 60:02d}:{rem % 60:02d}"
 
 
 def main(args: argparse.Namespace) -> int:
-    if not args.hours > 0:
+    if args.hours is not None and not args.hours > 0:
         print(f"--hours must be > 0, got {args.hours}", file=sys.stderr)
         return 2
+    if args.traverse is not None:
+        return _traverse(args)
+    if args.back:
+        print("--return needs --traverse", file=sys.stderr)
+        return 2
+    hours = 8.0 if args.hours is None else args.hours
     (rover,) = load_rovers([args.file])
-    print(f"{rover.id}: {args.hours:g} simulated hours at {rover.tick_hz:g} Hz")
+    print(f"{rover.id}: {hours:g} simulated hours at {rover.tick_hz:g} Hz")
 
     def progress(done: int, total: int, twin) -> None:
         print(f"  {done / total:5.0%}  t={_hms(twin.t_s)}  soc={twin.battery.soc:.4f}", flush=True)
 
     t0 = time.perf_counter()
-    b = run_budget(rover, args.hours, args.seed, progress)
+    b = run_budget(rover, hours, args.seed, progress)
     wall = time.perf_counter() - t0
     print(f"done: {b.ticks} ticks in {wall:.2f} s ({b.simulated_s / wall:,.0f}x real time)")
     print(f"  state of charge   {b.final_soc:.4f} at the end, {b.min_soc:.4f} at the lowest")
@@ -50,3 +68,68 @@ def main(args: argparse.Namespace) -> int:
     print(f"  depleted at {_hms(b.depleted_at_s)}" if b.depleted_at_s is not None
           else "  never depleted")
     return 0
+
+
+def _traverse(args: argparse.Namespace) -> int:
+    if not 0.0 <= args.reserve < 1.0:
+        print(f"--reserve is a state of charge, 0 to 1, got {args.reserve}", file=sys.stderr)
+        return 2
+    (rover,) = load_rovers([args.file])
+    try:
+        plan = load_traverse(args.traverse, rover)
+    except TraverseError as exc:
+        print(exc, file=sys.stderr)
+        return 2
+    cmd = plan.command()
+    if args.back:
+        cmd.return_to_start = True
+    print(f"{rover.id}: traverse {plan.traverse.name!r} ({args.traverse})"
+          f"{', and back' if cmd.return_to_start else ''}, from the rover file's start")
+
+    def progress(twin) -> None:
+        r = twin.drive.reading()
+        print(f"  t={_hms(twin.t_s)}  soc={twin.battery.soc:.4f}  odometer {r.odometer_m:8.1f} m  "
+              f"{r.status}", flush=True)
+
+    t0 = time.perf_counter()
+    try:
+        b = run_traverse(rover, cmd, args.reserve, args.hours, args.seed, progress)
+    except ValueError as exc:  # the rover's drive refuses it
+        print(f"{args.traverse}: {exc}", file=sys.stderr)
+        return 2
+    wall = time.perf_counter() - t0
+    print(f"done: {b.simulated_s / 3600:.2f} simulated hours in {wall:.2f} s "
+          f"({b.simulated_s / wall:,.0f}x real time)")
+    _print_budget(b)
+    return 0 if b.ok else 1
+
+
+def _print_budget(b: TraverseBudget) -> None:
+    print(f"  planned           {b.waypoints} waypoint(s), {b.planned_length_m:,.0f} m, "
+          f"{_hms(b.planned_duration_s)} at the commanded speeds")
+    if b.arrived_at_s is not None:
+        late = b.arrived_at_s - b.planned_duration_s
+        print(f"  arrived           at {_hms(b.arrived_at_s)} ({late / 60:+.1f} min against the plan)")
+    else:
+        print(f"  did NOT arrive    {b.outcome} at {_hms(b.simulated_s)}, {b.odometer_m:,.0f} m "
+              f"of {b.planned_length_m:,.0f} m driven")
+    if b.power_limited_s > 0:
+        print(f"  power limited     {_hms(b.power_limited_s)} (slowed by the drive load's max_w)")
+    if b.unpowered_s > 0:
+        print(f"  halted            {_hms(b.unpowered_s)} without power to the drive")
+    print(f"  drive energy      {b.drive_energy_j / 3600:,.1f} Wh, peak {b.peak_drive_w:,.0f} W")
+    print(f"  from the pack     {b.battery_energy_j / 3600:,.1f} Wh (every load, less generation)")
+    print(f"  state of charge   {b.final_soc:.1%} at the end, {b.min_soc:.1%} at the lowest")
+    reserve = f"{b.reserve_soc:.0%}"
+    c = b.below_reserve
+    if c is not None:
+        to = f", driving to waypoint {c.waypoint}" if c.waypoint is not None else ""
+        print(f"  below {reserve}         at {_hms(c.t_s)}, {c.odometer_m:,.0f} m along, at "
+              f"({c.x_m:,.0f}, {c.y_m:,.0f}) m{to}")
+    if b.ok:
+        print(f"answer: YES - it arrives with {b.final_soc:.1%} left, above the {reserve} reserve "
+              f"(a margin of {(b.min_soc - b.reserve_soc) * 100:.1f} points at the lowest)")
+    elif b.arrived_at_s is not None:
+        print(f"answer: NO - it arrives, but the charge falls below the {reserve} reserve on the way")
+    else:
+        print(f"answer: NO - it does not arrive ({b.outcome})")

@@ -1,7 +1,8 @@
 """``lunaris up``: an embedded router and every service for the given rovers, supervised.
 
 Each service runs in its own process (``lunaris run``), connected as a client to
-the router this process opens. A service that dies is restarted (with a growing
+the router this process opens. A service no rover needs is not started (the drive, when no
+rover has a ``drive`` section). A service that dies is restarted (with a growing
 back-off if it keeps dying) and resumes from its persisted state. A compact
 status line per rover is shown; Ctrl-C stops everything.
 """
@@ -25,7 +26,7 @@ import zenoh
 from common import keys
 from common.connection import DEFAULT_ENDPOINT, make_config
 from common.messages import BatteryState, RailState, decode
-from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV, load_rovers
+from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV, load_rovers, served
 
 __all__ = ["Supervisor", "add_arguments", "main"]
 
@@ -175,7 +176,8 @@ class _Status:
         live = self.services.setdefault(rover, set())
         (live.add if s.kind == zenoh.SampleKind.PUT else live.discard)(parts[-1])
 
-    def lines(self, expected: int, failed: dict[str, str] | None = None) -> list[str]:
+    def lines(self, expected: dict[str, int], failed: dict[str, str] | None = None) -> list[str]:
+        """One line per rover; ``expected`` is how many services serve each rover."""
         out = []
         failing = (" FAILED: " + ", ".join(f"{s} ({why})" for s, why in sorted(failed.items()))
                    if failed else "")
@@ -183,7 +185,7 @@ class _Status:
             b = self.battery.get(rover)
             rails = self.rails[rover]
             on = sum(1 for s in rails.values() if s == "on")
-            svc = f"services {len(self.services.get(rover, ()))}/{expected}{failing}"
+            svc = f"services {len(self.services.get(rover, ()))}/{expected.get(rover, 0)}{failing}"
             if b is None:
                 out.append(f"{rover:<12} waiting for the battery ...  {svc}")
                 continue
@@ -204,6 +206,11 @@ def main(args: argparse.Namespace) -> int:
         print(f"unknown service(s): {', '.join(unknown)} (known: {', '.join(SERVICES)})",
               file=sys.stderr)
         return 2
+    for service in [s for s in services if not served(s, rovers)]:
+        print(f"[up] {service} not started: no rover needs it ({service} serves only rovers "
+              f"with a {service} section)", flush=True)
+        services.remove(service)
+    expected = {r.id: sum(1 for s in services if served(s, [r])) for r in rovers}
     listen = args.listen or [DEFAULT_ENDPOINT]
     temp_state = args.state_dir is None
     state_dir = Path(tempfile.mkdtemp(prefix="lunaris-")) if temp_state else Path(args.state_dir)
@@ -231,14 +238,14 @@ def main(args: argparse.Namespace) -> int:
             if args.no_status:
                 continue
             if tty and now - last_print >= 1.0:
-                lines = status.lines(len(services), sup.failed)
+                lines = status.lines(expected, sup.failed)
                 if shown:
                     sys.stdout.write(f"\x1b[{shown}F")
                 sys.stdout.write("".join(f"\x1b[2K{line}\n" for line in lines))
                 sys.stdout.flush()
                 shown, last_print = len(lines), now
             elif not tty and now - last_print >= 10.0:
-                print("\n".join(status.lines(len(services), sup.failed)), flush=True)
+                print("\n".join(status.lines(expected, sup.failed)), flush=True)
                 last_print = now
     finally:
         print("[up] stopping ...", flush=True)

@@ -24,6 +24,7 @@ from common import keys
 from common.messages import (
     BatteryState,
     Clock,
+    DriveState,
     Event,
     LoadPower,
     PowerSummary,
@@ -39,6 +40,8 @@ __all__ = ["Connection", "Snapshot", "render"]
 SEVERITY_STYLE = {"info": "cyan", "warning": "yellow", "critical": "bold red"}
 SEVERITY_RANK = {"info": 0, "warning": 1, "critical": 2}
 RAIL_STYLE = {"on": "green", "off": "dim", "shed": "yellow", "tripped": "bold red", "failed": "bold red"}
+DRIVE_STYLE = {"driving": "green", "power_limited": "bold yellow", "unpowered": "bold red",
+               "arrived": "cyan", "parked": ""}
 STALE_S = 3.0  # telemetry older than this (wall time) is flagged
 
 
@@ -216,6 +219,34 @@ def _radio_panel(snap: Snapshot, rover: str) -> Panel:
     return Panel(_kv(rows), title="radios", border_style="blue", expand=False)
 
 
+def _drive_panel(snap: Snapshot, rover: str) -> Panel | None:
+    """The drive of a rover that has one (None for a rover that does not drive)."""
+    got = snap.value(keys.drive_state(rover), DriveState)
+    if got is None:
+        return None
+    d, age = got
+    status = Text(d.status.replace("_", " ").upper(), style=DRIVE_STYLE.get(d.status, ""))
+    if d.waypoint is not None:
+        traverse = f"to waypoint {d.waypoint + 1} of {d.waypoints}, {d.remaining_m:,.0f} m to go"
+    else:
+        traverse = "arrived" if d.status == "arrived" else "none"
+    rows: list[tuple[str, Text | str]] = [
+        ("status", status),
+        ("position", f"x {d.x_m:,.1f}  y {d.y_m:,.1f}  z {d.z_m:,.1f} m"),
+        ("heading", f"{d.heading_deg:5.0f} deg   grade {d.grade_deg:+.1f} deg"),
+        ("speed", f"{d.speed_m_per_s:8.2f} m/s"),
+        ("power", Text(f"{d.power_w:8.1f} W   force {d.tractive_force_n:,.1f} N   torque "
+                       f"{d.wheel_torque_nm:,.2f} N m",
+                       style="yellow" if d.status == "power_limited" else "")),
+        ("traverse", traverse),
+        ("odometer", f"{d.odometer_m:8,.1f} m   drive energy {d.energy_j / 3600:,.2f} Wh"),
+    ]
+    if age > STALE_S:
+        rows.append(("", Text(f"no update for {_duration(age)}", style="yellow")))
+    return Panel(_kv(rows), title="drive", border_style="red" if d.status == "unpowered" else "blue",
+                 expand=False)
+
+
 def _pdm_table(snap: Snapshot, rover: str) -> Table:
     rails = snap.named(rover, "rail", "state", RailState)
     loads = snap.named(rover, "load", "power", LoadPower)
@@ -308,8 +339,9 @@ def _rover_header(snap: Snapshot, rover: str) -> Text:
 def render_rover(snap: Snapshot, rover: str, n_events: int) -> RenderableType:
     faults = snap.faults.get(rover, [])
     # Columns keep each part at its natural width and wrap on a narrow terminal.
+    drive = _drive_panel(snap, rover)
     top = Columns([_battery_panel(snap, rover, faults), _power_panel(snap, rover),
-                   _radio_panel(snap, rover)], padding=(0, 1))
+                   _radio_panel(snap, rover), *([drive] if drive is not None else [])], padding=(0, 1))
     middle = Columns([_pdm_table(snap, rover), _faults_table({rover: faults}, fleet=False)],
                      padding=(0, 3))
     events = [(r, e) for r, e in snap.events if r == rover]
@@ -320,8 +352,9 @@ def render_fleet(snap: Snapshot, n_events: int) -> RenderableType:
     t = Table(title=f"fleet: {len(snap.rovers())} rover(s)", box=box.SIMPLE_HEAD, title_justify="left",
               title_style="bold")
     for name in ("rover", "sim t", "x", "SoC", "V", "A", "C", "to empty", "loads W", "gen W",
-                 "rails on", "radios", "faults", "services"):
-        t.add_column(name, no_wrap=True, justify="left" if name in ("rover", "radios") else "right")
+                 "rails on", "radios", "drive", "faults", "services"):
+        t.add_column(name, no_wrap=True, justify="left" if name in ("rover", "radios", "drive")
+                     else "right")
     for rover in snap.rovers():
         c = snap.value(keys.clock(rover), Clock)
         b = snap.value(keys.battery_state(rover), BatteryState)
@@ -345,11 +378,15 @@ def render_fleet(snap: Snapshot, n_events: int) -> RenderableType:
         row.append(Text(f"{on}/{len(rails)}", style="bold red" if bad_rails else ""))
         row.append(Text(" ".join(f"{n}:{'in' if r.in_range else 'OUT'}" for n, r in radios.items()),
                         style="" if all(r.in_range for r in radios.values()) else "bold red"))
+        d = snap.value(keys.drive_state(rover), DriveState)
+        row.append(Text(f"{d[0].status.replace('_', ' ')} {d[0].speed_m_per_s:.2f} m/s "
+                        f"{d[0].odometer_m:,.0f} m", style=DRIVE_STYLE.get(d[0].status, ""))
+                   if d else "-")
         row.append(Text(str(len(faults)), style=_sev(worst) if worst else "green"))
         row.append(str(len(snap.services.get(rover, ()))))
         t.add_row(*row)
     if not snap.rovers():
-        t.add_row("waiting for rovers ...", *[""] * 13)
+        t.add_row("waiting for rovers ...", *[""] * 14)
     return Group(t, _faults_table(snap.faults, fleet=True), _events_table(snap.events, n_events, fleet=True))
 
 

@@ -2,7 +2,8 @@
 
 Each tick runs what the services do over Zenoh, in the same order: the battery
 integrates the tick at the demand it was holding (zero-order hold), the loads
-draw new samples, solar and the PDM resolve rails (trips, shedding,
+draw new samples, the drive (of a rover that has one) moves over the tick and
+sets its load's power, solar and the PDM resolve rails (trips, shedding,
 protection) and the new net demand goes to the battery. Faults are applied
 with the same model attributes the services set. No I/O, no clock, no Zenoh.
 """
@@ -15,6 +16,7 @@ import numpy as np
 
 from common.config import Rover
 from services.battery.model import BatteryModel, BatteryReading
+from services.drive.model import DriveModel, motors_powered
 from services.loads.model import LoadsModel
 from services.power.model import PowerModel, Summary
 from services.solar.model import SolarModel
@@ -36,6 +38,12 @@ class ComposedTwin:
         self._samples = np.empty((0, len(self.loads.names)))
         self._row = 0
         self._load_rail = list(zip(self.loads.names, self.loads.rails, strict=True))
+        # -- the drive (one self-contained block): it sets its load's power ---------------------
+        self.drive: DriveModel | None = None
+        if rover.drive is not None:
+            load = next(ld for ld in rover.loads if ld.name == rover.drive.load)
+            self.drive = DriveModel(rover.drive, load.max_w)
+            self._drive_load, self._drive_rail = load.name, load.rail
         self.summary: Summary = self._resolve()
 
     def _next_samples(self) -> np.ndarray:
@@ -75,7 +83,18 @@ class ComposedTwin:
         self.battery.step(self.dt_s)
         self.t_s += self.dt_s
         self.loads.sampled_w = self._next_samples()
+        if self.drive is not None:
+            self._step_drive(self.drive)
         self.summary = self._resolve()
+
+    def _step_drive(self, drive: DriveModel) -> None:
+        """As the drive and loads services do: the drive moves over the tick if its load
+        supplies it, and sets its load's power for the next tick."""
+        loads, name = self.loads, self._drive_load
+        drive.set_powered(motors_powered(loads.rail_on.get(self._drive_rail, False),
+                                         loads.faults.get(name, ())))
+        drive.step(self.dt_s)
+        loads.driven_w[name] = drive.power_w
 
     def reading(self) -> BatteryReading:
         return self.battery.reading()

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from tests.harness import ALL_SERVICES, ROVERS, Probe, Twin, free_endpoint, open_router
+from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router, static_rover
 
 # Tests never read an operator's Zenoh configuration.
 os.environ.pop("LUNARIS_ZENOH_CONFIG", None)
@@ -31,9 +31,16 @@ def probe(router):
         yield p
 
 
+@pytest.fixture(scope="session")
+def static_mapp_file() -> Path:
+    """The MAPP rover without its drive (see tests/harness.py): the rover of the power-chain,
+    fault and tool tests."""
+    return static_rover("mapp.yaml")
+
+
 @pytest.fixture
-def mapp_file() -> Path:
-    return ROVERS / "mapp.yaml"
+def mapp_file(static_mapp_file) -> Path:
+    return static_mapp_file
 
 
 @pytest.fixture
@@ -67,13 +74,14 @@ def probe_solo(router):
 
 
 @pytest.fixture(scope="module")
-def mapp_twin(tmp_path_factory):
-    """(probe, twin): every service for mapp-1 on a router of their own, shared by one module.
-    The probe watches every lunaris key; tests must undo what they change."""
+def mapp_twin(tmp_path_factory, static_mapp_file):
+    """(probe, twin): every service for mapp-1 (without its drive) on a router of their own,
+    shared by one module. The probe watches every lunaris key; tests must undo what they
+    change."""
     endpoint = free_endpoint()
     router = open_router(endpoint)
     try:
-        with Twin(endpoint, [ROVERS / "mapp.yaml"], tmp_path_factory.mktemp("twin")) as t, \
+        with Twin(endpoint, [static_mapp_file], tmp_path_factory.mktemp("twin")) as t, \
                 Probe(endpoint) as p:
             p.watch("lunaris/**")
             p.wait_services("mapp-1", ALL_SERVICES)

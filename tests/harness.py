@@ -6,16 +6,24 @@
   even when the test fails.
 - :class:`Probe` is a client session that keeps the latest sample of every key
   it watches and waits on conditions with a deadline, never on fixed sleeps.
+- :func:`rover_without_drive` writes a shipped rover without its ``drive`` section: the
+  first release's rover, whose drive load is a noisy sample and whose radios take the
+  position input. The tests of the power chain, the faults and the tools use it, so their
+  expectations (a pack that drains, a position typed in) do not depend on the drive's.
 """
 
 from __future__ import annotations
 
+import atexit
+import functools
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -26,10 +34,42 @@ import zenoh
 
 from common import keys
 from common.connection import make_config
+from common.datafile import load_yaml
 
 ROOT = Path(__file__).resolve().parent.parent
 ROVERS = ROOT / "config" / "rovers"
 ALL_SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
+
+
+def rover_without_drive(src: Path, folder: Path) -> Path:
+    """``src`` without its drive section (the top-level ``drive:`` block, cut from the text so
+    the rest reads as written), written to ``folder`` under the same name."""
+    kept, inside = [], False
+    for line in src.read_text().splitlines(keepends=True):
+        if line.startswith("drive:"):
+            inside = True
+        elif inside and line.strip() and not line[0].isspace() and not line.startswith("#"):
+            inside = False
+        if not inside:
+            kept.append(line)
+    folder.mkdir(parents=True, exist_ok=True)
+    dst = folder / src.name
+    dst.write_text("".join(kept))
+    assert load_yaml(dst.read_text(), str(dst)).get("drive") is None, dst
+    return dst
+
+
+@functools.cache
+def _static_folder() -> Path:
+    folder = Path(tempfile.mkdtemp(prefix="lunaris-static-rovers-"))
+    atexit.register(shutil.rmtree, folder, ignore_errors=True)
+    return folder
+
+
+@functools.cache
+def static_rover(name: str) -> Path:
+    """``config/rovers/<name>`` without its drive section, written once per test process."""
+    return rover_without_drive(ROVERS / name, _static_folder())
 
 
 def free_endpoint() -> str:

@@ -2,7 +2,9 @@
 
 :func:`expand` turns each mapping into one :class:`Binding` per rover and per component
 (``{load}``, ``{rail}``, ``{radio}``, ``{panel}`` placeholders run over the rover's
-components), checking the resulting ROS 2 names and that no two bindings share a topic.
+components), checking the resulting ROS 2 names and that no two bindings share a topic. A
+key of the drive (``drive/state``) has no binding for a rover that does not drive, as a
+``{radio}`` mapping has none for a rover without radios.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ class RoverNames(NamedTuple):
     rail: tuple[str, ...] = ()
     radio: tuple[str, ...] = ()
     panel: tuple[str, ...] = ()
+    drives: bool = False  # the rover has a drive section
 
 
 def rover_names(rover: Rover) -> RoverNames:
@@ -36,6 +39,7 @@ def rover_names(rover: Rover) -> RoverNames:
         rail=tuple([x.name for x in rover.rails] + [rover.solar.rail.name]),
         radio=tuple(x.name for x in rover.radios),
         panel=tuple(x.name for x in rover.solar.panels),
+        drives=rover.drive is not None,
     )
 
 
@@ -78,6 +82,8 @@ def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mappin
         shape, item = found
         placeholder = shape.placeholder
         for rover in rovers:
+            if shape.owner == "drive" and not rover.drives:
+                continue
             if placeholder is None:
                 items: tuple[str | None, ...] = (None,)
             elif item is not None and item.startswith("{"):

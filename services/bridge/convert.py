@@ -7,6 +7,7 @@
   units, current negative while discharging, charge and capacity in Ah, percentage 0..1).
 - :func:`diagnostic_statuses` reports each component of the rover with the ROS levels
   OK / WARN / ERROR / STALE.
+- :func:`odometry_message`: the rover's site position and speed as ``nav_msgs/msg/Odometry``.
 
 Messages are plain dicts of ROS 2 fields; :mod:`services.bridge.cdr` makes bytes of them.
 """
@@ -20,7 +21,7 @@ import msgspec
 
 from common import keys
 from common.config import Battery, Rover
-from common.messages import ActiveFault, BadInput, BatteryState
+from common.messages import ActiveFault, BadInput, BatteryState, DriveState
 from services.bridge.bindings import rover_names
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants
 from services.bridge.mapping import Mapping
@@ -40,6 +41,7 @@ __all__ = [
     "in_payload",
     "level_name",
     "nominal_voltage_v",
+    "odometry_message",
     "out_message",
     "out_value",
     "stamp",
@@ -131,6 +133,35 @@ def in_payload(m: Mapping, msg: dict) -> dict[str, Any]:
 def stamp(t_ns: int) -> dict[str, int]:
     """A ``builtin_interfaces/msg/Time`` from nanoseconds."""
     return {"sec": t_ns // 1_000_000_000, "nanosec": t_ns % 1_000_000_000}
+
+# == nav_msgs/msg/Odometry ======================================================================
+
+
+def odometry_message(state: DriveState, stamp_ns: int, frame_id: str = "",
+                     options: dict[str, str] | None = None) -> dict:
+    """``nav_msgs/msg/Odometry`` from the twin's ``drive/state`` (REP-103: x east, y north,
+    z up, the ENU site frame of the twin).
+
+    - ``pose.position`` is the rover's site position [m] in ``frame_id`` (default ``site``);
+    - ``pose.orientation``: yaw from the compass heading (``yaw = 90 deg - heading``,
+      counter-clockwise from east) and pitch from the grade (nose up is a negative pitch
+      about the body's y axis, left);
+    - ``twist.linear.x`` is the speed along the ground in the body frame ``child_frame_id``
+      (option, default ``base_link``); the covariances are zero: the twin knows its truth.
+    """
+    options = options or {}
+    yaw = math.radians(90.0 - state.heading_deg)
+    pitch = -math.radians(state.grade_deg)
+    cy, sy = math.cos(yaw / 2.0), math.sin(yaw / 2.0)
+    cp, sp = math.cos(pitch / 2.0), math.sin(pitch / 2.0)
+    return {
+        "header": {"stamp": stamp(stamp_ns), "frame_id": frame_id or "site"},
+        "child_frame_id": options.get("child_frame_id", "base_link"),
+        "pose": {"pose": {"position": {"x": state.x_m, "y": state.y_m, "z": state.z_m},
+                          "orientation": {"x": -sy * sp, "y": cy * sp, "z": sy * cp, "w": cy * cp}}},
+        "twist": {"twist": {"linear": {"x": state.speed_m_per_s}}},
+    }
+
 
 # == sensor_msgs/msg/BatteryState ===============================================================
 

@@ -129,6 +129,7 @@ CONVERTERS: dict[str, Converter] = {
     "battery_state": Converter("sensor_msgs/msg/BatteryState", ("battery", "state"),
                                frozenset({"technology", "location", "serial_number"})),
     "diagnostics": Converter("diagnostic_msgs/msg/DiagnosticArray", ("event",), frozenset()),
+    "odometry": Converter("nav_msgs/msg/Odometry", ("drive", "state"), frozenset({"child_frame_id"})),
 }
 
 # -- parsing and validation ---------------------------------------------------------------------

@@ -39,6 +39,7 @@ from services.bridge.convert import (
     diagnostic_array_message,
     diagnostic_statuses,
     in_payload,
+    odometry_message,
     out_message,
 )
 from services.bridge.mapping import MappingFile, load_mapping
@@ -157,6 +158,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             return battery_state_message(payload, rover_cfg[outlet.binding.rover].battery,
                                          stamp_ns(payload.t_s), m.frame_id, m.options,
                                          opts.ros_distro)
+        if m.convert == "odometry":
+            return odometry_message(payload, stamp_ns(payload.t_s), m.frame_id, m.options)
         return out_message(m, payload)
 
     # -- diagnostics: the faults in effect and each component's last telemetry -----------------

@@ -10,7 +10,8 @@
   it, before publishing the effect. Nothing is kept here that could go stale.
 - **The gatekeeper** for what no other service owns: an instructor key for a rover no
   service serves, a fault on an unknown component, an input or command the twin does not
-  have. Each is rejected with an event, like every other bad input.
+  have (a traverse for a rover without a ``drive`` section). Each is rejected with an event,
+  like every other bad input.
 - **Session controls** (``control/reset``, ``control/snapshot/<name>``,
   ``control/restore/<name>``): every service acts on its own state (``common.session``);
   this one answers each with the one ``session`` event that marks it in the journal, or
@@ -50,6 +51,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     folder = rt.store.dir
     journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None)
                 for r in rovers}
+    drives = {r.id: r.drive is not None for r in rovers}
     live_rovers: set[str] = set()
     session = rt.session
     assert session is not None
@@ -85,6 +87,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             writable = ", ".join(f.name for f in keys.families("in"))
             raise BadInput(f"no such input or command {'/'.join(s.parts)!r} (the twin reads: "
                            f"{writable}, fault/...)")
+        if family.owner == "drive" and not drives[s.rover]:
+            raise BadInput(f"rover {s.rover} has no drive section in its rover file: it does not "
+                           "drive, so it cannot follow a traverse")
 
     def on_control(s: Sample) -> None:
         control = parse_control(s.parts)

@@ -3,6 +3,10 @@
 Every tick a load draws ``clip(N(nominal_w, std_w), 0, max_w)`` [W]. It draws
 nothing while its rail is off. Faults (SPEC §6) override the sample: ``short``
 draws ``V_rail^2 / R``, ``open`` nothing, ``stuck`` a constant power.
+
+The drive load of a rover with a ``drive`` section draws what the drive sets
+(:meth:`LoadsModel.set_driven`, from ``drive/state``; ``idle_w`` until it says otherwise)
+instead of samples; its faults still win.
 """
 
 from __future__ import annotations
@@ -34,6 +38,9 @@ class LoadsModel:
         self.max_w = np.array([ld.max_w for ld in rover.loads], dtype=float)
         self.sampled_w = self.nominal_w.copy()
         self.rail_on = {r.name: r.initially_on for r in rover.rails}
+        # The drive load: what the drive sets, instead of a sample.
+        self.idle_w = {rover.drive.load: rover.drive.idle_w} if rover.drive is not None else {}
+        self.driven_w: dict[str, float] = dict(self.idle_w)
         self.faults: dict[str, dict[str, Params]] = {}  # load -> {kind: params}
         self.rng = np.random.default_rng(seed)
 
@@ -41,6 +48,18 @@ class LoadsModel:
         """Draw a new noisy sample for every load (one tick)."""
         if len(self.names):
             self.sampled_w = sample_power(self.rng, self.nominal_w, self.std_w, self.max_w)
+
+    def set_driven(self, name: str, power_w: float) -> bool:
+        """The power the drive sets for its load [W]; True when it changed. Ignored for a load
+        the drive does not own."""
+        if name not in self.driven_w or self.driven_w[name] == power_w:
+            return False
+        self.driven_w[name] = power_w
+        return True
+
+    def reset_driven(self) -> None:
+        """Back to the drive's idle power (a session reset)."""
+        self.driven_w = dict(self.idle_w)
 
     def set_rail(self, rail: str, on: bool) -> bool:
         """Record a rail's state; True when it changed."""
@@ -57,7 +76,8 @@ class LoadsModel:
             return 0.0, False
         faults = self.faults.get(name)
         if not faults:
-            return float(self.sampled_w[i]), True
+            driven = self.driven_w.get(name)
+            return (float(self.sampled_w[i]) if driven is None else driven), True
         # Several faults on one load: a short dominates, then an open circuit, then stuck.
         short = faults.get("short")
         if isinstance(short, ShortParams):

@@ -1,11 +1,15 @@
-"""Loads service: samples every load on the clock and publishes each one's power."""
+"""Loads service: samples every load on the clock and publishes each one's power.
+
+The drive load of a rover that drives takes its power from ``drive/state`` instead, and is
+republished as soon as that changes.
+"""
 
 from __future__ import annotations
 
 from common import keys
 from common.config import Rover
 from common.faults import FaultKey, Params
-from common.messages import Clock, LoadPower, RailState, decode
+from common.messages import Clock, DriveState, LoadPower, RailState, decode
 from common.runtime import Runtime, Sample
 from services.loads.model import LoadsModel
 
@@ -34,14 +38,27 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if rail in m.rail_on and m.set_rail(rail, decode(s.payload, RailState).state == "on"):
             publish(s.rover, {n for n, r in zip(m.names, m.rails, strict=True) if r == rail})
 
+    drive_load = {r.id: r.drive.load for r in rovers if r.drive is not None}
+
+    def on_drive(s: Sample) -> None:
+        load = drive_load.get(s.rover)
+        if load is not None and not s.deleted and models[s.rover].set_driven(
+                load, decode(s.payload, DriveState).power_w):
+            publish(s.rover, {load})
+
+    def reset(rover: str) -> None:
+        models[rover].reset_driven()
+
     def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
         models[rover].apply_fault(fk, params)
         publish(rover, {fk.name} if fk.name else None)
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.rail_state("*", "*"), on_rail)
+    rt.subscribe(keys.drive_state("*"), on_drive)
     rt.faults.own("load", lambda rover: models[rover].names, apply_fault)
-    # No state of its own (rail_on mirrors the PDM), but its faults follow resets and snapshots.
-    rt.own_state(lambda rover: {}, lambda rover, st: None, lambda rover: None,
-                 after=publish, persist_every_s=None)
+    # No state of its own (rail_on mirrors the PDM, the drive load follows drive/state), but
+    # its faults follow resets and snapshots.
+    rt.own_state(lambda rover: {}, lambda rover, st: None, reset, after=publish,
+                 persist_every_s=None)
     rt.faults.restore()

@@ -6,7 +6,8 @@ A rail with load power ``P_r`` [W] at ``voltage_v`` carries ``I_r = P_r / V_r``
 goes off while the battery is non-operational; a rail with ``shed_below_soc``
 is shed below it and restored at ``restore_above_soc`` (hysteresis). Solar
 generation reaches the bus through the solar rail's efficiency; net battery
-power is rail draw minus generation.
+power is rail draw minus generation. A rail whose loads return power (a drive regenerating
+on a descent) feeds the bus through the same converter: ``P_r * efficiency``.
 """
 
 from __future__ import annotations
@@ -166,7 +167,7 @@ class PowerModel:
                 readings.append(RailReading(name, cfg.voltage_v, power_w / cfg.voltage_v,
                                             power_w, cfg.current_limit_a, state, reason))
                 load_total += power_w
-                bus_total += power_w / cfg.efficiency
+                bus_total += power_w / cfg.efficiency if power_w >= 0.0 else power_w * cfg.efficiency
             else:
                 readings.append(RailReading(name, 0.0, 0.0, 0.0, cfg.current_limit_a, state, reason))
         sr = self.solar_rail

@@ -4,6 +4,10 @@ The rover's position relative to the radio arrives as a distance ``d`` [m] and
 an angle [deg]: ``x = d cos(angle)``, ``y = d sin(angle)``. It is in range when
 ``((x - offset_x) / a)^2 + ((y - offset_y) / b)^2 <= 1``; a ``degraded`` fault
 scales both axes, a ``failure`` means never in range.
+
+A radio with a ``site`` on a rover that drives takes the distance and angle from its site
+to the rover's site position instead (:func:`relative_to_site`): the same convention, so
+``x`` and ``y`` are the rover's offsets east and north of the radio.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from typing import NamedTuple
 from common.config import Radio
 from common.faults import FaultKey, Params, RangeScaleParams
 
-__all__ = ["Link", "RadioModel", "in_range", "position_xy"]
+__all__ = ["Link", "RadioModel", "in_range", "position_xy", "relative_to_site"]
 
 
 class Link(NamedTuple):
@@ -26,6 +30,13 @@ class Link(NamedTuple):
 def position_xy(distance_m: float, angle_deg: float) -> tuple[float, float]:
     a = math.radians(angle_deg)
     return distance_m * math.cos(a), distance_m * math.sin(a)
+
+
+def relative_to_site(site_x_m: float, site_y_m: float, x_m: float, y_m: float) -> tuple[float, float]:
+    """Distance [m] and angle [deg, counter-clockwise from east] from a radio's site to a
+    site position: the inverse of :func:`position_xy`."""
+    dx, dy = x_m - site_x_m, y_m - site_y_m
+    return math.hypot(dx, dy), math.degrees(math.atan2(dy, dx))
 
 
 def in_range(x_m: float, y_m: float, a_m: float, b_m: float,

@@ -1,4 +1,11 @@
-"""Radio service: link in range or not, published on change and at least once a second."""
+"""Radio service: link in range or not, published on change and at least once a second.
+
+The rover's position relative to a radio comes from ``input/radio/<radio>/position``, except
+for a radio with a ``site`` on a rover with a ``drive`` section: that radio follows the
+rover, with the distance and bearing from its site to the position ``drive/state`` reports
+(the rover file's ``drive.start`` until the drive says otherwise). Its position input is
+refused then, with the reason: two sources of one position would contradict each other.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +15,9 @@ from typing import Any
 from common import keys
 from common.config import Rover
 from common.faults import FaultKey, Params
-from common.messages import BadInput, RadioLink, RadioPosition, decode_input
+from common.messages import BadInput, DriveState, RadioLink, RadioPosition, decode, decode_input
 from common.runtime import Runtime, Sample
-from services.radio.model import RadioModel
+from services.radio.model import RadioModel, relative_to_site
 
 __all__ = ["serve"]
 
@@ -20,6 +27,18 @@ HEARTBEAT_S = 1.0
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     radios = {r.id: {c.name: RadioModel(c) for c in r.radios} for r in rovers}
     last: dict[tuple[str, str], tuple[bool, float]] = {}  # -> (in_range, wall time published)
+    # rover -> the radios that follow its drive, and where the rover starts
+    following = {r.id: [c for c in r.radios if c.site is not None] for r in rovers if r.drive is not None}
+    starts = {r.id: (r.drive.start.x_m, r.drive.start.y_m) for r in rovers if r.drive is not None}
+
+    def follow(rover: str, x_m: float, y_m: float) -> list[str]:
+        """Move the radios that follow the drive to the rover at (x, y); their names."""
+        names = []
+        for c in following.get(rover, []):
+            assert c.site is not None  # following holds radios with a site
+            radios[rover][c.name].set_position(*relative_to_site(c.site.x_m, c.site.y_m, x_m, y_m))
+            names.append(c.name)
+        return names
 
     def publish(rover: str, name: str, force: bool = False) -> None:
         m = radios[rover][name]
@@ -41,9 +60,20 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if name not in radios[s.rover]:
             known = ", ".join(radios[s.rover]) or "none"
             raise BadInput(f"rover {s.rover} has no radio {name!r} (radios: {known})")
+        if any(c.name == name for c in following.get(s.rover, [])):
+            raise BadInput(f"radio {name} of {s.rover} follows the rover's drive (its site and "
+                           "drive/state give the position); move the rover with a traverse on "
+                           "input/drive/traverse")
         pos = decode_input(s.payload, RadioPosition)
         radios[s.rover][name].set_position(pos.distance_m, pos.angle_deg)
         publish(s.rover, name, force=True)
+
+    def on_drive(s: Sample) -> None:
+        if s.deleted or s.rover not in following:
+            return
+        state = decode(s.payload, DriveState)
+        for name in follow(s.rover, state.x_m, state.y_m):
+            publish(s.rover, name)  # on a change of in_range at once, else with the heartbeat
 
     def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
         assert fk.name is not None
@@ -57,13 +87,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         for name, m in radios[rover].items():
             m.set_state(state.get(name, {}))
 
+    def reset(rover: str) -> None:
+        set_state(rover, {})
+        if rover in starts:
+            follow(rover, *starts[rover])
+
     def republish(rover: str) -> None:
         for name in radios[rover]:
             publish(rover, name, force=True)
 
     rt.subscribe(keys.input_radio_position("*", "*"), on_position)
+    rt.subscribe(keys.drive_state("*"), on_drive)
     rt.faults.own("radio", lambda rover: radios[rover], apply_fault)
-    rt.own_state(get_state, set_state, lambda rover: set_state(rover, {}), after=republish)
+    for rover in starts:
+        follow(rover, *starts[rover])
+    rt.own_state(get_state, set_state, reset, after=republish)
     rt.faults.restore()
     rt.every(0.2, heartbeat)
     heartbeat()

@@ -17,7 +17,8 @@ from tests.harness import ROOT
 
 MODELS = sorted(str(p.relative_to(ROOT).with_suffix("")).replace("/", ".")
                 for p in (ROOT / "services").glob("*/model.py"))
-PURE = [*MODELS, "services.composed", "common.scenario", "common.conditions", "common.config",
+PURE = [*MODELS, "services.composed", "services.drive.budget", "common.traverse",
+        "common.scenario", "common.conditions", "common.config",
         "common.faults", "common.keys", "common.messages", "services.bridge.mapping",
         "services.bridge.convert", "services.bridge.cdr", "services.bridge.rmw_zenoh",
         "services.bridge.bindings"]

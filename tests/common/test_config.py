@@ -119,6 +119,55 @@ def test_check_warns_of_a_rail_its_loads_can_trip(tmp_path):
         assert budget_warnings(load_rover(ROVERS / shipped)) == []
 
 
+def test_the_drive_section_and_radio_sites():
+    mapp = load_rover(ROVERS / "mapp.yaml")
+    d = mapp.drive
+    assert d is not None and d.load == "drive_motors" and d.regen_efficiency == 0.0
+    assert (d.start.x_m, d.start.y_m, d.start.heading_deg) == (5.0, 0.0, 90.0)
+    assert mapp.radios[0].site is not None and (mapp.radios[0].site.x_m, mapp.radios[0].site.y_m) == (0, 0)
+    ltv = load_rover(ROVERS / "ltv.yaml")
+    assert ltv.drive is not None and ltv.drive.mass_kg >= 1000 and ltv.drive.regen_efficiency > 0
+    # defaults: the Moon's gravity, the site origin, no regeneration, 30 deg
+    minimal = broken(MAPP, ("  gravity_m_per_s2: 1.625\n", ""), ("  max_grade_deg: 25 ", "  #"),
+                     ("  start: {x_m: 5, y_m: 0, z_m: 0, heading_deg: 90}", ""))
+    m = parse_rover(minimal).drive
+    assert m is not None and (m.gravity_m_per_s2, m.max_grade_deg, m.start.x_m) == (1.625, 30.0, 0.0)
+    bad = broken(MAPP, ("load: drive_motors", "load: wheels"), ("mass_kg: 10.0", "mass_kg: 0"),
+                 ("drivetrain_efficiency: 0.05", "drivetrain_efficiency: 1.5"),
+                 ("max_grade_deg: 25", "max_grade_deg: 90"), ("site: {x_m: 0, y_m: 0}", "site: {x_m: 0}"))
+    with pytest.raises(ConfigError) as info:
+        parse_rover(bad, "bad.yaml")
+    assert sorted(info.value.problems) == sorted([
+        "drive.mass_kg: must be > 0.0, got 0",
+        "drive.drivetrain_efficiency: must be <= 1.0, got 1.5",
+        "drive.max_grade_deg: must be < 90.0, got 90",
+        "radios[0].site.y_m: missing required field",
+    ])  # the load is checked once the section is well formed:
+    with pytest.raises(ConfigError) as info:
+        parse_rover(broken(MAPP, ("load: drive_motors", "load: wheels")))
+    assert info.value.problems == ["drive.load: no load named 'wheels' (loads: drive_motors, "
+                                   "survival_heater, flight_computer, uhf_radio, nav_camera, "
+                                   "hazard_cameras, imu, sun_sensor, nir_spectrometer, thermal_imager)"]
+    with pytest.raises(ConfigError) as info:
+        parse_rover(broken(MAPP, ("idle_w: 3.0", "idle_w: 90")))
+    assert info.value.problems == ["drive.idle_w: must be below the max_w of load drive_motors (90 W), "
+                                   "or the rover could never move; got 90"]
+
+
+def test_check_describes_the_drive_and_warns_of_one_too_weak_for_its_speed(tmp_path):
+    weak = tmp_path / "weak.yaml"  # 20 W at most: 16.25 * 0.2 * 0.1 / 0.05 + 3 = 9.5 W fits,
+    weak.write_text(broken(MAPP, ("max_speed_m_per_s: 0.10", "max_speed_m_per_s: 0.5")))  # 35.5 W not
+    text = weak.read_text().replace("nominal_w: 40.0, max_w: 90.0", "nominal_w: 20.0, max_w: 20.0")
+    weak.write_text(text)
+    run = subprocess.run(lunaris_cmd("check", str(weak)), capture_output=True, text=True,
+                         cwd=ROOT, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert "drive - 10 kg, up to 0.5 m/s and 25 deg; drive_motors draws 3 W parked, 35.5 W" in run.stdout
+    assert "warning: drive: on the flat at max_speed_m_per_s the drive needs 35.5 W, above the max_w " \
+           "20 W of load drive_motors" in run.stdout
+    assert "nominal load 39.0 W parked" in run.stdout  # the drive load at its idle_w
+
+
 # Any value, anywhere: the loader answers with problems, never with a crash.
 _values = st.recursive(
     st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),

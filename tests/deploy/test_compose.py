@@ -22,7 +22,7 @@ from tests.deploy.conftest import REPO, make_test_secrets
 
 SECRETS = REPO / "deploy" / "secrets"
 
-SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
 STATE_DIR = "/var/lib/lunaris"
 DOCKER_COMPOSE = shutil.which("docker-compose")
 

@@ -13,12 +13,12 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from tests.harness import ROVERS, Probe, wait_for
+from tests.harness import Probe, static_rover, wait_for
 
 pytestmark = pytest.mark.timeout(90)
 
 R = "mapp-1"
-MAPP = ROVERS / "mapp.yaml"
+MAPP = static_rover("mapp.yaml")  # no drive: its pack drains and its radio takes the position
 PANEL_W = 1361 * 0.12 * 0.29 * 0.5  # 23.68 W at the 60 deg sun of mapp.yaml
 
 

@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 from common import keys
-from tests.harness import ROOT, ROVERS, Probe, Twin, free_endpoint, lunaris_cmd, stop_process
+from tests.harness import ROOT, Probe, Twin, free_endpoint, lunaris_cmd, static_rover, stop_process
 
 R = "mapp-1"
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
@@ -23,7 +23,7 @@ def test_services_reconnect_after_the_router_restarts(tmp_path):
 
     router = start_router()
     try:
-        with Twin(endpoint, [ROVERS / "mapp.yaml"], tmp_path, services=SERVICES) as twin, \
+        with Twin(endpoint, [static_rover("mapp.yaml")], tmp_path, services=SERVICES) as twin, \
                 Probe(endpoint) as probe:
             probe.watch(f"lunaris/{R}/**")
             probe.wait_services(R, SERVICES)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import pytest
 
 from common import keys
-from tests.harness import ALL_SERVICES, ROVERS, wait_for
+from tests.harness import ALL_SERVICES, static_rover, wait_for
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -22,7 +22,7 @@ CAPACITY_J = 5.3e5
 @pytest.fixture
 def twin(twin_factory, probe_solo):
     probe_solo.watch("lunaris/**")
-    twin_factory([ROVERS / "mapp.yaml"])
+    twin_factory([static_rover("mapp.yaml")])  # the drive's reset: test_drive.py
     probe_solo.wait_services(R, ALL_SERVICES)
     probe_solo.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
     return probe_solo

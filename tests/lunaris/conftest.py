@@ -12,17 +12,17 @@ from common import keys
 from tests.harness import (
     ALL_SERVICES,
     ROOT,
-    ROVERS,
     Probe,
     Twin,
     env_without_zenoh_config,
     free_endpoint,
     lunaris_cmd,
     open_router,
+    static_rover,
 )
 
 R = "mapp-1"
-MAPP = ROVERS / "mapp.yaml"
+MAPP = static_rover("mapp.yaml")  # the first release's rover: no drive (tests/harness.py)
 
 
 @dataclass

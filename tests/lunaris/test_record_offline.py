@@ -14,6 +14,7 @@ from common import keys
 from common.messages import (
     BatteryState,
     Clock,
+    DriveState,
     Event,
     LoadPower,
     PowerSummary,
@@ -38,6 +39,8 @@ R = "mapp-1"
     (["solar", "left", "power"], "solar/*/power"),
     (["umbilical", "state"], "umbilical/state"),
     (["radio", "lander", "link"], "radio/*/link"),
+    (["drive", "state"], "drive/state"),
+    (["input", "drive", "traverse"], None),
     (["event"], "event"),
     (["clock", "control"], None),
     (["fault", "battery", "heating"], None),
@@ -153,3 +156,18 @@ def test_the_report_draws_a_recording(tmp_path: Path):
     assert len(fig.axes) == 6  # five plots and the current's twin axis
     fig.savefig(tmp_path / "out.png")
     assert (tmp_path / "out.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
+    path = tmp_path / "s.mcap"
+    drive = [(f"lunaris/{R}/drive/state", encode(DriveState(
+        10.0 + i, 5.0, 2.0 * i, 0.0, 0.1, 0.0, 0.0, 3.25, 0.325, 9.5 + i, 2.0 * i, 0, True, "driving",
+        1, 20.0 - 2 * i, 9.5 * i)), False, 1_700_000_000_000_000_100 + i) for i in range(5)]
+    path.write_bytes(_record(_samples() + drive))
+    s = load_session(path)[R]
+    assert s.path == ([5.0] * 5, [0.0, 2.0, 4.0, 6.0, 8.0], [9.5, 10.5, 11.5, 12.5, 13.5])
+    fig = draw(s, "test")
+    assert len(fig.axes) == 8  # the five plots, the current's twin axis, the path and its colour bar
+    path_ax = fig.axes[5]
+    assert path_ax.get_xlabel() == "x, east [m]" and "drive's power" in path_ax.get_title()
+    assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last

@@ -11,9 +11,11 @@ from common.conditions import parse_condition
 from common.config import load_rover
 from common.scenario import ScenarioError, load_scenario, parse_scenario
 from common.scenario_player import Player
-from tests.harness import ROOT, ROVERS
+from tests.harness import ROOT, ROVERS, static_rover
 
 MAPP = load_rover(ROVERS / "mapp.yaml")
+LTV = load_rover(ROVERS / "ltv.yaml")
+STATIC_MAPP = load_rover(static_rover("mapp.yaml"))  # no drive
 SCENARIOS = sorted((ROOT / "config" / "scenarios").glob("*.yaml"))
 
 
@@ -85,14 +87,19 @@ def test_a_condition_holds_only_when_every_comparison_does_on_present_data():
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.name for p in SCENARIOS])
-def test_the_shipped_scenarios_are_valid_for_the_mapp_rover(path: Path):
-    sc = load_scenario(path, MAPP)
-    assert sc.rover == "mapp-1" and len(sc.steps) >= 5
+def test_the_shipped_scenarios_are_valid_for_their_rover(path: Path):
+    rover = {r.id: r for r in (MAPP, LTV)}[load_scenario(path).rover]
+    sc = load_scenario(path, rover)
+    assert len(sc.steps) >= 5
     assert path.read_text().lstrip().startswith("#")  # commented for the training team
 
 
-def test_three_scenarios_are_shipped():
-    assert len(SCENARIOS) >= 3
+def test_four_scenarios_are_shipped_one_of_them_a_drive_drill():
+    assert len(SCENARIOS) >= 4
+    sortie = load_scenario(ROOT / "config" / "scenarios" / "crater-rim-sortie.yaml", LTV)
+    traverses = [s.traverse for s in sortie.steps if s.traverse is not None]
+    assert len(traverses[0]["waypoints"]) == 6  # the traverse file's, read at load time
+    assert any(s.when and s.when.startswith("drive.") for s in sortie.steps)
 
 
 BAD = """
@@ -275,3 +282,87 @@ steps:
     assert {w.key for _, w in writes} == {"lunaris/mapp-1/input/radio/lander/position"}
     assert [b["distance_m"] for b in bodies] == [100 + 50 * i for i in range(11)]
     assert {b["angle_deg"] for b in bodies} == {30.0}
+
+
+# -- the drive: traverse steps and drive conditions -----------------------------------------------
+
+DRIVE = """
+scenario: {name: drive}
+rover: mapp-1
+steps:
+  - at_s: 1
+    traverse: {speed_m_per_s: 0.1, waypoints: [{x_m: 5, y_m: 50, z_m: 0}], return_to_start: true}
+  - when: drive.odometer_m > 20 and drive.status == driving
+    traverse: stop
+  - after_s: 0
+    traverse: {file: TRAVERSE}
+"""
+
+
+def test_a_traverse_step_writes_the_traverse_and_stop_deletes_it(tmp_path):
+    text = DRIVE.replace("TRAVERSE", str(ROOT / "config" / "traverses" / "mapp-crater-rim.yaml"))
+    sc = parse_scenario(text, rover=MAPP)
+    odometer = {"odometer_m": 0.0, "status": "driving"}
+    values = {("drive", "state"): odometer}
+    player = Player(sc)
+    assert player.tick(0.0, lambda parts: values.get(parts)) == []  # the start
+    first = player.tick(1.0, lambda parts: values.get(parts))
+    (w,) = first
+    assert w.key == "lunaris/mapp-1/input/drive/traverse" and w.answer == "input"
+    assert json.loads(w.payload) == {"speed_m_per_s": 0.1, "waypoints": [{"x_m": 5, "y_m": 50, "z_m": 0}],
+                                     "return_to_start": True}
+    assert player.tick(2.0, lambda parts: values.get(parts)) == []
+    odometer["odometer_m"] = 25.0
+    stop, from_file = player.tick(3.0, lambda parts: values.get(parts))
+    assert stop.payload is None and stop.key == w.key
+    body = json.loads(from_file.payload)
+    assert len(body["waypoints"]) == 4 and body["return_to_start"] is True
+    assert [r.label for r in player.results] == [
+        "traverse through 1 waypoint(s) at 0.1 m/s, and back", "traverse stop",
+        "traverse through 4 waypoint(s) at 0.1 m/s, and back"]
+
+
+def test_traverse_steps_and_drive_conditions_are_checked_against_the_rover(tmp_path):
+    bad = """
+scenario: {name: drive}
+rover: mapp-1
+steps:
+  - at_s: 1
+    traverse: {speed_m_per_s: 0.5, waypoints: [{x_m: 5, y_m: 50, z_m: 0}, {x_m: 5, y_m: 51, z_m: 9}]}
+  - at_s: 2
+    traverse: {waypoints: [{x_m: 1, y_m: 2}]}
+  - at_s: 3
+    traverse: backwards
+  - at_s: 4
+    traverse: {file: nowhere.yaml}
+  - at_s: 5
+    traverse: {file: x.yaml, speed_m_per_s: 1}
+  - when: drive.odometer_m > 20
+    note: far
+  - at_s: 6
+    position: {radio: lander, distance_m: 10}
+"""
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(bad, str(tmp_path / "bad.yaml"), MAPP)
+    problems = err.value.problems
+    for want in [
+        "steps[0].traverse.speed_m_per_s: 0.5 m/s is above the rover's max_speed_m_per_s (0.1)",
+        "steps[0].traverse.waypoints[1]: the leg from waypoints[0] climbs 83.7 deg",
+        "steps[1].traverse.waypoints[0].z_m: missing required field",
+        "steps[2].traverse: expected stop or a traverse",
+        "steps[3].traverse.file: ",
+        "steps[4].traverse: a traverse from a file is {file: PATH} alone",
+        "steps[6].position.radio: radio lander of mapp-1 follows the rover's drive",
+    ]:
+        assert any(p.startswith(want) for p in problems), f"{want!r} not in {problems}"
+    assert any("cannot read file" in p for p in problems)
+    assert len(problems) == 7, problems
+    # a rover that does not drive can neither take a traverse nor be watched driving
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(DRIVE.replace("TRAVERSE", "x.yaml"), rover=STATIC_MAPP)
+    assert "steps[0].traverse: rover mapp-1 has no drive section: it does not drive" in err.value.problems
+    assert "steps[1].when: rover mapp-1 has no drive section: it does not drive" in err.value.problems
+    # ... and its radios take the position input
+    ok = ("scenario: {name: x}\nrover: mapp-1\nsteps:\n"
+          "  - {at_s: 1, position: {radio: lander, distance_m: 9}}\n")
+    assert parse_scenario(ok, rover=STATIC_MAPP).steps[0].position.distance_m == 9

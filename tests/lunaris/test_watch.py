@@ -18,7 +18,7 @@ import pytest
 from rich.console import Console
 
 from common import keys
-from common.messages import BatteryState, Clock, Event, LoadPower, RadioLink, RailState, encode
+from common.messages import BatteryState, Clock, DriveState, Event, LoadPower, RadioLink, RailState, encode
 from lunaris.watch import Connection, Snapshot, render
 from tests.harness import (
     ALL_SERVICES,
@@ -90,6 +90,22 @@ def test_the_fleet_view_has_a_line_per_rover():
     text, _ = _draw(render(_snapshot(), Connection("x", state="connected"), None, 8))
     line = next(ln for ln in text.splitlines() if ln.strip().startswith(R))
     assert "125.5" in line and "12.3 %" in line and "1/2" in line and "lander:OUT" in line
+
+
+def test_the_drive_panel_and_the_fleet_column_of_a_rover_that_drives():
+    snap = _snapshot()
+    assert "drive" not in _draw(render(snap, Connection("x", state="connected"), R, 0))[0].split("PDM")[0]
+    snap.latest[keys.drive_state(R)] = (encode(DriveState(
+        125.5, 120.4, 35.2, 6.8, 0.064, 42.0, 18.5, 8.0, 0.8, 20.0, 180.7, 2, True, "power_limited", 5,
+        96.3, 5400.0)), snap.now)
+    text, ansi = _draw(render(snap, Connection("x", state="connected"), R, 0))
+    for shown in ("POWER LIMITED", "x 120.4  y 35.2  z 6.8 m", "42 deg", "grade +18.5 deg", "0.06 m/s",
+                  "20.0 W", "force 8.0 N", "torque 0.80 N m", "to waypoint 3 of 5, 96 m to go",
+                  "180.7 m", "drive energy 1.50 Wh"):
+        assert shown in text, shown
+    assert "\x1b[1;33mPOWER LIMITED" in ansi
+    fleet, _ = _draw(render(snap, Connection("x", state="connected"), None, 0))
+    assert "power limited 0.06 m/s 181 m" in fleet
 
 
 def test_the_banner_follows_the_connection():

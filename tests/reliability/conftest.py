@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from tests.harness import ALL_SERVICES, ROVERS, Probe, Twin, wait_for
+from tests.harness import ALL_SERVICES, Probe, Twin, static_rover, wait_for
 
 R = "mapp-1"
-MAPP = ROVERS / "mapp.yaml"
+MAPP = static_rover("mapp.yaml")  # without its drive: parked, the pack drains
 WITH_BRIDGE = (*ALL_SERVICES, "bridge")
 
 

@@ -11,11 +11,20 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import ConfigError, load_rover
-from common.messages import ActiveFault, BadInput, BatteryState, LoadPower, PowerSummary, RailState
+from common.messages import (
+    ActiveFault,
+    BadInput,
+    BatteryState,
+    DriveState,
+    LoadPower,
+    PowerSummary,
+    RailState,
+)
 from services.bridge import bindings as bd
 from services.bridge import cdr, convert, rmw_zenoh
 from services.bridge import mapping as mp
 from tests import rosmsg
+from tests.harness import static_rover
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "config" / "bridge" / "default.yaml"
@@ -143,7 +152,7 @@ mappings:
         "mappings[13].type: the battery_state converter makes sensor_msgs/msg/BatteryState, not "
         "std_msgs/msg/Int32",
         "mappings[14].type: sensor_msgs/msg/BatteryState needs a converter",
-        "mappings[15].convert: unknown converter 'magic' (known: battery_state, diagnostics)",
+        "mappings[15].convert: unknown converter 'magic' (known: battery_state, diagnostics, odometry)",
     ]
     for want in expected:
         assert any(p.startswith(want) for p in problems), f"{want!r} not in {problems}"
@@ -337,6 +346,35 @@ def test_fault_component_from_either_key_form():
     assert convert.component_of_fault("lunaris/r/fault/battery/heating") == ("battery", "heating")
     assert convert.component_of_fault("lunaris/r/rail/12V/tripped") == ("rail/12V", "tripped")
     assert convert.component_of_fault("lunaris/r/battery/depleted") == ("battery", "depleted")
+
+
+# -- the drive --------------------------------------------------------------------------------------
+
+
+def test_the_drive_maps_only_for_a_rover_that_drives_and_as_odometry():
+    mf = mp.load_mapping(DEFAULT)
+
+    def drive_topics(rover) -> set[str]:
+        return {b.topic for b in bd.expand(mf, [bd.rover_names(rover)]) if b.key.endswith("/drive/state")}
+
+    assert drive_topics(MAPP) == {"/odom", "/drive_state"}
+    assert drive_topics(load_rover(static_rover("mapp.yaml"))) == set()  # no drive: no topic
+    # heading 90 deg (east) is yaw 0; a 10 deg climb is a pitch of -10 deg about y (REP-103):
+    # q = (0, sin(-5 deg), 0, cos(-5 deg)) = (0, -0.0871557, 0, 0.9961947)
+    state = DriveState(12.0, 120.0, -35.0, 6.5, 0.08, 90.0, 10.0, 4.4, 0.44, 9.5, 200.0, 1, True)
+    msg = convert.odometry_message(state, 12_000_000_034, "site", {"child_frame_id": "chassis"})
+    got = rosmsg.decode("nav_msgs/msg/Odometry", cdr.encode_cdr("nav_msgs/msg/Odometry", msg))
+    assert (got.header.stamp.sec, got.header.stamp.nanosec, got.header.frame_id) == (12, 34, "site")
+    assert got.child_frame_id == "chassis"
+    p, q = got.pose.pose.position, got.pose.pose.orientation
+    assert (p.x, p.y, p.z) == (120.0, -35.0, 6.5)
+    assert_allclose((q.x, q.y, q.z, q.w), (0.0, -0.0871557, 0.0, 0.9961947), atol=1e-7)
+    assert got.twist.twist.linear.x == 0.08 and list(got.pose.covariance) == [0.0] * 36
+    # heading 0 (north) on the flat: yaw 90 deg, q = (0, 0, sin 45 deg, cos 45 deg)
+    north = convert.odometry_message(DriveState(0, 0, 0, 0, 0, 0.0, 0.0, 0, 0, 0, 0, None, False), 0)
+    o = north["pose"]["pose"]["orientation"]
+    assert_allclose((o["x"], o["y"], o["z"], o["w"]), (0, 0, 0.70710678, 0.70710678), atol=1e-8)
+    assert north["header"]["frame_id"] == "site" and north["child_frame_id"] == "base_link"
 
 
 # -- CDR, read back by the independent decoder ----------------------------------------------------

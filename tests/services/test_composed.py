@@ -10,13 +10,17 @@ from numpy.testing import assert_allclose
 
 from common.config import Rover, load_rover
 from common.faults import fault_of
+from common.messages import DriveTraverse, TraverseWaypoint
+from common.traverse import plan
 from services.composed import ComposedTwin, run_budget
-from tests.harness import ROOT, ROVERS, lunaris_cmd
+from services.drive.budget import power_profile, run_traverse
+from tests.harness import ROOT, ROVERS, lunaris_cmd, static_rover
 
 
 @pytest.fixture
 def mapp() -> Rover:
-    return load_rover(ROVERS / "mapp.yaml")
+    """The MAPP rover without its drive: the budget of the first release (drive_motors ~40 W)."""
+    return load_rover(static_rover("mapp.yaml"))
 
 
 def small_pack(rover: Rover, capacity_j: float) -> Rover:
@@ -66,3 +70,91 @@ def test_lunaris_sim_prints_a_budget():
                          capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert run.returncode == 0, run.stderr
     assert "3600 ticks" in run.stdout and "state of charge" in run.stdout
+
+
+# -- the drive ----------------------------------------------------------------------------------
+# mapp.yaml's drive: 16.25 N of weight, c_rr 0.2, eta 0.05, idle 3 W; on the flat at 0.1 m/s
+# F = 3.25 N and the drive load draws 3.25 * 0.1 / 0.05 + 3 = 9.5 W.
+
+
+@pytest.fixture
+def driving() -> Rover:
+    return load_rover(ROVERS / "mapp.yaml")
+
+
+def north(metres: float, rover: Rover) -> DriveTraverse:
+    assert rover.drive is not None
+    s = rover.drive.start
+    return DriveTraverse([TraverseWaypoint(s.x_m, s.y_m + metres, s.z_m)], 0.1)
+
+
+def test_the_drive_moves_and_sets_its_load_in_the_composed_twin(driving):
+    twin = ComposedTwin(driving, seed=1)
+    assert twin.drive is not None and twin.loads.power("drive_motors") == (3.0, True)  # parked
+    twin.drive.start(plan(north(100.0, driving), driving.drive, (5.0, 0.0, 0.0))[0])
+    for _ in range(10):
+        twin.step()
+    assert twin.drive.y_m == pytest.approx(0.1)  # 10 ticks of 0.1 s at 0.1 m/s
+    assert twin.loads.power("drive_motors") == (pytest.approx(9.5), True)
+    # a short on the 12 V rail's heater trips it: the drive loses its power and halts
+    twin.loads.apply_fault(*fault_of("load/survival_heater/short", {"resistance_ohm": 0.05}))
+    twin.step()
+    assert twin.power.switches["12V"].tripped
+    y = twin.drive.y_m
+    for _ in range(10):
+        twin.step()
+    assert twin.drive.status == "unpowered" and twin.drive.y_m == y
+    assert twin.loads.power("drive_motors") == (0.0, False)
+
+
+def test_run_traverse_drives_to_the_end_and_books_the_energy(driving):
+    # 10 m north at 0.1 m/s: 100 s, arriving on the 1000th tick; 9.5 W for 100 s = 950 J
+    b = run_traverse(driving, north(10.0, driving), reserve_soc=0.2)
+    assert b.outcome == "arrived" and b.ok and b.below_reserve is None
+    assert b.planned_length_m == 10.0 and b.planned_duration_s == pytest.approx(100.0)
+    assert b.arrived_at_s == pytest.approx(100.0, abs=0.1) and b.odometer_m == pytest.approx(10.0)
+    assert b.drive_energy_j == pytest.approx(950.0, abs=9.5 * 0.1)
+    assert b.peak_drive_w == pytest.approx(9.5) and b.power_limited_s == 0.0
+    profile = power_profile(driving, north(1.0, driving), dt_s=1.0)
+    assert profile == [pytest.approx(9.5)] * 10
+
+
+def test_run_traverse_says_where_the_reserve_is_crossed(driving):
+    # a 20 kJ pack, the MAPP parked already drains: the reserve goes on the way
+    b = run_traverse(small_pack(driving, 2e4), north(500.0, driving), reserve_soc=0.5)
+    assert not b.ok and b.below_reserve is not None
+    assert 0 < b.below_reserve.odometer_m < 500 and b.below_reserve.waypoint == 0
+    assert b.below_reserve.y_m == pytest.approx(b.below_reserve.odometer_m, abs=1e-6)
+    with pytest.raises(ValueError, match="above the rover's max_speed_m_per_s"):
+        run_traverse(driving, DriveTraverse([TraverseWaypoint(5, 10, 0)], 1.0))
+    with pytest.raises(ValueError, match="has no drive section"):
+        run_traverse(load_rover(static_rover("mapp.yaml")), north(1.0, driving))
+    with pytest.raises(ValueError, match="has no drive section"):
+        power_profile(load_rover(static_rover("mapp.yaml")), north(1.0, driving))
+    with pytest.raises(ValueError, match="steeper than"):
+        power_profile(driving, DriveTraverse([TraverseWaypoint(5, 1, 5)]))
+    short = run_traverse(driving, north(500.0, driving), max_hours=0.01)
+    assert short.outcome == "time limit" and short.arrived_at_s is None
+
+
+def test_lunaris_sim_answers_the_traverse_question(tmp_path):
+    traverse = ROOT / "config" / "traverses" / "mapp-crater-rim.yaml"
+    yes = subprocess.run(lunaris_cmd("sim", str(ROVERS / "mapp.yaml"), "--traverse", str(traverse)),
+                         capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert yes.returncode == 0, yes.stderr
+    assert "answer: YES - it arrives with" in yes.stdout and "8 waypoint(s), 520 m" in yes.stdout
+    no = subprocess.run(lunaris_cmd("sim", str(ROVERS / "mapp.yaml"), "--traverse", str(traverse),
+                                    "--reserve", "0.99"), capture_output=True, text=True, cwd=ROOT,
+                        timeout=120)
+    assert no.returncode == 1 and "answer: NO - it arrives, but the charge falls below the 99%" in no.stdout
+    assert "below 99%" in no.stdout
+    for args, error in (
+            (["--traverse", str(traverse), "--reserve", "2"], "--reserve is a state of charge"),
+            (["--return"], "--return needs --traverse"),
+            (["--traverse", str(tmp_path / "none.yaml")], "cannot read file")):
+        bad = subprocess.run(lunaris_cmd("sim", str(ROVERS / "mapp.yaml"), *args), capture_output=True,
+                             text=True, cwd=ROOT, timeout=60)
+        assert bad.returncode == 2 and error in bad.stderr, (args, bad.stderr)
+    static = subprocess.run(lunaris_cmd("sim", str(static_rover("mapp.yaml")), "--traverse", str(traverse)),
+                            capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert static.returncode == 2 and "has no drive section" in static.stderr

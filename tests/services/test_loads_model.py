@@ -59,3 +59,21 @@ def test_faults_short_open_stuck(mapp):
     m.apply_fault(*fault_of("load/nav_camera/short"))
     m.sample()
     assert 0.0 <= m.power("nav_camera")[0] <= 5.0
+
+
+def test_the_drive_load_draws_what_the_drive_sets_and_its_faults_still_win(mapp):
+    m = LoadsModel(mapp, seed=3)
+    m.sample()
+    assert m.power("drive_motors") == (3.0, True)  # the drive's idle_w, not a sample
+    assert m.set_driven("drive_motors", 9.5) and not m.set_driven("drive_motors", 9.5)
+    assert not m.set_driven("nav_camera", 1.0)  # the drive owns only its load
+    m.sample()
+    assert m.power("drive_motors") == (9.5, True)
+    m.apply_fault(*fault_of("load/drive_motors/stuck", {"power_w": 77.0}))
+    assert m.power("drive_motors")[0] == 77.0
+    m.apply_fault(*fault_of("load/drive_motors/short", {"resistance_ohm": 0.5}))
+    assert_allclose(m.power("drive_motors")[0], 12.0**2 / 0.5)  # a short wins: 288 W
+    m.set_rail("12V", False)
+    assert m.power("drive_motors") == (0.0, False)
+    m.reset_driven()
+    assert m.driven_w == {"drive_motors": 3.0}

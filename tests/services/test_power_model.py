@@ -123,3 +123,13 @@ def test_no_input_gives_nan_or_negative_power(powers, soc, operational, panels):
     m.load_power_w.update(dict.fromkeys(m.load_power_w, 0.0))
     m.compute()
     assert tripped == {n for n, sw in m.switches.items() if sw.tripped}  # latched
+
+
+def test_a_rail_returning_power_feeds_the_bus_through_its_converter(pdm):
+    # a drive regenerating 20 W on 12V (efficiency 0.93) with the 12 W heater: -8 W on the
+    # rail, -8 * 0.93 = -7.44 W on the bus (not -8 / 0.93: the converter loses either way)
+    pdm.load_power_w.update(drive_motors=-20.0, survival_heater=12.0)
+    r, s = rails(pdm)
+    assert r["12V"].state == "on" and r["12V"].power_w == -8.0
+    assert_allclose(r["12V"].current_a, -8.0 / 12.0)
+    assert_allclose(s.bus_power_w, -8.0 * 0.93)

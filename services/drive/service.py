@@ -1,0 +1,99 @@
+"""Drive service: follows ``input/drive/traverse`` and publishes ``drive/state`` every tick.
+
+It serves the rovers that have a ``drive`` section (``lunaris run drive`` leaves the others
+out, see :func:`serves`). A traverse is planned from where the rover is when it arrives
+(:func:`common.traverse.plan`) and refused, with the reason, when it is malformed, has no
+waypoint, asks for more than the rover's maximum speed or a leg steeper than its
+``max_grade_deg``; an accepted one replaces the traverse being driven and is journalled as an
+``input`` event. ``delete`` stops the rover where it is. The drive load's power comes from
+``drive/state`` (the loads service applies it); its ``load/<name>/power`` tells this service
+whether the motors are supplied (a rail off, an open or shorted load halt the rover).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from common import keys
+from common.config import Rover
+from common.messages import BadInput, Clock, DriveState, DriveTraverse, LoadPower, decode, decode_input
+from common.runtime import Runtime, Sample
+from common.traverse import length_and_duration, plan
+from services.drive.model import DriveModel, motors_powered
+
+__all__ = ["serve", "serves"]
+
+
+def serves(rover: Rover) -> bool:
+    """The drive service has something to do for this rover."""
+    return rover.drive is not None
+
+
+def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
+    configs = {r.id: r for r in rovers if serves(r)}
+    models: dict[str, DriveModel] = {}
+    for rover_id, r in configs.items():
+        assert r.drive is not None  # serves()
+        max_w = next(ld.max_w for ld in r.loads if ld.name == r.drive.load)
+        models[rover_id] = DriveModel(r.drive, max_w)
+
+    def publish(rover: str) -> None:
+        if rover in models:
+            rt.publish(keys.drive_state(rover), DriveState(rt.t_s[rover], *models[rover].reading()))
+
+    def on_tick(rover: str, tick: Clock) -> None:
+        if rover in models:
+            models[rover].step(tick.dt_s)
+            publish(rover)
+
+    def on_traverse(s: Sample) -> None:
+        m = models[s.rover]
+        if s.deleted:
+            where = f"({m.x_m:.1f}, {m.y_m:.1f}, {m.z_m:.1f}) m"
+            if not m.stop():
+                raise BadInput(f"no traverse to stop: the rover is {m.status} at {where}")
+            publish(s.rover)
+            rt.event(s.rover, "info", "input", s.key, f"traverse stopped at {where}, "
+                     f"odometer {m.odometer_m:.1f} m")
+            return
+        cmd = decode_input(s.payload, DriveTraverse)
+        start = (m.x_m, m.y_m, m.z_m)
+        legs, problems = plan(cmd, m.cfg, start)
+        if problems:
+            raise BadInput("; ".join(problems))
+        replaced = m.active
+        m.start(legs)
+        publish(s.rover)
+        length, duration = length_and_duration(start, legs)
+        rt.event(s.rover, "info", "input", s.key,
+                 f"{'traverse replaced' if replaced else 'traverse'}: {len(legs)} waypoint(s), "
+                 f"{length:.1f} m, {duration / 60:.1f} min at the commanded speed"
+                 f"{' (returning to the start)' if cmd.return_to_start else ''}",
+                 {"waypoints": len(legs), "length_m": length, "duration_s": duration})
+
+    def on_load(s: Sample) -> None:
+        if s.deleted:
+            return
+        p = decode(s.payload, LoadPower)
+        if models[s.rover].set_powered(motors_powered(p.on, p.faults)):
+            publish(s.rover)
+
+    def get_state(rover: str) -> dict[str, Any]:
+        return models[rover].state() if rover in models else {}
+
+    def set_state(rover: str, state: dict[str, Any]) -> None:
+        if rover in models:
+            models[rover].set_state(state)
+
+    def reset(rover: str) -> None:
+        if rover in models:
+            models[rover].reset()
+
+    rt.on_tick(on_tick)
+    rt.subscribe(keys.input_drive_traverse("*"), on_traverse)
+    for rover_id, r in configs.items():  # each rover's drive load only, not every load's samples
+        assert r.drive is not None
+        rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load)
+    rt.own_state(get_state, set_state, reset, after=publish)
+    for rover in models:
+        publish(rover)
