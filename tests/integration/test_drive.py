@@ -162,7 +162,7 @@ def test_delete_stops_the_rover_where_it_is(probe):
 BAD = [
     (b'{"waypoints": []}', "at least one waypoint"),
     (b'{"waypoints": [{"x_m": NaN, "y_m": 0, "z_m": 0}]}', "malformed JSON"),
-    (b'{"waypoints": [{"x_m": 1e999, "y_m": 0, "z_m": 0}]}', "malformed JSON"),
+    (b'{"waypoints": [{"x_m": 1e999, "y_m": 0, "z_m": 0}]}', "Number out of range"),
     (b'{"waypoints": [{"x_m": 50, "y_m": 0, "z_m": 0}], "speed_m_per_s": 0.5}',
      "above the rover's max_speed_m_per_s"),
     (b'{"waypoints": [{"x_m": 50, "y_m": 0, "z_m": 0, "speed_m_per_s": 0.3}]}',

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from common import keys
-from tests.deploy.conftest import DEPLOY, running_router
+from tests.deploy.conftest import make_test_secrets, running_router
 from tests.harness import Probe, Twin, wait_for
 from tests.lunaris.conftest import MAPP, R, run_tool
 
@@ -102,29 +102,34 @@ def test_no_router_exits_2():
     assert "no Zenoh router answered at tcp/127.0.0.1:" in done.stderr and "within 1.5 s" in done.stderr
 
 
-def test_with_credentials_on_the_deployment_router(tmp_path, monkeypatch):
-    """deploy/zenohd.json5 with access control: the instructor injects, an observer cannot."""
-    with running_router() as router:
-        monkeypatch.setenv("LUNARIS_ZENOH_CONFIG", str(DEPLOY / "client-service.json5"))
-        with Twin(router.endpoint, [MAPP], tmp_path / "state", services=("clock", "solar", "faults")):
-            monkeypatch.delenv("LUNARIS_ZENOH_CONFIG")
-            instructor = ["--config", str(DEPLOY / "client-instructor.json5"), "--connect", router.endpoint]
-            observer = ["--config", str(DEPLOY / "client-observer.json5"), "--connect", router.endpoint]
+def test_with_credentials_on_the_deployment_router(tmp_path):
+    """deploy/zenohd.json5 with access control over TLS, each service with its own identity:
+    the instructor injects; the crew's observer can neither clear it nor list it; the debrief
+    identity lists it."""
+    secrets = make_test_secrets(tmp_path / "secrets")
+    with running_router(secrets) as router:
+        services = ("clock", "solar", "faults")
+        extra = {s: ["--config", str(secrets / f"client-lunaris-{s}.json5")] for s in services}
+        with Twin(router.endpoint, [MAPP], tmp_path / "state", services=services, extra=extra):
+            def as_(who: str) -> list[str]:
+                return ["--config", str(secrets / f"client-{who}.json5"), "--connect", router.endpoint]
+            instructor, observer, debrief = as_("instructor"), as_("observer"), as_("debrief")
 
             def services_up() -> bool:
-                done = run_tool("fault", "list", R, "--timeout", "1", *observer)
+                done = run_tool("fault", "list", R, "--timeout", "1", *debrief)
                 return done.returncode == 0
-            wait_for(services_up, 30, "the services to log in and answer the observer")
+            wait_for(services_up, 30, "the services to log in and answer the debrief")
 
             done = run_tool("fault", "inject", R, "solar/right", "disconnect", *instructor)
             assert done.returncode == 0, done.stdout + done.stderr
             assert done.stdout.startswith("accepted: fault_injected")
-            listed = run_tool("fault", "list", R, *observer)
+            listed = run_tool("fault", "list", R, *debrief)
             assert "solar/right/disconnect" in listed.stdout
 
-            # the router drops an observer's write: no answer, and nothing changed
+            # the router drops an observer's write, and its question: no answer, nothing changed
             done = run_tool("fault", "clear", R, "solar/right", "disconnect", "--timeout", "1", *observer)
             assert done.returncode == 2, done.stdout + done.stderr
-            assert "solar/right/disconnect" in run_tool("fault", "list", R, *observer).stdout
+            assert run_tool("fault", "list", R, "--timeout", "1", *observer).returncode == 2
+            assert "solar/right/disconnect" in run_tool("fault", "list", R, *debrief).stdout
             done = run_tool("fault", "clear", R, "solar/right", "disconnect", *instructor)
             assert done.returncode == 0 and "fault_cleared" in done.stdout
