@@ -79,6 +79,7 @@ class BatteryState(_Msg):
     faults: list[str]
     time_to_empty_s: float | None  # null while charging or idle
     heat_w: float = 0.0
+    polarisation_v: list[float] = []  # the equivalent circuit's branch voltages (rc_pairs)
 
 
 class LoadPower(_Msg):

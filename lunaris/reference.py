@@ -150,7 +150,11 @@ def rover_page() -> str:
             + struct_table(Rover)
             + "\nCross-field rules: `battery.thermal`: `min_c < max_c < cutoff_c`; "
             "`battery.ocv_curve`: as many `volts` as `soc` points, `soc` strictly increasing "
-            "from 0.0 to 1.0, `volts` never decreasing; a load's `rail` names a rail of the "
+            "from 0.0 to 1.0, `volts` never decreasing; `battery`: exactly one of "
+            "`internal_resistance_ohm` and `resistance_curve`; each of `rc_pairs[]`: exactly one "
+            "of `resistance_ohm` and `resistance_curve` (every value > 0); a `resistance_curve`: "
+            "as many `ohm` as `soc` points, `soc` strictly increasing; `cutoff_cell_v` below the "
+            "curve's last voltage; a load's `rail` names a rail of the "
             "file; `nominal_w <= max_w`; `restore_above_soc` needs `shed_below_soc` and is "
             "above it; an essential rail is never shed; names are unique among rails (the "
             "solar rail included), loads, panels and radios.\n")
