@@ -55,23 +55,26 @@ def ocv(soc: float, curve_soc: list[float], curve_volts: list[float], cells_seri
     return interp(soc, Table.of(curve_soc, curve_volts, cells_series))
 
 
+_new = tuple.__new__  # a NamedTuple without its Python-level constructor: this runs every tick
+
+
 def solve_bus(v_x: float, r_ohm: float, power_w: float) -> BusPoint:
     """Terminal voltage [V] and current [A] for a demanded power [W] behind ``v_x`` and
     ``r_ohm`` (see the module docstring); never NaN, never a division by zero."""
     if not math.isfinite(power_w):
         raise ValueError(f"power_w must be finite, got {power_w}")
     if v_x <= 0.0:
-        return BusPoint(0.0, 0.0, 0.0, power_w > 0.0)
+        return _new(BusPoint, (0.0, 0.0, 0.0, power_w > 0.0, False))
     if power_w == 0.0:
-        return BusPoint(v_x, 0.0, 0.0, False)
+        return _new(BusPoint, (v_x, 0.0, 0.0, False, False))
     if r_ohm <= 0.0:
-        return BusPoint(v_x, power_w / v_x, power_w, False)
+        return _new(BusPoint, (v_x, power_w / v_x, power_w, False, False))
     p_max = v_x * v_x / (4.0 * r_ohm)
     if power_w > p_max:
-        return BusPoint(v_x / 2.0, v_x / (2.0 * r_ohm), p_max, True)
+        return _new(BusPoint, (v_x / 2.0, v_x / (2.0 * r_ohm), p_max, True, False))
     current = 2.0 * power_w / (v_x + math.sqrt(v_x * v_x - 4.0 * r_ohm * power_w))
     voltage = v_x - current * r_ohm
-    return BusPoint(voltage, current, voltage * current, False)
+    return _new(BusPoint, (voltage, current, voltage * current, False, False))
 
 
 def thermal_step(temp_c: float, heat_w: float, conductance_w_per_k: float,

@@ -51,6 +51,7 @@ __all__ = ["BatteryModel", "BatteryReading", "Books", "BusPoint", "StepRecord", 
 
 
 _OFF = BusPoint(0.0, 0.0, 0.0, False)
+_new = tuple.__new__  # a NamedTuple without its Python-level constructor: this runs every tick
 
 
 class StepRecord(NamedTuple):
@@ -113,14 +114,21 @@ class BatteryModel:
         self._cj = [p.capacitance_f for p in cfg.rc_pairs]
         self._cutoff_v = (cfg.cells_series * cfg.cutoff_cell_v if cfg.cutoff_cell_v is not None
                           else None)
-        self._at_soc = -1.0
+        # hot-path caches: the circuit at a charge, the operating point of a state and demand
+        self._at_e = math.nan
         self._at: tuple[float, float, list[float]] = (0.0, 0.0, [])
+        self._rev = 0  # moves whenever the branches, the latches or the faults change
+        self._point_e = self._point_demand = math.nan
+        self._point_rev = -1
+        self._point = _OFF
+        self._th_dt, self._th_decay = math.nan, 1.0
+        self._cap = cfg.capacity_j
+        self._capacity_loss = 0.0
         self.energy_j = cfg.initial_soc * cfg.capacity_j
         self.temperature_c = cfg.thermal.initial_c
         self.demand_w = 0.0
         self.branch_v = [0.0] * len(self._cj)
-        # injected faults
-        self.capacity_loss = 0.0
+        # injected faults (and capacity_loss, a property)
         self.resistance_factor = 1.0
         self.injected_heat_w = 0.0
         self.disconnected = False
@@ -157,29 +165,41 @@ class BatteryModel:
             self.branch_v = [float(v) for v in saved]
         else:
             self.branch_v = [0.0] * len(self._cj)
-        self._at_soc = -1.0
+        self._changed()
+
+    def _changed(self) -> None:
+        """Forget the cached circuit and operating point (a fault, a restored state)."""
+        self._at_e = math.nan
+        self._rev += 1
 
     # -- derived quantities -----------------------------------------------------------------
 
     @property
+    def capacity_loss(self) -> float:
+        """The injected capacity loss, 0..1 (set it with :meth:`apply_capacity_loss`)."""
+        return self._capacity_loss
+
+    @property
     def capacity_j(self) -> float:
-        return self.cfg.capacity_j * (1.0 - self.capacity_loss)
+        return self._cap
 
     @property
     def soc(self) -> float:
-        cap = self.capacity_j
+        cap = self._cap
         return min(1.0, max(0.0, self.energy_j / cap)) if cap > 0.0 else 0.0
 
     def _params(self) -> tuple[float, float, list[float]]:
         """``(V_oc, R0, [R_j])`` at the present charge, with the resistance fault applied."""
-        soc = self.soc
-        if soc != self._at_soc:  # asked several times a tick at the same charge
+        e = self.energy_j
+        if e != self._at_e:  # asked several times a tick at the same charge
+            cap = self._cap
+            soc = min(1.0, max(0.0, e / cap)) if cap > 0.0 else 0.0
             f = self.resistance_factor
             r0 = self._r0
             rj = [f * (interp(soc, r) if isinstance(r, Table) else r) for r in self._rj]
             self._at = (interp(soc, self._ocv), f * (interp(soc, r0) if isinstance(r0, Table) else r0),
                         rj)
-            self._at_soc = soc
+            self._at_e = e
         return self._at
 
     @property
@@ -207,13 +227,21 @@ class BatteryModel:
 
     def operating_point(self) -> BusPoint:
         """Where the pack sits on the bus for the present demand."""
+        e, demand, rev = self.energy_j, self.demand_w, self._rev
+        if e == self._point_e and demand == self._point_demand and rev == self._point_rev:
+            return self._point  # the step and the PDM ask about the same state
+        point = self._solve()
+        self._point_e, self._point_demand, self._point_rev, self._point = e, demand, rev, point
+        return point
+
+    def _solve(self) -> BusPoint:
         demand = self.demand_w
         if self.disconnected or self.thermal_cutoff:
             return _OFF
         if demand > 0.0 and (self.depleted or self.uv_cutoff):
             return _OFF
         if demand < 0.0:
-            demand = 0.0 if self.energy_j >= self.capacity_j else max(demand, -self.cfg.max_charge_w)
+            demand = 0.0 if self.energy_j >= self._cap else max(demand, -self.cfg.max_charge_w)
         v_oc, r0, _ = self._params()
         v_x = v_oc - sum(self.branch_v) if self.branch_v else v_oc
         point = solve_bus(v_x, r0, demand)
@@ -236,21 +264,23 @@ class BatteryModel:
             self.apply_capacity_loss(params.fraction if isinstance(params, FractionParams) else 0.0)
         elif fault.kind == "resistance":
             self.resistance_factor = params.factor if isinstance(params, FactorParams) else 1.0
-            self._at_soc = -1.0
         elif fault.kind == "heating":
             self.injected_heat_w = params.heat_w if isinstance(params, HeatParams) else 0.0
         elif fault.kind == "disconnect":
             self.disconnected = params is not None
         else:
             raise ValueError(f"the battery has no fault kind {fault.kind!r}")
+        self._changed()
 
     def apply_capacity_loss(self, fraction: float) -> None:
         """Shrink usable capacity; energy above the new capacity is lost for good."""
-        self.capacity_loss = fraction
-        excess = self.energy_j - self.capacity_j
+        self._capacity_loss = fraction
+        self._cap = self.cfg.capacity_j * (1.0 - fraction)
+        excess = self.energy_j - self._cap
         if excess > 0.0:
             self._lost += excess
-            self.energy_j = self.capacity_j
+            self.energy_j = self._cap
+        self._changed()
 
     def step(self, dt_s: float) -> StepRecord:
         """Integrate the circuit, the store and the temperature over ``dt_s`` [s] at the
@@ -259,11 +289,12 @@ class BatteryModel:
             raise ValueError(f"dt_s must be finite and >= 0, got {dt_s}")
         i = self.operating_point().current_a
         v_oc, r0, rj = self._params()
+        self._rev += 1  # the branches and latches move below
         e0 = self.energy_j
         drain = v_oc * i  # out of the store [W]
         active = dt_s
         if i > 0.0:
-            floor = self.cfg.depleted_soc * self.capacity_j
+            floor = self.cfg.depleted_soc * self._cap
             if drain * dt_s >= e0 - floor:  # reaches the floor within the step: stop there
                 active = max(0.0, (e0 - floor) / drain)
                 self.energy_j = min(e0, floor)
@@ -271,7 +302,7 @@ class BatteryModel:
             else:
                 self.energy_j = e0 - drain * dt_s
         elif i < 0.0:
-            cap = self.capacity_j
+            cap = self._cap
             if -drain * dt_s >= cap - e0:  # full within the step: stop there
                 active = max(0.0, (cap - e0) / -drain)
                 self.energy_j = max(e0, cap)
@@ -281,24 +312,27 @@ class BatteryModel:
         v_integral = 0.0  # integral over the active part of sum_j v_j
         bv = self.branch_v
         rest = dt_s - active
+        exp, expm1 = math.exp, math.expm1
         for j, c in enumerate(self._cj):
             r = rj[j]
             tau = r * c
             v = bv[j]
             if active > 0.0:
                 x = active / tau
-                a = math.exp(-x)
-                one_a = -math.expm1(-x)
+                a = exp(-x)
+                one_a = -expm1(-x)
                 v_inf = r * i
                 d = v - v_inf
                 v_integral += v_inf * active + d * tau * one_a
                 # integral of v^2 / R: >= 0, though its terms nearly cancel when dt << tau
-                heat += max(0.0, (v_inf * v_inf * active + 2.0 * v_inf * d * tau * one_a
-                                  + 0.5 * d * d * tau * one_a * (1.0 + a)) / r)
+                h = (v_inf * v_inf * active + 2.0 * v_inf * d * tau * one_a
+                     + 0.5 * d * d * tau * one_a * (1.0 + a)) / r
+                if h > 0.0:
+                    heat += h
                 v = v_inf + d * a
             if rest > 0.0 and v != 0.0:  # no current for the rest of the step: it relaxes
-                b = math.exp(-rest / tau)
-                heat += 0.5 * c * v * v * (-math.expm1(-rest / tau)) * (1.0 + b)
+                b = exp(-rest / tau)
+                heat += 0.5 * c * v * v * (-expm1(-rest / tau)) * (1.0 + b)
                 v *= b
             bv[j] = v
         delivered = (v_oc - r0 * i) * i * active - i * v_integral
@@ -307,25 +341,33 @@ class BatteryModel:
         self._delivered += delivered
         self._heat += heat
         th = self.cfg.thermal
-        q = heat / dt_s if dt_s > 0.0 else 0.0
-        self.temperature_c = thermal_step(
-            self.temperature_c, q + self.injected_heat_w, th.conductance_w_per_k,
-            th.heat_capacity_j_per_k, th.environment_c, dt_s,
-        )
+        q = (heat / dt_s if dt_s > 0.0 else 0.0) + self.injected_heat_w
+        g = th.conductance_w_per_k
+        if g > 0.0:  # thermal_step, with its decay kept while dt does not change
+            if dt_s != self._th_dt:
+                self._th_dt, self._th_decay = dt_s, math.exp(-g * dt_s / th.heat_capacity_j_per_k)
+            t_inf = th.environment_c + q / g
+            self.temperature_c = t_inf + (self.temperature_c - t_inf) * self._th_decay
+        else:
+            self.temperature_c = thermal_step(self.temperature_c, q, g, th.heat_capacity_j_per_k,
+                                              th.environment_c, dt_s)
         self._update_latches()
-        record = self.last_step = StepRecord(dt_s, active, drawn, delivered, heat)
+        record = self.last_step = _new(StepRecord, (dt_s, active, drawn, delivered, heat))
         return record
 
     def _update_latches(self) -> None:
+        self._rev += 1
         cfg = self.cfg
-        soc = self.soc
+        cap = self._cap
+        soc = min(1.0, max(0.0, self.energy_j / cap)) if cap > 0.0 else 0.0
         if soc <= cfg.depleted_soc:
             self.depleted = True
         elif self.depleted and soc >= cfg.depleted_soc + cfg.depleted_hysteresis_soc:
             self.depleted = False
-        if self.temperature_c > cfg.thermal.cutoff_c:
+        th, t = cfg.thermal, self.temperature_c
+        if t > th.cutoff_c:
             self.thermal_cutoff = True
-        elif self.thermal_cutoff and self.temperature_c < cfg.thermal.max_c:
+        elif self.thermal_cutoff and t < th.max_c:
             self.thermal_cutoff = False
         cutoff_v = self._cutoff_v
         if cutoff_v is None:
@@ -335,8 +377,10 @@ class BatteryModel:
             if point.current_a > 0.0 and point.voltage_v < cutoff_v:
                 self.uv_cutoff = True
                 self.cutoff_demand_w = self.demand_w
+                self._rev += 1
         elif self._recovered(cutoff_v):
             self.uv_cutoff = False
+            self._rev += 1
 
     def _recovered(self, cutoff_v: float) -> bool:
         v_oc, r0, rj = self._params()
