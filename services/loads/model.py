@@ -55,18 +55,23 @@ class LoadsModel:
         on = self.rail_on.get(rail, False)
         if not on:
             return 0.0, False
+        held = self.fault_power(name)
+        return (float(self.sampled_w[i]) if held is None else held), True
+
+    def fault_power(self, name: str) -> float | None:
+        """The power a fault holds a load at while its rail is on [W]; None without a fault."""
         faults = self.faults.get(name)
         if not faults:
-            return float(self.sampled_w[i]), True
+            return None
         # Several faults on one load: a short dominates, then an open circuit, then stuck.
         short = faults.get("short")
         if isinstance(short, ShortParams):
-            return self.rail_voltage_v[rail] ** 2 / short.resistance_ohm, True
+            return self.rail_voltage_v[self.rails[self.index[name]]] ** 2 / short.resistance_ohm
         if "open" in faults:
-            return 0.0, True
+            return 0.0
         stuck = faults["stuck"]
         assert isinstance(stuck, StuckParams)
-        return stuck.power_w, True
+        return stuck.power_w
 
     def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
         """Inject (``params``) or clear (None) one fault of one load."""

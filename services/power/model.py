@@ -17,7 +17,9 @@ from common.config import Rail, Rover, SolarRail
 from common.faults import FaultKey, Params
 from common.messages import Severity
 
-__all__ = ["PowerModel", "RailReading", "RailSwitch", "Summary"]
+__all__ = ["COMMANDED_OFF", "PowerModel", "RailReading", "RailSwitch", "Summary"]
+
+COMMANDED_OFF = "commanded off"  # the reason of a rail switched off by command
 
 
 class RailReading(NamedTuple):
@@ -66,7 +68,7 @@ class RailSwitch:
         if self.shed:
             return "shed", f"state of charge below {self.cfg.shed_below_soc}"
         if not self.commanded_on:
-            return "off", "commanded off"
+            return "off", COMMANDED_OFF
         return "on", ""
 
 
