@@ -10,7 +10,7 @@ import bisect
 import math
 from typing import NamedTuple
 
-__all__ = ["BusPoint", "Table", "interp", "ocv", "solve_bus", "thermal_step"]
+__all__ = ["Books", "BusPoint", "StepRecord", "Table", "interp", "ocv", "solve_bus", "thermal_step"]
 
 
 class BusPoint(NamedTuple):
@@ -84,3 +84,29 @@ def thermal_step(temp_c: float, heat_w: float, conductance_w_per_k: float,
         return temp_c + heat_w * dt_s / heat_capacity_j_per_k
     t_inf = env_c + heat_w / conductance_w_per_k
     return t_inf + (temp_c - t_inf) * math.exp(-conductance_w_per_k * dt_s / heat_capacity_j_per_k)
+
+
+class StepRecord(NamedTuple):
+    """What one step did [J, s]: ``active_s`` of its ``dt_s`` carried the current."""
+
+    dt_s: float
+    active_s: float
+    drawn_j: float  # out of the store (negative while charging)
+    delivered_j: float  # at the terminals
+    heat_j: float  # in R0 and the branch resistances
+
+    @property
+    def power_w(self) -> float:
+        """Mean power at the terminals over the step [W]."""
+        return self.delivered_j / self.dt_s if self.dt_s > 0.0 else 0.0
+
+
+class Books(NamedTuple):
+    """Running energy totals since the pack was made [J]. Exactly (to rounding):
+    ``drawn = delivered + heat + capacitor_j - capacitor_j at the start``, and the store fell
+    by ``drawn + lost`` (to the rounding of the store itself, 1e-16 of its content a step)."""
+
+    drawn_j: float
+    delivered_j: float
+    heat_j: float
+    lost_j: float  # removed by a capacity_loss fault

@@ -44,7 +44,7 @@ from common.config import Battery as BatteryConfig
 from common.config import ResistanceCurve
 from common.faults import FactorParams, FaultKey, FractionParams, HeatParams, Params
 from common.messages import Severity
-from services.battery.circuit import BusPoint, Table, interp, ocv, solve_bus, thermal_step
+from services.battery.circuit import Books, BusPoint, StepRecord, Table, interp, ocv, solve_bus, thermal_step
 
 __all__ = ["BatteryModel", "BatteryReading", "Books", "BusPoint", "StepRecord", "Table", "interp",
            "ocv", "solve_bus", "thermal_step"]
@@ -52,32 +52,6 @@ __all__ = ["BatteryModel", "BatteryReading", "Books", "BusPoint", "StepRecord", 
 
 _OFF = BusPoint(0.0, 0.0, 0.0, False)
 _new = tuple.__new__  # a NamedTuple without its Python-level constructor: this runs every tick
-
-
-class StepRecord(NamedTuple):
-    """What one step did [J, s]: ``active_s`` of its ``dt_s`` carried the current."""
-
-    dt_s: float
-    active_s: float
-    drawn_j: float  # out of the store (negative while charging)
-    delivered_j: float  # at the terminals
-    heat_j: float  # in R0 and the branch resistances
-
-    @property
-    def power_w(self) -> float:
-        """Mean power at the terminals over the step [W]."""
-        return self.delivered_j / self.dt_s if self.dt_s > 0.0 else 0.0
-
-
-class Books(NamedTuple):
-    """Running energy totals since the pack was made [J]. Exactly (to rounding):
-    ``drawn = delivered + heat + capacitor_j - capacitor_j at the start``, and the store fell
-    by ``drawn + lost`` (to the rounding of the store itself, 1e-16 of its content a step)."""
-
-    drawn_j: float
-    delivered_j: float
-    heat_j: float
-    lost_j: float  # removed by a capacity_loss fault
 
 
 class BatteryReading(NamedTuple):
