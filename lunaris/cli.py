@@ -31,6 +31,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "record": ("lunaris.record", "record every lunaris key to an MCAP file"),
     "report": ("lunaris.report", "draw a recorded session for the debrief"),
     "scenario": ("lunaris.scenario", "play a scripted training scenario"),
+    "predict": ("lunaris.predict", "Monte Carlo time to empty and state of charge, from a file or "
+                "the live twin"),
 }
 
 

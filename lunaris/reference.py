@@ -27,6 +27,7 @@ from common.conditions import SOURCES
 from common.config import Rover
 from common.datafile import struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, NoParams
+from common.messages import Prediction, PredictionRequest
 from common.scenario import Scenario
 from services.bridge.mapping import CONVERTERS, MappingFile
 
@@ -199,6 +200,14 @@ def keys_page() -> str:
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
                 ("`faults/journal` (query)", "the session's events, oldest first"),
+                ("`prediction` (query)", "`get lunaris/<rover>/prediction?hours=8;samples=1000` "
+                 "(parameters, defaults 8 h and 1000 samples: " + _payload_fields(PredictionRequest)
+                 + "; an unknown or bad "
+                 "one is answered with an error reply): the Monte Carlo of the rover's futures "
+                 "from its live state, answered by the battery service with `Prediction`: "
+                 + _payload_fields(Prediction) + "; `time_to_empty_s` and `soc_at_horizon` are "
+                 "`{p05, p50, p95}`, a time null where that share of the futures does not empty "
+                 "within the horizon"),
                 ("`service/<name>` (liveliness)", "a token per running service, declared once "
                  "it is listening"),
             ]))

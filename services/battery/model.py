@@ -141,6 +141,18 @@ class BatteryModel:
             self.branch_v = [0.0] * len(self._cj)
         self._changed()
 
+    def clone(self) -> BatteryModel:
+        """A pack in the same state with the same injected faults (a prediction's start)."""
+        twin = BatteryModel(self.cfg)
+        twin.set_state(self.state())
+        twin.apply_capacity_loss(self.capacity_loss)
+        twin.energy_j = self.energy_j
+        twin.resistance_factor = self.resistance_factor
+        twin.injected_heat_w = self.injected_heat_w
+        twin.disconnected = self.disconnected
+        twin._changed()
+        return twin
+
     def _changed(self) -> None:
         """Forget the cached circuit and operating point (a fault, a restored state)."""
         self._at_e = math.nan

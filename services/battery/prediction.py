@@ -249,7 +249,7 @@ def predict(start: Start, horizon_s: float, samples: int, seed: int | None = Non
         gone = packs.depleted | packs.uv_cutoff
         empty = np.where(np.isinf(empty) & gone, n * dt, empty)
         packs.demand_w = pdm.bus_w(packs.soc, packs.operational, loads.next()) - generation
-        if progress is not None and (n % report == 0 or n == steps):
+        if progress is not None and ((n % report == 0 and steps - n >= report // 2) or n == steps):
             progress(n, steps)
     return Outcome(start.t_s, steps * dt, dt, samples, empty, packs.soc)
 
