@@ -110,7 +110,8 @@ def _from_twin(args: argparse.Namespace, request: PredictionRequest) -> tuple[Pr
         for reply in session.get(selector, timeout=args.timeout):
             if reply.ok is not None:
                 return decode(reply.ok.payload.to_bytes(), Prediction), f"{args.rover}, live"
-            raise ToolError(f"{args.rover} refused: {reply.err.payload.to_string()}", 1)
+            why = reply.err.payload.to_string() if reply.err is not None else "no reason given"
+            raise ToolError(f"{args.rover} refused: {why}", 1)
     except BadInput as exc:
         raise ToolError(f"unreadable answer: {exc}") from None
     finally:
