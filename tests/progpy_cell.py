@@ -22,8 +22,9 @@ from common.config import Rover, load_rover
 from services.battery.model import BatteryModel
 from tests.harness import ROVERS
 
-__all__ = ["PROFILES", "Comparison", "Run", "compare", "example_current_a", "lunaris_run",
-           "progpy_model", "progpy_run", "reference_cell"]
+__all__ = ["PROFILES", "Comparison", "Run", "compare", "energy_soc", "example_current_a",
+           "lunaris_run", "progpy_model", "progpy_monte_carlo", "progpy_run", "progpy_state",
+           "reference_cell"]
 
 PROGPY_DT_S = 0.5
 SAVE_S = 1.0
@@ -126,3 +127,46 @@ def compare(profile: Profile, rover: Rover | None = None) -> Comparison:
     diff = np.interp(t, twin.times_s[ok], twin.voltage_v[ok]) - ref.voltage_v[: len(t)]
     return Comparison(profile.name, ref.eod_s, twin.eod_s, float(np.sqrt(np.mean(diff**2))),
                       float(np.max(np.abs(diff))))
+
+
+def progpy_state(m, charge_soc: float):
+    """BatteryCircuit's state at a state of charge (by charge, its own), branches relaxed."""
+    p = m.parameters
+    return m.StateContainer({"tb": p["Ta"], "qb": p["qMax"] - p["CMax"] * (1.0 - charge_soc),
+                             "qcp": 0.0, "qcs": 0.0})
+
+
+def energy_soc(charge_soc: float) -> float:
+    """Lunaris's state of charge (by energy) of BatteryCircuit's (by charge): the integral of
+    the equilibrium voltage over charge from empty, over the whole of it."""
+    m = progpy_model()
+    p = m.parameters
+    q = np.linspace(p["qMax"] - p["CMax"], p["qMax"], 100_001)
+    x = m.StateContainer({"tb": np.full_like(q, p["Ta"]), "qb": q, "qcp": np.zeros_like(q),
+                          "qcs": np.zeros_like(q)})
+    vb = np.asarray(m.output(x)["v"], dtype=float).ravel()
+    energy = np.concatenate([[0.0], np.cumsum(0.5 * (vb[1:] + vb[:-1]) * np.diff(q))])
+    return float(np.interp(p["qMax"] - p["CMax"] * (1.0 - charge_soc), q, energy) / energy[-1])
+
+
+def progpy_monte_carlo(samples: int, charge_soc: float, power_w: float, std_w: float, max_w: float,
+                       dt_s: float, seed: int) -> np.ndarray:
+    """ProgPy's MonteCarlo predictor on BatteryCircuit: the ends of discharge [s] of
+    ``samples`` futures from ``charge_soc``, each drawing ``clip(N(power_w, std_w), 0, max_w)``
+    afresh every step of ``dt_s`` (RK4) and meeting it with ``i = P / v``."""
+    from progpy.predictors import MonteCarlo
+    from progpy.uncertain_data import ScalarData
+
+    m = progpy_model()
+    rng = np.random.default_rng(seed)
+
+    def loading(t: float, x=None):
+        p = float(np.clip(rng.normal(power_w, std_w), 0.0, max_w))
+        v = float(m.output(x)["v"]) if x is not None else m.parameters["V0"]
+        return m.InputContainer({"i": p / v})
+
+    result = MonteCarlo(m).predict(ScalarData(progpy_state(m, charge_soc)), loading,
+                                   n_samples=samples, dt=dt_s, integration_method="rk4",
+                                   horizon=HORIZON_S, save_freq=HORIZON_S, events=["EOD"])
+    return np.array([float(s["EOD"]) if s["EOD"] is not None else np.inf
+                     for s in result.time_of_event])
