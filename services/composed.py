@@ -90,7 +90,8 @@ class ComposedTwin:
         b = self.battery
         point = b.operating_point()
         power.set_battery(b.soc, b.operational, point.voltage_v)
-        if self._fast and self.fast and not any(loads.faults.values()):
+        faults = loads.faults
+        if self._fast and self.fast and (not faults or not any(faults.values())):
             states, summary = power.resolve(self._rail_w[self._row - 1])
             if states != self._states:  # the loads follow their rails, as over Zenoh
                 self._states = states

@@ -52,6 +52,7 @@ __all__ = ["BatteryModel", "BatteryReading", "Books", "BusPoint", "StepRecord", 
 
 _OFF = BusPoint(0.0, 0.0, 0.0, False)
 _new = tuple.__new__  # a NamedTuple without its Python-level constructor: this runs every tick
+_INF = math.inf
 
 
 class BatteryReading(NamedTuple):
@@ -97,6 +98,7 @@ class BatteryModel:
         self._point = _OFF
         self._th_dt, self._th_decay = math.nan, 1.0
         self._cap = cfg.capacity_j
+        self._depleted_soc = cfg.depleted_soc
         self._capacity_loss = 0.0
         self.energy_j = cfg.initial_soc * cfg.capacity_j
         self.temperature_c = cfg.thermal.initial_c
@@ -114,6 +116,7 @@ class BatteryModel:
         # the books
         self.last_step = StepRecord(0.0, 0.0, 0.0, 0.0, 0.0)
         self._drawn = self._delivered = self._heat = self._lost = 0.0
+        self._changed()
 
     # -- state ------------------------------------------------------------------------------
 
@@ -157,6 +160,9 @@ class BatteryModel:
         """Forget the cached circuit and operating point (a fault, a restored state)."""
         self._at_e = math.nan
         self._rev += 1
+        f = self.resistance_factor  # the constant resistances times the fault's factor, once
+        self._rj_fixed = [0.0 if isinstance(r, Table) else f * r for r in self._rj]
+        self._rj_curves = [(k, r) for k, r in enumerate(self._rj) if isinstance(r, Table)]
 
     # -- derived quantities -----------------------------------------------------------------
 
@@ -182,7 +188,9 @@ class BatteryModel:
             soc = min(1.0, max(0.0, e / cap)) if cap > 0.0 else 0.0
             f = self.resistance_factor
             r0 = self._r0
-            rj = [f * (interp(soc, r) if isinstance(r, Table) else r) for r in self._rj]
+            rj = self._rj_fixed.copy()
+            for k, t in self._rj_curves:
+                rj[k] = f * interp(soc, t)
             self._at = (interp(soc, self._ocv), f * (interp(soc, r0) if isinstance(r0, Table) else r0),
                         rj)
             self._at_e = e
@@ -271,7 +279,7 @@ class BatteryModel:
     def step(self, dt_s: float) -> StepRecord:
         """Integrate the circuit, the store and the temperature over ``dt_s`` [s] at the
         present operating point (see the module docstring); returns what the step did."""
-        if not 0.0 <= dt_s < math.inf:
+        if not 0.0 <= dt_s < _INF:
             raise ValueError(f"dt_s must be finite and >= 0, got {dt_s}")
         i = self.operating_point().current_a
         v_oc, r0, rj = self._params()
@@ -280,7 +288,7 @@ class BatteryModel:
         drain = v_oc * i  # out of the store [W]
         active = dt_s
         if i > 0.0:
-            floor = self.cfg.depleted_soc * self._cap
+            floor = self._depleted_soc * self._cap
             if drain * dt_s >= e0 - floor:  # reaches the floor within the step: stop there
                 active = max(0.0, (e0 - floor) / drain)
                 self.energy_j = min(e0, floor)

@@ -20,6 +20,7 @@ from common.messages import Severity
 __all__ = ["COMMANDED_OFF", "PowerModel", "RailReading", "RailSwitch", "Summary"]
 
 COMMANDED_OFF = "commanded off"  # the reason of a rail switched off by command
+_ON = ("on", "")
 
 
 class RailReading(NamedTuple):
@@ -69,7 +70,7 @@ class RailSwitch:
             return "shed", f"state of charge below {self.cfg.shed_below_soc}"
         if not self.commanded_on:
             return "off", COMMANDED_OFF
-        return "on", ""
+        return _ON
 
 
 class PowerModel:
@@ -180,8 +181,10 @@ class PowerModel:
         states: list[tuple[str, str]] = []
         load_total = bus_total = 0.0
         for sw, power_w in zip(self._switch_list, rail_w, strict=True):
-            state = sw.state(ok)
-            if state[0] == "on":
+            # RailSwitch.state's precedence, without the call for a rail that is simply on
+            on = ok and sw.commanded_on and not (sw.failed or sw.tripped or sw.shed)
+            state = _ON if on else sw.state(ok)
+            if on:
                 cfg = sw.cfg
                 current = power_w / cfg.voltage_v
                 if current > cfg.current_limit_a:
