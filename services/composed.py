@@ -31,8 +31,9 @@ class ComposedTwin:
     the general path computes, to the bit): the loads are drawn :data:`_BLOCK` ticks at a
     time and summed per rail in the same order :meth:`PowerModel.compute` adds them, so while
     no load has a fault the PDM resolves the rails from those sums directly (one pass, not
-    the fixed point of loads and rails); the panels are recomputed only when the sun angle,
-    the dust, a disconnection or the umbilical changed.
+    the fixed point of loads and rails; ``loads.sampled_w`` is brought up to date when the
+    general path runs); the panels are recomputed only when the sun angle, the dust, a
+    disconnection or the umbilical changed.
     """
 
     def __init__(self, rover: Rover, seed: int | None = 0, fast: bool = True):
@@ -55,21 +56,17 @@ class ComposedTwin:
         self._fast = False  # the present tick's loads are a row of the block's rail sums
         self.summary: Summary = self._resolve()
 
-    def _next_samples(self) -> np.ndarray:
-        if self._row >= len(self._samples):
-            m = self.loads
-            self._samples = np.clip(
-                m.rng.normal(m.nominal_w, m.std_w, size=(_BLOCK, len(m.names))), 0.0, m.max_w)
-            # per rail, the loads added in load order from 0.0, as PowerModel.compute adds them
-            sums = np.zeros((_BLOCK, len(self._rail_names)))
-            for j, members in enumerate(self._rail_loads):
-                for k in members:
-                    sums[:, j] = sums[:, j] + self._samples[:, k]
-            self._rail_w = sums.tolist()
-            self._row = 0
-        row = self._samples[self._row]
-        self._row += 1
-        return row
+    def _draw_block(self) -> None:
+        m = self.loads
+        self._samples = np.clip(
+            m.rng.normal(m.nominal_w, m.std_w, size=(_BLOCK, len(m.names))), 0.0, m.max_w)
+        # per rail, the loads added in load order from 0.0, as PowerModel.compute adds them
+        sums = np.zeros((_BLOCK, len(self._rail_names)))
+        for j, members in enumerate(self._rail_loads):
+            for k in members:
+                sums[:, j] = sums[:, j] + self._samples[:, k]
+        self._rail_w = sums.tolist()
+        self._row = 0
 
     def _update_solar(self) -> None:
         sol, seen = self.solar, self._solar_seen
@@ -99,6 +96,8 @@ class ComposedTwin:
                 for name, (state, _) in zip(self._rail_names, states, strict=True):
                     rail_on[name] = state == "on"
         else:
+            if self._fast:  # the loads model draws this tick's row of the block
+                loads.sampled_w = self._samples[self._row - 1]
             summary = self._fixed_point()
         b.set_demand(summary.net_battery_power_w)
         return summary
@@ -122,7 +121,9 @@ class ComposedTwin:
         """One tick of ``1 / tick_hz`` simulated seconds."""
         self.battery.step(self.dt_s)
         self.t_s += self.dt_s
-        self.loads.sampled_w = self._next_samples()
+        if self._row >= len(self._rail_w):
+            self._draw_block()
+        self._row += 1
         self._fast = True
         self.summary = self._resolve()
 
@@ -162,7 +163,9 @@ def run_budget(rover: Rover, hours: float, seed: int | None = 0,
     b, step = twin.battery, twin.step
     pending = [(name, sw) for name, sw in twin.power.switches.items()  # rails that can shed
                if sw.cfg.shed_below_soc is not None]
-    for i in range(ticks):
+    shed_soc = max((sw.cfg.shed_below_soc or 0.0 for _, sw in pending), default=0.0)
+    next_report = report_every if progress is not None else ticks + 1
+    for i in range(1, ticks + 1):
         step()
         soc = b.soc
         if soc < min_soc:
@@ -170,18 +173,19 @@ def run_budget(rover: Rover, hours: float, seed: int | None = 0,
         if b.temperature_c > peak_t:
             peak_t = b.temperature_c
         summary = twin.summary
-        load_sum += summary.load_power_w
-        gen_sum += summary.generation_w
+        load_sum += summary[0]  # load_power_w
+        gen_sum += summary[2]  # generation_w
         if depleted_at is None and b.depleted:
             depleted_at = twin.t_s
         if cutoff_at is None and b.uv_cutoff:
             cutoff_at = twin.t_s
-        if pending and any(sw.shed for _, sw in pending):
+        if pending and soc < shed_soc:  # a rail sheds below its threshold only
             for name, sw in [p for p in pending if p[1].shed]:
                 shed_at[name] = twin.t_s
                 pending.remove((name, sw))
-        if progress is not None and (i + 1) % report_every == 0:
-            progress(i + 1, ticks, twin)
+        if i == next_report:
+            next_report += report_every
+            progress(i, ticks, twin)
     n = max(ticks, 1)
     return Budget(twin.t_s, ticks, twin.battery.soc, min_soc, e0 - twin.battery.energy_j,
                   load_sum / n, gen_sum / n, depleted_at, shed_at, peak_t, cutoff_at)
