@@ -86,6 +86,9 @@ class PredictionQueries:
         """On the worker thread: parse, copy the pack, and hand the rest to the pool."""
         targets = [r for r in sorted(self.rovers) if zenoh.KeyExpr(keys.prediction(r)).intersects(
             q.key_expr)]
+        if not targets:  # another battery process serves the rover asked about
+            q.drop()
+            return
         try:
             request = decode_parameters(str(q.parameters), PredictionRequest)
         except BadInput as exc:
