@@ -108,7 +108,15 @@ class Packs:
     @staticmethod
     def solve_bus(v_x: np.ndarray, r0: np.ndarray, demand: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Voltage, current and brown-out of :func:`~services.battery.circuit.solve_bus`."""
+        """Voltage, current and brown-out of :func:`~services.battery.circuit.solve_bus`.
+        (``where`` evaluates every branch for every element and keeps the one that applies:
+        the others' divisions by zero are expected, and silenced.)"""
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            return Packs._solve_bus(v_x, r0, demand)
+
+    @staticmethod
+    def _solve_bus(v_x: np.ndarray, r0: np.ndarray, demand: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         live = v_x > 0.0
         all_live = bool(live.all())
         has_r = r0 > 0.0

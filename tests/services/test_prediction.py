@@ -8,10 +8,14 @@ import math
 import msgspec
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import Rover, load_rover
 from common.faults import fault_of
+from services.battery.circuit import solve_bus
+from services.battery.packs import Packs
 from services.battery.prediction import clipped_moments, percentiles, predict, start_of
 from services.composed import ComposedTwin
 from tests.harness import ROVERS
@@ -187,3 +191,21 @@ def test_bad_arguments_are_refused():
         predict(start, 0.0, 10)
     with pytest.raises(ValueError, match="samples must be >= 1"):
         predict(start, 10.0, 0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(
+    st.one_of(st.just(0.0), st.floats(-5.0, 500.0)),  # V_x
+    st.one_of(st.just(0.0), st.floats(0.0, 2.0)),  # R0
+    st.one_of(st.just(0.0), st.floats(-1e4, 1e5)),  # demand
+), min_size=1, max_size=12))
+def test_the_vectorised_bus_solution_is_the_scalar_one_to_the_bit(cases):
+    """Every element of Packs.solve_bus equals circuit.solve_bus on the same numbers, in
+    every branch: no source, no demand, no resistance, a brown-out, charging, and arrays that
+    mix them."""
+    v_x, r0, demand = (np.array(c) for c in zip(*cases, strict=True))
+    voltage, current, brownout = Packs.solve_bus(v_x, r0, demand)
+    for k, (v, r, p) in enumerate(cases):
+        want = solve_bus(v, r, p)
+        assert (voltage[k], current[k], bool(brownout[k])) == (
+            want.voltage_v, want.current_a, want.brownout), (v, r, p)
