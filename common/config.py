@@ -42,11 +42,14 @@ __all__ = [
     "RadioSite",
     "Rail",
     "Rover",
+    "RcPair",
+    "ResistanceCurve",
     "RoverInfo",
     "Solar",
     "SolarRail",
     "Thermal",
     "Umbilical",
+    "Uncertainty",
     "budget_warnings",
     "load_rover",
     "parse_rover",
@@ -81,14 +84,42 @@ class Thermal(Strict, frozen=True):
     min_c: Annotated[float, doc("under-temperature alarm below this [degC]")]
 
 
+class ResistanceCurve(Strict, frozen=True):
+    """A resistance against state of charge: linear between points, held flat outside them."""
+
+    soc: Annotated[list[Fraction], doc("state of charge points, strictly increasing")]
+    ohm: Annotated[list[NonNegative], doc("resistance at each point [ohm, whole pack]")]
+
+
+class RcPair(Strict, frozen=True):
+    """A polarisation branch of the equivalent circuit (a resistance in parallel with a
+    capacitance, whole pack): dv/dt = I / C - v / (R C)."""
+
+    capacitance_f: Annotated[Positive, doc("C [F]")]
+    resistance_ohm: Annotated[Positive | None, doc(
+        "R [ohm]; give this or resistance_curve")] = None
+    resistance_curve: Annotated[ResistanceCurve | None, doc(
+        "R against state of charge [ohm]; give this or resistance_ohm")] = None
+
+
+class Uncertainty(Strict, frozen=True):
+    """What the prediction (lunaris predict) does not know: each is the relative standard
+    deviation of a factor drawn once per Monte Carlo sample, 1 + frac * N(0, 1)."""
+
+    capacity_frac: Annotated[Fraction, doc("of the capacity (same state of charge)")] = 0.0
+    resistance_frac: Annotated[Fraction, doc("of every resistance of the circuit")] = 0.0
+    generation_frac: Annotated[Fraction, doc("of the generation (panels and umbilical) "
+                                             "held over the horizon")] = 0.0
+
+
 class Battery(Strict, frozen=True):
-    """The pack: an open-circuit voltage behind an internal resistance (SPEC §4)."""
+    """The pack: an open-circuit voltage behind a series resistance and, optionally,
+    polarisation branches (SPEC §4)."""
 
     capacity_j: Annotated[Positive, doc("usable energy when full [J]")]
     initial_soc: Annotated[Fraction, doc("state of charge at the start, 0..1")]
     cells_series: Annotated[int, msgspec.Meta(ge=1), doc("cells in series")]
     ocv_curve: OcvCurve
-    internal_resistance_ohm: Annotated[NonNegative, doc("whole-pack series resistance [ohm]")]
     max_discharge_a: Annotated[Positive, doc("BMS discharge current limit [A]: a demand above "
                                              "it is met only in part")]
     max_charge_w: Annotated[NonNegative, doc("charging power limit [W]")]
@@ -98,6 +129,25 @@ class Battery(Strict, frozen=True):
     depleted_hysteresis_soc: Annotated[Fraction, doc(
         "a depleted pack comes back on line once charged this far above depleted_soc, so it "
         "does not chatter on and off")] = 0.05
+    internal_resistance_ohm: Annotated[NonNegative | None, doc(
+        "whole-pack series resistance R0 [ohm]; required unless resistance_curve is given")] = None
+    resistance_curve: Annotated[ResistanceCurve | None, doc(
+        "R0 against state of charge [ohm, whole pack]; replaces internal_resistance_ohm")] = None
+    rc_pairs: Annotated[list[RcPair], doc(
+        "polarisation branches in series with R0 (none: the first release's model)")] = []
+    cutoff_cell_v: Annotated[Positive | None, doc(
+        "BMS under-voltage cut-off per cell [V]: when the terminal voltage under load falls "
+        "below cells_series times this, the pack stops supplying until its open-circuit "
+        "voltage has recovered and the demand allows (none: no cut-off)")] = None
+    uncertainty: Uncertainty = Uncertainty()
+
+    @property
+    def series_resistance(self) -> float | ResistanceCurve:
+        """R0: the curve when given, else the constant (0 when neither: a file that parsed
+        always has one)."""
+        if self.resistance_curve is not None:
+            return self.resistance_curve
+        return self.internal_resistance_ohm or 0.0
 
 
 class Rail(Strict, frozen=True):
@@ -292,6 +342,8 @@ def _semantic_problems(d: dict) -> list[str]:
     curve = _typed(battery.get("ocv_curve"), OcvCurve)
     if curve is not None:
         _curve_rules(curve, problems)
+    if raw_battery is not None and isinstance(raw_battery, dict):
+        _circuit_rules(battery, curve, problems)
     rails = [r for r in (_typed(x, Rail) for x in _list(d.get("rails"))) if r is not None]
     loads = [x for x in (_typed(x, Load) for x in _list(d.get("loads"))) if x is not None]
     solar = _typed(d.get("solar"), Solar)
@@ -340,6 +392,48 @@ def _curve_rules(curve: OcvCurve, problems: list[str]) -> None:
         problems.append("battery.ocv_curve.soc: must be strictly increasing")
     if soc[0] != 0.0 or soc[-1] != 1.0:
         problems.append(f"battery.ocv_curve.soc: must run from 0.0 to 1.0, got {soc[0]}..{soc[-1]}")
+
+
+def _circuit_rules(battery: dict, ocv: OcvCurve | None, problems: list[str]) -> None:
+    """R0 given once; each branch's resistance given once; every resistance curve well formed;
+    a cut-off the full pack can stay above."""
+    has_r0 = battery.get("internal_resistance_ohm") is not None
+    has_curve = battery.get("resistance_curve") is not None
+    if not has_r0 and not has_curve:
+        problems.append("battery.internal_resistance_ohm: missing required field "
+                        "(or give battery.resistance_curve)")
+    elif has_r0 and has_curve:
+        problems.append("battery.resistance_curve: replaces internal_resistance_ohm; give one "
+                        "of them, not both")
+    r_curve = _typed(battery.get("resistance_curve"), ResistanceCurve)
+    if r_curve is not None:
+        _resistance_curve_rules("battery.resistance_curve", r_curve, problems)
+    for i, raw in enumerate(_list(battery.get("rc_pairs"))):
+        pair = _typed(raw, RcPair)
+        if pair is None:
+            continue
+        where = f"battery.rc_pairs[{i}]"
+        if (pair.resistance_ohm is None) == (pair.resistance_curve is None):
+            problems.append(f"{where}: give resistance_ohm or resistance_curve (exactly one), got "
+                            f"{'both' if pair.resistance_ohm is not None else 'neither'}")
+        if pair.resistance_curve is not None:
+            _resistance_curve_rules(f"{where}.resistance_curve", pair.resistance_curve, problems)
+            if not all(r > 0.0 for r in pair.resistance_curve.ohm):
+                problems.append(f"{where}.resistance_curve.ohm: a branch resistance must be > 0")
+    cutoff = battery.get("cutoff_cell_v")
+    if ocv is not None and ocv.volts and isinstance(cutoff, int | float) and not isinstance(cutoff, bool) \
+            and cutoff >= max(ocv.volts):
+        problems.append(f"battery.cutoff_cell_v: must be below the full cell's open-circuit voltage "
+                        f"({max(ocv.volts):g} V), got {cutoff:g}: the pack could never supply")
+
+
+def _resistance_curve_rules(where: str, curve: ResistanceCurve, problems: list[str]) -> None:
+    if len(curve.ohm) != len(curve.soc):
+        problems.append(f"{where}.ohm: expected {len(curve.soc)} values, got {len(curve.ohm)}")
+    if not curve.soc:
+        problems.append(f"{where}.soc: expected at least 1 point, got 0")
+    elif any(b <= a for a, b in zip(curve.soc, curve.soc[1:], strict=False)):
+        problems.append(f"{where}.soc: must be strictly increasing")
 
 
 def _rail_rules(i: int, r: Rail, problems: list[str]) -> None:

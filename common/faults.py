@@ -183,6 +183,8 @@ DERIVED: dict[str, dict[str, str]] = {
                     "limit)",
         "over_current": "the BMS held the discharge current at max_discharge_a",
         "under_voltage": "terminal voltage below the empty-cell voltage",
+        "under_voltage_cutoff": "terminal voltage under load below cells_series * cutoff_cell_v: "
+                                "the BMS switched the pack off (back when it can hold the demand)",
         "over_temperature": "pack above max_c (alarm)",
         "under_temperature": "pack below min_c (alarm)",
     },
@@ -201,6 +203,7 @@ FAULT_CODES: list[tuple[str, int, str]] = [
     ("thermal_cutoff", 6, "pack above cutoff_c: disconnected itself"),
     ("disconnected", 7, "pack off the bus (injected disconnect)"),
     ("depleted", 5, "state of charge at or below depleted_soc"),
+    ("under_voltage_cutoff", 12, "terminal voltage under load below the cut-off: pack switched off"),
     ("brownout", 4, "demand beyond what the pack can deliver (P > Voc^2 / 4R)"),
     ("over_current", 8, "discharge current above max_discharge_a"),
     ("under_voltage", 3, "terminal voltage below the empty-cell voltage"),

@@ -6,10 +6,10 @@ back into its rover and the rest.
 
 A *family* is a key shape after ``lunaris/<rover>/`` whose name chunks are placeholders
 (``load/{load}/power``), with the msgspec Struct its payload follows, whether the twin
-publishes it (telemetry, ``out``) or reads it (an input or command, ``in``), and the
-service that owns it. :data:`FAMILIES` is the one table every tool reads: the bridge's
-mapping validation, the recorder's schemas, the scenario conditions, the gatekeeper that
-refuses keys nobody owns.
+publishes it (telemetry, ``out``), reads it (an input or command, ``in``) or answers a
+``get`` on it (``query``), and the service that owns it. :data:`FAMILIES` is the one table
+every tool reads: the bridge's mapping validation, the recorder's schemas, the scenario
+conditions, the gatekeeper that refuses keys nobody owns.
 """
 
 from __future__ import annotations
@@ -48,6 +48,7 @@ __all__ = [
     "input_umbilical",
     "load_power",
     "power_summary",
+    "prediction",
     "radio_link",
     "rail_state",
     "rover_prefix",
@@ -184,6 +185,11 @@ def snapshots_of(rover: str, service: str) -> str:
     return f"{ROOT}/{rover}/snapshots/{service}"
 
 
+def prediction(rover: str) -> str:
+    """``get`` with ``?hours=8;samples=1000`` returns the Monte Carlo from the live state."""
+    return f"{ROOT}/{rover}/prediction"
+
+
 def event(rover: str) -> str:
     return f"{ROOT}/{rover}/event"
 
@@ -202,7 +208,7 @@ def split(key: str) -> tuple[str, list[str]]:
 
 # -- families ----------------------------------------------------------------------------------
 
-Direction = Literal["out", "in"]
+Direction = Literal["out", "in", "query"]  # published, read, or answered to a get
 
 
 class Family(NamedTuple):
@@ -232,9 +238,10 @@ class Family(NamedTuple):
             c.startswith("{") or c == p for c, p in zip(self.chunks, parts, strict=True))
 
 
-def _f(shape: str, payload: type[msgspec.Struct], owner: str) -> Family:
+def _f(shape: str, payload: type[msgspec.Struct], owner: str, direction: Direction | None = None
+       ) -> Family:
     return Family(tuple(shape.split("/")), payload,
-                  "out" if m.is_telemetry(payload) else "in", owner)
+                  direction or ("out" if m.is_telemetry(payload) else "in"), owner)
 
 
 FAMILIES: tuple[Family, ...] = (
@@ -255,6 +262,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("input/drive/traverse", m.DriveTraverse, "drive"),
     _f("cmd/rail/{rail}", m.RailCommand, "power"),
     _f("clock/control", m.ClockControl, "clock"),
+    _f("prediction", m.Prediction, "battery", "query"),
 )
 
 

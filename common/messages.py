@@ -31,7 +31,10 @@ __all__ = [
     "Severity",
     "SnapshotInfo",
     "LoadPower",
+    "Percentiles",
     "PowerSummary",
+    "Prediction",
+    "PredictionRequest",
     "RadioLink",
     "RadioPosition",
     "RailCommand",
@@ -44,6 +47,7 @@ __all__ = [
     "decode",
     "decode_input",
     "read_json",
+    "decode_parameters",
     "encode",
     "is_telemetry",
 ]
@@ -86,6 +90,29 @@ class BatteryState(_Msg):
     faults: list[str]
     time_to_empty_s: float | None  # null while charging or idle
     heat_w: float = 0.0
+    polarisation_v: list[float] = []  # the equivalent circuit's branch voltages (rc_pairs)
+
+
+class Percentiles(msgspec.Struct, omit_defaults=False):
+    """The 5th, 50th and 95th percentiles of a Monte Carlo outcome; null where not reached."""
+
+    p05: float | None
+    p50: float | None
+    p95: float | None
+
+
+class Prediction(_Msg):
+    """``get lunaris/<rover>/prediction?hours=8;samples=1000``: the Monte Carlo of the rover's
+    futures from its live state (SPEC §4, §5)."""
+
+    t_s: float  # sim time of the state the futures start from
+    horizon_s: float
+    samples: int
+    time_to_empty_s: Percentiles  # from t_s to depleted or cut off; null: not within the horizon
+    soc_at_horizon: Percentiles
+    computed_in_s: float  # wall time the Monte Carlo took
+    step_s: float = 0.0  # its integration step
+    notes: list[str] = []  # what was assumed where the live state was not known
 
 
 class LoadPower(_Msg):
@@ -265,6 +292,47 @@ class UmbilicalInput(_Input):
 class RailCommand(_Input):
     on: bool | None = None
     reset: bool | None = None
+
+
+class PredictionRequest(_Input):
+    """The parameters of a ``prediction`` query: ``?hours=8;samples=1000`` (``seed`` for a
+    repeatable answer)."""
+
+    hours: Annotated[float, msgspec.Meta(gt=0.0, le=168.0)] = 8.0
+    samples: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 1000
+    seed: Annotated[int, msgspec.Meta(ge=0)] | None = None
+
+
+def decode_parameters(text: str, typ: type[T]) -> T:
+    """A query's selector parameters (``hours=8;samples=1000``) as an input Struct; raise
+    :class:`BadInput` naming the problem (an unknown or repeated name, a value that is not a
+    number or out of range)."""
+    raw: dict[str, Any] = {}
+    for item in (p for p in text.replace("&", ";").split(";") if p.strip()):
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise BadInput(f"parameter {item!r} is not name=value")
+        if name in raw:
+            raise BadInput(f"parameter {name!r} given twice")
+        raw[name] = _number(name, value.strip())
+    try:
+        return msgspec.convert(raw, typ)
+    except msgspec.ValidationError as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _number(name: str, value: str) -> int | float:
+    try:
+        number: int | float = int(value)
+    except ValueError:
+        try:
+            number = float(value)
+        except ValueError:
+            raise BadInput(f"parameter {name!r} must be a number, got {value!r}") from None
+    if isinstance(number, float) and not math.isfinite(number):
+        raise BadInput(f"parameter {name!r} must be finite, got {value!r}")
+    return number
 
 
 def is_telemetry(struct: type[msgspec.Struct]) -> bool:

@@ -33,6 +33,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scenario": ("lunaris.scenario", "play a scripted training scenario"),
     "deploy": ("lunaris.deploy", "a deployment's router access control, secrets and their check"),
     "traverse": ("lunaris.traverse", "send a rover on a traverse, or stop it"),
+    "predict": ("lunaris.predict", "Monte Carlo time to empty and state of charge, from a file or "
+                "the live twin"),
 }
 
 

@@ -27,6 +27,7 @@ from common.conditions import SOURCES
 from common.config import Rover
 from common.datafile import struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, NoParams
+from common.messages import Prediction, PredictionRequest
 from common.scenario import Scenario
 from common.traverse import TraverseFile
 from services.bridge.mapping import CONVERTERS, MappingFile
@@ -151,7 +152,11 @@ def rover_page() -> str:
             + struct_table(Rover)
             + "\nCross-field rules: `battery.thermal`: `min_c < max_c < cutoff_c`; "
             "`battery.ocv_curve`: as many `volts` as `soc` points, `soc` strictly increasing "
-            "from 0.0 to 1.0, `volts` never decreasing; a load's `rail` names a rail of the "
+            "from 0.0 to 1.0, `volts` never decreasing; `battery`: exactly one of "
+            "`internal_resistance_ohm` and `resistance_curve`; each of `rc_pairs[]`: exactly one "
+            "of `resistance_ohm` and `resistance_curve` (every value > 0); a `resistance_curve`: "
+            "as many `ohm` as `soc` points, `soc` strictly increasing; `cutoff_cell_v` below the "
+            "curve's last voltage; a load's `rail` names a rail of the "
             "file; `nominal_w <= max_w`; `restore_above_soc` needs `shed_below_soc` and is "
             "above it; an essential rail is never shed; names are unique among rails (the "
             "solar rail included), loads, panels and radios; `drive.load` names a load of the "
@@ -197,6 +202,14 @@ def keys_page() -> str:
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
                 ("`faults/journal` (query)", "the session's events, oldest first"),
+                ("`prediction` (query)", "`get lunaris/<rover>/prediction?hours=8;samples=1000` "
+                 "(parameters, defaults 8 h and 1000 samples: " + _payload_fields(PredictionRequest)
+                 + "; an unknown or bad "
+                 "one is answered with an error reply): the Monte Carlo of the rover's futures "
+                 "from its live state, answered by the battery service with `Prediction`: "
+                 + _payload_fields(Prediction) + "; `time_to_empty_s` and `soc_at_horizon` are "
+                 "`{p05, p50, p95}`, a time null where that share of the futures does not empty "
+                 "within the horizon"),
                 ("`service/<name>` (liveliness)", "a token per running service, declared once "
                  "it is listening"),
             ]))

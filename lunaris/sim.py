@@ -67,6 +67,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"  rail {rail} shed at {_hms(t)}")
     print(f"  depleted at {_hms(b.depleted_at_s)}" if b.depleted_at_s is not None
           else "  never depleted")
+    print(f"  under-voltage cut-off at {_hms(b.cutoff_at_s)}" if b.cutoff_at_s is not None
+          else "  never cut off for under-voltage")
     return 0
 
 

@@ -27,8 +27,20 @@ _BLOCK = 4096  # load samples drawn at once: one numpy call instead of one per t
 
 
 class ComposedTwin:
-    def __init__(self, rover: Rover, seed: int | None = 0):
+    """One rover's models stepped together on a deterministic clock.
+
+    Where the time of a tick goes, and what keeps it short (the results are the same numbers
+    the general path computes, to the bit): the loads are drawn :data:`_BLOCK` ticks at a
+    time and summed per rail in the same order :meth:`PowerModel.compute` adds them, so while
+    no load has a fault the PDM resolves the rails from those sums directly (one pass, not
+    the fixed point of loads and rails; ``loads.sampled_w`` is brought up to date when the
+    general path runs); the panels are recomputed only when the sun angle, the dust, a
+    disconnection or the umbilical changed.
+    """
+
+    def __init__(self, rover: Rover, seed: int | None = 0, fast: bool = True):
         self.rover = rover
+        self.fast = fast  # False: every tick takes the general path (the tests compare them)
         self.dt_s = 1.0 / rover.tick_hz
         self.t_s = 0.0
         self.battery = BatteryModel(rover.battery)
@@ -36,35 +48,80 @@ class ComposedTwin:
         self.power = PowerModel(rover)
         self.solar = SolarModel(rover)
         self._samples = np.empty((0, len(self.loads.names)))
+        self._rail_w: list[list[float]] = []
         self._row = 0
-        self._load_rail = list(zip(self.loads.names, self.loads.rails, strict=True))
+        self._rail_names = list(self.power.switches)
+        self._rail_loads = [[k for k, r in enumerate(self.loads.rails) if r == name]
+                            for name in self._rail_names]
+        self._solar_seen: tuple | None = None  # what the panels were last computed for
+        self._states: list[tuple[str, str]] = []
+        self._fast = False  # the present tick's loads are a row of the block's rail sums
         # -- the drive (one self-contained block): it sets its load's power ---------------------
+        # Its load is left out of the block's sums; its power is added to its rail each tick.
         self.drive: DriveModel | None = None
+        self._drive_col = -1
         if rover.drive is not None:
             load = next(ld for ld in rover.loads if ld.name == rover.drive.load)
             self.drive = DriveModel(rover.drive, load.max_w)
             self._drive_load, self._drive_rail = load.name, load.rail
+            k = self.loads.index[load.name]
+            self._drive_col = self._rail_names.index(load.rail)
+            self._rail_loads = [[i for i in members if i != k] for members in self._rail_loads]
         self.summary: Summary = self._resolve()
 
-    def _next_samples(self) -> np.ndarray:
-        if self._row >= len(self._samples):
-            m = self.loads
-            self._samples = np.clip(
-                m.rng.normal(m.nominal_w, m.std_w, size=(_BLOCK, len(m.names))), 0.0, m.max_w)
-            self._row = 0
-        row = self._samples[self._row]
-        self._row += 1
-        return row
+    def _draw_block(self) -> None:
+        m = self.loads
+        self._samples = np.clip(
+            m.rng.normal(m.nominal_w, m.std_w, size=(_BLOCK, len(m.names))), 0.0, m.max_w)
+        # per rail, the loads added in load order from 0.0, as PowerModel.compute adds them
+        sums = np.zeros((_BLOCK, len(self._rail_names)))
+        for j, members in enumerate(self._rail_loads):
+            for k in members:
+                sums[:, j] = sums[:, j] + self._samples[:, k]
+        self._rail_w = sums.tolist()
+        self._row = 0
+
+    def _update_solar(self) -> None:
+        sol, seen = self.solar, self._solar_seen
+        if seen is not None and (sol.sun_angle_deg == seen[0] and sol.dust == seen[1]
+                                 and sol.disconnected == seen[2] and sol.umbilical_connected == seen[3]):
+            return
+        self._solar_seen = (sol.sun_angle_deg, dict(sol.dust), set(sol.disconnected),
+                            sol.umbilical_connected)
+        power = self.power
+        for name, p_w, _, _ in sol.panels():
+            power.panel_power_w[name] = p_w
+        power.umbilical_w = sol.umbilical_power_w
 
     def _resolve(self) -> Summary:
         """Solar, PDM and loads to a fixed point (a tripped rail turns its loads off)."""
         power, loads = self.power, self.loads
-        for name, p_w, _, _ in self.solar.panels():
-            power.panel_power_w[name] = p_w
-        power.umbilical_w = self.solar.umbilical_power_w
+        self._update_solar()
         b = self.battery
         point = b.operating_point()
         power.set_battery(b.soc, b.operational, point.voltage_v)
+        faults = loads.faults
+        if self._fast and self.fast and (not faults or not any(faults.values())):
+            rail_w = self._rail_w[self._row - 1]
+            if self.drive is not None:
+                rail_w = list(rail_w)
+                rail_w[self._drive_col] += loads.driven_w[self._drive_load]
+            states, summary = power.resolve(rail_w)
+            if states != self._states:  # the loads follow their rails, as over Zenoh
+                self._states = states
+                rail_on = loads.rail_on
+                for name, (state, _) in zip(self._rail_names, states, strict=True):
+                    rail_on[name] = state == "on"
+        else:
+            if self._fast:  # the loads model draws this tick's row of the block
+                loads.sampled_w = self._samples[self._row - 1]
+            summary = self._fixed_point()
+        b.set_demand(summary.net_battery_power_w)
+        return summary
+
+    def _fixed_point(self) -> Summary:
+        power, loads = self.power, self.loads
+        self._states = []  # the loads' rails are set here: the fast path syncs them afresh
         for _ in range(len(power.switches) + 1):
             for name, p_w, _, _ in loads.powers():
                 power.load_power_w[name] = p_w
@@ -75,14 +132,16 @@ class ComposedTwin:
                     changed |= loads.set_rail(r.name, r.state == "on")
             if not changed:
                 break
-        b.set_demand(summary.net_battery_power_w)
         return summary
 
     def step(self) -> None:
         """One tick of ``1 / tick_hz`` simulated seconds."""
         self.battery.step(self.dt_s)
         self.t_s += self.dt_s
-        self.loads.sampled_w = self._next_samples()
+        if self._row >= len(self._rail_w):
+            self._draw_block()
+        self._row += 1
+        self._fast = True
         if self.drive is not None:
             self._step_drive(self.drive)
         self.summary = self._resolve()
@@ -113,6 +172,7 @@ class Budget(NamedTuple):
     depleted_at_s: float | None
     shed_at_s: dict[str, float]
     peak_temperature_c: float
+    cutoff_at_s: float | None = None  # the first under-voltage cut-off
 
 
 def run_budget(rover: Rover, hours: float, seed: int | None = 0,
@@ -124,24 +184,36 @@ def run_budget(rover: Rover, hours: float, seed: int | None = 0,
     min_soc = twin.battery.soc
     load_sum = gen_sum = 0.0
     depleted_at: float | None = None
+    cutoff_at: float | None = None
     shed_at: dict[str, float] = {}
     peak_t = twin.battery.temperature_c
     report_every = max(1, ticks // 20)
-    for i in range(ticks):
-        twin.step()
-        b = twin.battery
+    b, step = twin.battery, twin.step
+    pending = [(name, sw) for name, sw in twin.power.switches.items()  # rails that can shed
+               if sw.cfg.shed_below_soc is not None]
+    shed_soc = max((sw.cfg.shed_below_soc or 0.0 for _, sw in pending), default=0.0)
+    next_report = report_every if progress is not None else ticks + 1
+    for i in range(1, ticks + 1):
+        step()
         soc = b.soc
-        min_soc = min(min_soc, soc)
-        peak_t = max(peak_t, b.temperature_c)
-        load_sum += twin.summary.load_power_w
-        gen_sum += twin.summary.generation_w
+        if soc < min_soc:
+            min_soc = soc
+        if b.temperature_c > peak_t:
+            peak_t = b.temperature_c
+        summary = twin.summary
+        load_sum += summary[0]  # load_power_w
+        gen_sum += summary[2]  # generation_w
         if depleted_at is None and b.depleted:
             depleted_at = twin.t_s
-        for name, sw in twin.power.switches.items():
-            if sw.shed and name not in shed_at:
+        if cutoff_at is None and b.uv_cutoff:
+            cutoff_at = twin.t_s
+        if pending and soc < shed_soc:  # a rail sheds below its threshold only
+            for name, sw in [p for p in pending if p[1].shed]:
                 shed_at[name] = twin.t_s
-        if progress is not None and (i + 1) % report_every == 0:
-            progress(i + 1, ticks, twin)
+                pending.remove((name, sw))
+        if i == next_report:
+            next_report += report_every
+            progress(i, ticks, twin)
     n = max(ticks, 1)
     return Budget(twin.t_s, ticks, twin.battery.soc, min_soc, e0 - twin.battery.energy_j,
-                  load_sum / n, gen_sum / n, depleted_at, shed_at, peak_t)
+                  load_sum / n, gen_sum / n, depleted_at, shed_at, peak_t, cutoff_at)

@@ -1,4 +1,5 @@
-"""Battery service: steps each pack on the clock, re-solves the bus when demand changes.
+"""Battery service: steps each pack on the clock, re-solves the bus when demand changes,
+and answers ``prediction`` queries (:mod:`services.battery.query` says why here).
 
 A pack integrates the simulated time since it last stepped (not only the tick's ``dt_s``),
 so time that passed while no tick could reach it (a restart of this service, a router
@@ -16,6 +17,7 @@ from common.faults import FaultKey, Params, battery_fault_code
 from common.messages import BatteryState, Clock, PowerSummary, decode
 from common.runtime import Runtime, Sample
 from services.battery.model import BatteryModel
+from services.battery.query import PredictionQueries
 
 __all__ = ["serve"]
 
@@ -26,6 +28,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     config = {r.id: r.battery for r in rovers}
     packs = {r.id: BatteryModel(r.battery) for r in rovers}
     stepped_t: dict[str, float] = dict.fromkeys(packs, 0.0)  # sim time each pack has reached
+    generation: dict[str, float] = {}  # the last generation each rover's PDM reported
 
     def publish(rover: str) -> None:
         pack = packs[rover]
@@ -44,6 +47,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def on_summary(s: Sample) -> None:
         summary = decode(s.payload, PowerSummary)
         pack = packs[s.rover]
+        generation[s.rover] = summary.generation_w
         if summary.net_battery_power_w != pack.demand_w:
             pack.set_demand(summary.net_battery_power_w)
             publish(s.rover)  # the bus voltage and current move at once, not at the next tick
@@ -63,6 +67,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         packs[rover] = BatteryModel(config[rover])
         stepped_t[rover] = 0.0
 
+    def snapshot(rover: str) -> tuple[BatteryModel, float, float | None]:
+        return packs[rover].clone(), stepped_t[rover], generation.get(rover)
+
+    queries = PredictionQueries(rt.zenoh_session, {r.id: r for r in rovers}, snapshot)
+    rt.queryable(keys.prediction("*"), queries.on_query)
+    rt.on_exit(queries.close)
     rt.on_tick(on_tick)
     rt.subscribe(keys.power_summary("*"), on_summary)
     rt.faults.own("battery", None, apply_fault)

@@ -171,6 +171,7 @@ HEALTH: list[tuple[str, str]] = [
     ("thermal_cutoff", "OVERHEAT"),
     ("over_temperature", "OVERHEAT"),
     ("depleted", "DEAD"),
+    ("under_voltage_cutoff", "DEAD"),  # the BMS cut the pack off at the end of its discharge
     ("under_temperature", "COLD"),
 ]
 _CURRENT_EPS_A = 1e-3  # below this the pack is neither charging nor discharging
@@ -202,7 +203,8 @@ def battery_state_message(state: BatteryState, battery: Battery, stamp_ns: int,
     - ``percentage`` 0..1 (the state of charge);
     - ``power_supply_status``: DISCHARGING / CHARGING by the sign of the current, FULL at rest
       when full, NOT_CHARGING otherwise (and whenever the pack is off the bus);
-    - ``power_supply_health`` from the active faults (:data:`HEALTH`): OVERHEAT, DEAD, COLD,
+    - ``power_supply_health`` from the active faults (:data:`HEALTH`): OVERHEAT, DEAD (depleted
+      or cut off for under-voltage), COLD,
       UNSPEC_FAILURE for any other fault, GOOD with none;
     - ``cell_voltage`` and ``cell_temperature``: one NaN per series cell, the message's way of
       saying the number of cells is known but not their values;

@@ -74,19 +74,26 @@ class LoadsModel:
         on = self.rail_on.get(rail, False)
         if not on:
             return 0.0, False
+        held = self.fault_power(name)
+        if held is not None:
+            return held, True
+        driven = self.driven_w.get(name)  # the drive sets its load's power while it exists
+        return (float(self.sampled_w[i]) if driven is None else driven), True
+
+    def fault_power(self, name: str) -> float | None:
+        """The power a fault holds a load at while its rail is on [W]; None without a fault."""
         faults = self.faults.get(name)
         if not faults:
-            driven = self.driven_w.get(name)
-            return (float(self.sampled_w[i]) if driven is None else driven), True
+            return None
         # Several faults on one load: a short dominates, then an open circuit, then stuck.
         short = faults.get("short")
         if isinstance(short, ShortParams):
-            return self.rail_voltage_v[rail] ** 2 / short.resistance_ohm, True
+            return self.rail_voltage_v[self.rails[self.index[name]]] ** 2 / short.resistance_ohm
         if "open" in faults:
-            return 0.0, True
+            return 0.0
         stuck = faults["stuck"]
         assert isinstance(stuck, StuckParams)
-        return stuck.power_w, True
+        return stuck.power_w
 
     def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
         """Inject (``params``) or clear (None) one fault of one load."""

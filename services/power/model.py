@@ -18,7 +18,10 @@ from common.config import Rail, Rover, SolarRail
 from common.faults import FaultKey, Params
 from common.messages import Severity
 
-__all__ = ["PowerModel", "RailReading", "RailSwitch", "Summary"]
+__all__ = ["COMMANDED_OFF", "PowerModel", "RailReading", "RailSwitch", "Summary"]
+
+COMMANDED_OFF = "commanded off"  # the reason of a rail switched off by command
+_ON = ("on", "")
 
 
 class RailReading(NamedTuple):
@@ -67,8 +70,8 @@ class RailSwitch:
         if self.shed:
             return "shed", f"state of charge below {self.cfg.shed_below_soc}"
         if not self.commanded_on:
-            return "off", "commanded off"
-        return "on", ""
+            return "off", COMMANDED_OFF
+        return _ON
 
 
 class PowerModel:
@@ -77,6 +80,9 @@ class PowerModel:
     def __init__(self, rover: Rover):
         self.rover = rover
         self.switches = {r.name: RailSwitch(r) for r in rover.rails}
+        self._switch_list = list(self.switches.values())
+        self._sheddable = [(sw, sw.cfg.shed_below_soc, sw.restore_soc) for sw in self._switch_list
+                           if sw.cfg.shed_below_soc is not None and sw.restore_soc is not None]
         self.load_rail = {ld.name: ld.rail for ld in rover.loads}
         self.load_power_w = {ld.name: 0.0 for ld in rover.loads}
         self.panel_power_w = {p.name: 0.0 for p in rover.solar.panels}
@@ -100,10 +106,7 @@ class PowerModel:
         self.battery_soc = soc
         self.battery_ok = operational
         self.bus_voltage_v = voltage_v
-        for sw in self.switches.values():
-            shed_below, restore = sw.cfg.shed_below_soc, sw.restore_soc
-            if shed_below is None or restore is None:  # restore_soc is None exactly when shed_below is
-                continue
+        for sw, shed_below, restore in self._sheddable:
             if not sw.shed and soc < shed_below:
                 sw.shed = True
             elif sw.shed and soc >= restore:
@@ -148,26 +151,17 @@ class PowerModel:
 
     def compute(self) -> tuple[list[RailReading], Summary]:
         """Rail readings and bus totals; trips any rail over its limit (latched)."""
-        per_rail = {name: 0.0 for name in self.switches}
+        per_rail = dict.fromkeys(self.switches, 0.0)
         for load, power_w in self.load_power_w.items():
             per_rail[self.load_rail[load]] += power_w
+        states, summary = self.resolve(list(per_rail.values()))
         readings: list[RailReading] = []
-        load_total = bus_total = 0.0
-        for name, sw in self.switches.items():
+        for (name, sw), power_w, (state, reason) in zip(self.switches.items(), per_rail.values(),
+                                                        states, strict=True):
             cfg = sw.cfg
-            state, reason = sw.state(self.battery_ok)
             if state == "on":
-                current = per_rail[name] / cfg.voltage_v
-                if current > cfg.current_limit_a:
-                    sw.tripped = True
-                    sw.trip_current_a = current
-                    state, reason = sw.state(self.battery_ok)
-            if state == "on":
-                power_w = per_rail[name]
                 readings.append(RailReading(name, cfg.voltage_v, power_w / cfg.voltage_v,
                                             power_w, cfg.current_limit_a, state, reason))
-                load_total += power_w
-                bus_total += power_w / cfg.efficiency if power_w >= 0.0 else power_w * cfg.efficiency
             else:
                 readings.append(RailReading(name, 0.0, 0.0, 0.0, cfg.current_limit_a, state, reason))
         sr = self.solar_rail
@@ -177,10 +171,37 @@ class PowerModel:
             sr.current_limit_a, "failed" if self.solar_failed else "on",
             "converter failed" if self.solar_failed else "",
         ))
-        generation = panels_w * sr.efficiency + self.umbilical_w
-        summary = Summary(load_total, bus_total, generation, bus_total - generation,
-                          self.bus_voltage_v)
         return readings, summary
+
+    def resolve(self, rail_w: list[float]) -> tuple[list[tuple[str, str]], Summary]:
+        """Each rail's ``(state, reason)`` and the bus totals, given the power its loads
+        draw when it is on [W, in rail order]; trips any rail over its limit (latched).
+        :meth:`compute` is this with the loads summed per rail; the composed twin, which
+        sums them for many ticks at once, calls it directly."""
+        ok = self.battery_ok
+        states: list[tuple[str, str]] = []
+        load_total = bus_total = 0.0
+        for sw, power_w in zip(self._switch_list, rail_w, strict=True):
+            # RailSwitch.state's precedence, without the call for a rail that is simply on
+            on = ok and sw.commanded_on and not (sw.failed or sw.tripped or sw.shed)
+            state = _ON if on else sw.state(ok)
+            if on:
+                cfg = sw.cfg
+                current = power_w / cfg.voltage_v
+                if current > cfg.current_limit_a:
+                    sw.tripped = True
+                    sw.trip_current_a = current
+                    state = sw.state(ok)
+                else:
+                    load_total += power_w
+                    # a rail whose loads return power (regeneration) feeds the bus through it
+                    bus_total += power_w / cfg.efficiency if power_w >= 0.0 else power_w * cfg.efficiency
+            states.append(state)
+        panels_w = 0.0 if self.solar_failed else sum(self.panel_power_w.values())
+        generation = panels_w * self.solar_rail.efficiency + self.umbilical_w
+        summary = tuple.__new__(Summary, (load_total, bus_total, generation, bus_total - generation,
+                                          self.bus_voltage_v))  # the constructor, without its cost
+        return states, summary
 
     def derived_faults(self, rail: str) -> dict[str, tuple[Severity, str]]:
         """Faults a rail raises itself: name -> (severity, message)."""

@@ -10,9 +10,11 @@ import json
 import threading
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from common import keys
+from common.config import load_rover
 from tests.harness import Probe, static_rover, wait_for
 
 pytestmark = pytest.mark.timeout(90)
@@ -79,14 +81,24 @@ def test_capacity_loss_shrinks_capacity_and_the_lost_energy_stays_lost(probe):
 
 
 def test_resistance_multiplies_the_internal_resistance(probe):
+    # V = V_oc - sum(v_j) - R0(soc) I: the series resistance is what the terminals lose beyond
+    # the branches' polarisation, and MAPP's R0 is its resistance_curve at the pack's charge.
+    curve = load_rover(MAPP).battery.resistance_curve
+    assert curve is not None
+
     def r_ohm(b):
-        return (b["ocv_v"] - b["voltage_v"]) / b["current_a"]
-    inject(probe, "battery", "resistance", {"factor": 3})
-    b = probe.wait_value(keys.battery_state(R), lambda b: "resistance" in b["faults"])
-    assert r_ohm(b) == pytest.approx(0.18, rel=1e-6)
-    clear(probe, "battery", "resistance")
+        return (b["ocv_v"] - sum(b["polarisation_v"]) - b["voltage_v"]) / b["current_a"]
+
+    def r0(b):
+        return float(np.interp(b["soc"], curve.soc, curve.ohm))
+    try:
+        inject(probe, "battery", "resistance", {"factor": 3})
+        b = probe.wait_value(keys.battery_state(R), lambda b: "resistance" in b["faults"])
+        assert r_ohm(b) == pytest.approx(3 * r0(b), rel=1e-6)
+    finally:
+        clear(probe, "battery", "resistance")
     b = probe.wait_value(keys.battery_state(R), lambda b: "resistance" not in b["faults"])
-    assert r_ohm(b) == pytest.approx(0.06, rel=1e-6)
+    assert r_ohm(b) == pytest.approx(r0(b), rel=1e-6)
 
 
 def test_disconnect_takes_the_pack_off_the_bus_and_every_rail_off(probe):

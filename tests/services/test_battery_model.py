@@ -19,7 +19,10 @@ SOC = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
 VOLTS = [3.60, 3.68, 3.73, 3.77, 3.81, 3.85, 3.90, 3.96, 4.03, 4.11, 4.20]
 
 
-MAPP_BATTERY = msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml").battery)
+# The MAPP pack as the first release described it: R = 0.06 ohm, no branches, no cut-off.
+MAPP_BATTERY = {k: v for k, v in msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml").battery).items()
+                if k not in ("resistance_curve", "rc_pairs", "cutoff_cell_v", "uncertainty")}
+MAPP_BATTERY["internal_resistance_ohm"] = 0.06
 
 
 def battery_cfg(**over) -> Battery:

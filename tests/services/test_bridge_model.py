@@ -302,6 +302,7 @@ def test_battery_state_follows_ros_conventions():
     ({"faults": ["over_temperature"]}, 2, 2),  # OVERHEAT
     ({"faults": ["thermal_cutoff"], "operational": False}, 3, 2),
     ({"faults": ["depleted"], "operational": False, "current_a": 0.0}, 3, 3),  # DEAD
+    ({"faults": ["under_voltage_cutoff"], "operational": False, "current_a": 0.0}, 3, 3),  # DEAD
     ({"faults": ["under_temperature"]}, 2, 6),  # COLD
     ({"faults": ["disconnected"], "operational": False}, 3, 5),  # UNSPEC_FAILURE
     ({"faults": ["capacity_loss", "over_temperature"]}, 2, 2),

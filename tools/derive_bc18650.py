@@ -1,0 +1,187 @@
+"""Derive ``config/rovers/bc18650.yaml``, the reference cell, from NASA ProgPy's BatteryCircuit.
+
+BatteryCircuit (Daigle and Sankararaman 2013, ProgPy 1.9) is an 18650 cell: a charge ``qb``
+on a nonlinear capacitance ``Cb(SOC)`` whose voltage ``Vb = qb / Cb`` is the equilibrium
+(open-circuit) voltage, and two RC pairs in series with it, ``Rs || Cs`` and
+``Rcp(SOC) || Ccp``, with no series resistance. Its state of charge is by charge,
+``SOC = (CMax - qMax + qb) / CMax``, empty at ``SOC = 0``.
+
+Lunaris counts energy, so the conversion is by the integral of the equilibrium voltage over
+charge: ``E(qb) = integral from qMax - CMax to qb of Vb dq``, the capacity is ``E(qMax)``, and
+the energy state of charge of a charge is ``E(qb) / E(qMax)``. At a grid of energy states of
+charge (dense below 10 %, where the curve falls from 3.66 V to 2.93 V) the script finds the
+charge, and there samples ``Vb`` from the model's own output equation (branches relaxed) and
+``Rcp`` from its resistance equation. The grid is chosen so that linear interpolation follows
+``Vb`` to half a millivolt: each point is as far from the last as that allows. ``Rs``, ``Cs``,
+``Ccp``, ``VEOD`` and the thermal parameters are the model's defaults as they are.
+
+    .venv/bin/python tools/derive_bc18650.py            # rewrite config/rovers/bc18650.yaml
+    .venv/bin/python tools/derive_bc18650.py --check    # exit 1 if the committed file differs
+
+Needs ``progpy`` (the ``dev`` extra).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+TARGET = ROOT / "config" / "rovers" / "bc18650.yaml"
+TOLERANCE_V = 0.5e-3  # the table follows the equilibrium voltage to this, between its points
+MAX_STEP_SOC = 0.05  # and has a point at least every 5 % of charge
+
+
+def cell_model():
+    try:
+        from progpy.models import BatteryCircuit
+    except ImportError:
+        raise SystemExit("this script needs progpy: pip install -e '.[dev]'") from None
+    return BatteryCircuit(process_noise=0, measurement_noise=0)
+
+
+def derive() -> dict:
+    """The cell's tables and parameters, and how well linear interpolation follows them."""
+    m = cell_model()
+    p = m.parameters
+    q_empty, q_full = p["qMax"] - p["CMax"], p["qMax"]
+    q = np.linspace(q_empty, q_full, 200_001)
+
+    def equilibrium_v(qb: np.ndarray) -> np.ndarray:
+        x = m.StateContainer({"tb": np.full_like(qb, p["Ta"]), "qb": qb,
+                              "qcp": np.zeros_like(qb), "qcs": np.zeros_like(qb)})
+        return np.asarray(m.output(x)["v"], dtype=float).ravel()
+
+    def rcp_ohm(qb: np.ndarray) -> np.ndarray:  # BatteryCircuit.dx's Rcp(SOC)
+        soc = (p["CMax"] - p["qMax"] + qb) / p["CMax"]
+        return p["Rcp0"] + p["Rcp1"] * np.exp(p["Rcp2"] * (1.0 - soc))
+
+    vb = equilibrium_v(q)
+    energy = np.concatenate([[0.0], np.cumsum(0.5 * (vb[1:] + vb[:-1]) * np.diff(q))])
+    capacity_j = float(energy[-1])
+    soc_fine = energy / capacity_j
+    grid = _grid(soc_fine, vb)
+    q_at = np.interp(grid * capacity_j, energy, q)
+    volts = equilibrium_v(q_at)
+    rcp = rcp_ohm(q_at)
+    ocv_error = float(np.max(np.abs(np.interp(soc_fine, grid, volts) - vb)))
+    rcp_error = float(np.max(np.abs(np.interp(soc_fine, grid, rcp) - rcp_ohm(q)) / rcp_ohm(q)))
+    return {"p": p, "capacity_j": capacity_j, "soc": grid.tolist(), "volts": volts.tolist(),
+            "rcp": rcp.tolist(), "ocv_error_v": ocv_error, "rcp_error_frac": rcp_error}
+
+
+def _grid(soc: np.ndarray, volts: np.ndarray) -> np.ndarray:
+    """Points of state of charge (rounded to 1e-5) from 0 to 1, each as far from the last as
+    keeps the chord within :data:`TOLERANCE_V` of the curve."""
+    points = [0.0]
+    k = 0
+    while points[-1] < 1.0:
+        lo, hi = k + 1, len(soc) - 1
+        while lo < hi:  # the farthest index whose chord from k stays within tolerance
+            mid = (lo + hi + 1) // 2
+            s_end = round(float(soc[mid]), 5)
+            if s_end - points[-1] > MAX_STEP_SOC or _chord_error(soc, volts, k, mid) > TOLERANCE_V:
+                hi = mid - 1
+            else:
+                lo = mid
+        s_next = 1.0 if lo == len(soc) - 1 else round(float(soc[lo]), 5)
+        k = int(np.searchsorted(soc, s_next))
+        k = min(k, len(soc) - 1)
+        points.append(s_next)
+    return np.array(points)
+
+
+def _chord_error(soc: np.ndarray, volts: np.ndarray, a: int, b: int) -> float:
+    seg = slice(a, b + 1)
+    chord = np.interp(soc[seg], [soc[a], soc[b]], [volts[a], volts[b]])
+    return float(np.max(np.abs(chord - volts[seg])))
+
+
+def _row(values: list[float], digits: int) -> str:
+    return "[" + ", ".join(f"{v:.{digits}f}" for v in values) + "]"
+
+
+def render(d: dict) -> str:
+    p = d["p"]
+    ta_c = p["Ta"] - 273.15
+    return f"""\
+# The reference cell: NASA ProgPy's BatteryCircuit 18650 (Daigle and Sankararaman 2013) with
+# its default parameters, as a Lunaris rover of one cell. Generated by
+# tools/derive_bc18650.py from ProgPy's own equations; do not edit by hand.
+#
+# Conversion (see the script): the open-circuit curve is BatteryCircuit's equilibrium voltage
+# Vb = qb / Cb(SOC) sampled against the state of charge by energy; the capacity is the integral
+# of Vb over the charge from empty (its SOC = 0) to full; the two RC pairs are its Rs || Cs and
+# Rcp(SOC) || Ccp (no series resistance); the cut-off is its end of discharge, VEOD.
+# Linear interpolation of these tables follows Vb to {d["ocv_error_v"] * 1e3:.2f} mV and Rcp to
+# {d["rcp_error_frac"] * 100:.2f} %. Not modelled: its parasitic self-discharge through Rp = {p["Rp"]:g} ohm
+# (about 0.4 mA), and its heating weights hcp, hcs (here the heat is the I^2 R of each
+# resistance); the rails and the load only give the cell a constant-power demand.
+rover:
+  id: bc18650
+  name: ProgPy BatteryCircuit reference cell
+tick_hz: 10
+
+battery:
+  capacity_j: {d["capacity_j"]:.2f}
+  initial_soc: 1.0
+  cells_series: 1
+  ocv_curve:
+    soc: {_row(d["soc"], 5)}
+    volts: {_row(d["volts"], 5)}
+  internal_resistance_ohm: 0.0
+  rc_pairs:
+    - {{resistance_ohm: {p["Rs"]}, capacitance_f: {p["Cs"]}}}       # Rs || Cs
+    - capacitance_f: {p["Ccp"]}                             # Rcp(SOC) || Ccp
+      resistance_curve:
+        soc: {_row(d["soc"], 5)}
+        ohm: {_row(d["rcp"], 5)}
+  cutoff_cell_v: {p["VEOD"]}                        # VEOD: end of discharge
+  depleted_soc: 0.0
+  max_discharge_a: 10                     # assumption: a 10 A cell
+  max_charge_w: 6.3                       # assumption: 1.5 A at 4.2 V
+  uncertainty: {{capacity_frac: 0.02, resistance_frac: 0.1}}
+  thermal:
+    initial_c: {ta_c:.2f}
+    environment_c: {ta_c:.2f}                 # Ta
+    heat_capacity_j_per_k: {p["Jt"]}              # Jt
+    conductance_w_per_k: {p["ha"]}               # ha
+    max_c: 60
+    cutoff_c: 75
+    min_c: -20
+
+rails:
+  - {{name: LOAD, voltage_v: 3.3, current_limit_a: 20.0, efficiency: 1.0, essential: true}}
+loads:
+  - {{name: test_load, rail: LOAD, nominal_w: 8.0, max_w: 30.0, std_w: 0.0}}   # constant power
+solar:
+  irradiance_w_per_m2: 0
+  sun_angle_deg: 0
+  rail: {{name: SOLAR, voltage_v: 5.0, efficiency: 1.0}}
+  panels: []
+"""
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--check", action="store_true", help="exit 1 if the committed file differs")
+    args = parser.parse_args()
+    d = derive()
+    text = render(d)
+    print(f"capacity {d['capacity_j']:.1f} J, {len(d['soc'])} points "
+          f"({sum(s < 0.1 for s in d['soc'])} below 10 %), OCV {d['volts'][0]:.3f}..{d['volts'][-1]:.3f} V, "
+          f"interpolation error {d['ocv_error_v'] * 1e3:.2f} mV, Rcp {d['rcp_error_frac'] * 100:.2f} %")
+    if args.check:
+        same = TARGET.is_file() and TARGET.read_text() == text
+        print(f"{TARGET.relative_to(ROOT)}: {'up to date' if same else 'differs: regenerate it'}")
+        return 0 if same else 1
+    TARGET.write_text(text)
+    print(f"wrote {TARGET.relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
