@@ -7,6 +7,10 @@ annotations below (types, ranges, name patterns; the machinery is
 :mod:`common.datafile`) plus the cross-field rules in :func:`_semantic_problems`.
 Each field's ``doc`` is its entry in the generated reference
 (``docs/reference/rover-file.md``). Nothing here knows about Zenoh.
+
+Longer than 450 lines on purpose: it is the one description of the rover file, every
+section with its fields, units, ranges and cross-field rules side by side, which is what
+the reference is generated from.
 """
 
 from __future__ import annotations

@@ -6,6 +6,10 @@ infinity and out-of-range values raise :class:`BadInput` with a message that
 names the field. JSON has no NaN or infinity, and msgspec refuses a number
 that overflows to one (``1e999``). A payload with one parameter may also be a bare JSON number
 (``60`` for ``input/sun_angle``), see :func:`decode_input`.
+
+Longer than 450 lines on purpose: one Struct per payload of SPEC §5 and the one strict
+reader of inputs, kept together as the single table the keys, the tools and the reference
+are built from.
 """
 
 from __future__ import annotations

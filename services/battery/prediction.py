@@ -69,6 +69,8 @@ def start_of(twin) -> Start:
     rails = {name: RailStart(sw.commanded_on, sw.tripped, sw.failed, sw.shed)
              for name, sw in power.switches.items()}
     fixed = {name: p for name in loads.names if (p := loads.fault_power(name)) is not None}
+    for name, power_w in loads.driven_w.items():  # the drive's load, at the drive's present power
+        fixed.setdefault(name, power_w)
     return Start(twin.rover, twin.battery, rails, fixed, twin.summary.generation_w, twin.t_s)
 
 

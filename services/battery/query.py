@@ -38,6 +38,7 @@ from common.faults import fault_of
 from common.messages import (
     ActiveFaults,
     BadInput,
+    LoadPower,
     Percentiles,
     Prediction,
     PredictionRequest,
@@ -116,6 +117,12 @@ class PredictionQueries:
         notes: list[str] = []
         rails = self._rails(cfg, pack.soc, notes)
         fixed = self._fixed_loads(cfg, notes)
+        if cfg.drive is not None and cfg.drive.load not in fixed:
+            driven = self._last_load_power(cfg, cfg.drive.load)
+            if driven is None:
+                notes.append(f"no power from the drive's load {cfg.drive.load} yet: its idle power assumed")
+                driven = cfg.drive.idle_w
+            fixed[cfg.drive.load] = driven  # the drive's present power, held like every input
         if generation_w is None:
             notes.append("no power/summary received yet: no generation assumed")
         start = Start(cfg, pack, rails, fixed, generation_w or 0.0, t_s)
@@ -155,6 +162,21 @@ class PredictionQueries:
         below = {r.name: r.shed_below_soc for r in cfg.rails}
         return {r.name: rail_start(heard[r.name], soc, below[r.name]) if r.name in heard
                 else RailStart(commanded_on=r.initially_on) for r in cfg.rails}
+
+    def _last_load_power(self, cfg: Rover, load: str) -> float | None:
+        """The last power a load published [W] (from its publisher's cache), None if none."""
+        got: list[float] = []
+        done = threading.Event()
+
+        def on_sample(s: zenoh.Sample) -> None:
+            got.append(decode(s.payload.to_bytes(), LoadPower).power_w)
+            done.set()
+
+        sub = zext.declare_advanced_subscriber(self.session, keys.load_power(cfg.id, load),
+                                               on_sample, history=zext.HistoryConfig())
+        done.wait(GATHER_S)
+        sub.undeclare()
+        return got[-1] if got else None
 
     def _fixed_loads(self, cfg: Rover, notes: list[str]) -> dict[str, float]:
         if not cfg.loads:

@@ -13,7 +13,7 @@ from common import keys
 from common.config import load_rover
 from services.battery.prediction import percentiles, predict, start_of
 from services.composed import ComposedTwin
-from tests.harness import ROOT, ROVERS, Probe, lunaris_cmd
+from tests.harness import ROOT, Probe, lunaris_cmd, static_rover
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -45,7 +45,7 @@ def test_the_live_twin_answers_from_its_state(mapp_twin):
     assert 0.0 < soc["p05"] <= soc["p50"] <= soc["p95"] < 1.0
     assert answer["time_to_empty_s"] == {"p05": None, "p50": None, "p95": None}  # not in 1 h
     # The same futures from the file, a few seconds of sim time earlier: nearly the same.
-    out = predict(start_of(ComposedTwin(load_rover(ROVERS / "mapp.yaml"))), 3600.0, 200, seed=3)
+    out = predict(start_of(ComposedTwin(load_rover(static_rover("mapp.yaml")))), 3600.0, 200, seed=3)
     assert soc["p50"] == pytest.approx(percentiles(out.soc_at_horizon)["p50"], abs=0.01)
 
 

@@ -44,12 +44,15 @@ def start_up(endpoint: str, state_dir: Path) -> subprocess.Popen:
         start_new_session=True)
 
 
-def tick_rate(p: Probe, seconds: float = 2.0) -> float:
-    """Clock samples per second of wall time on mapp-1's clock key."""
+def one_clock(p: Probe, seconds: float = 2.0) -> bool:
+    """One clock ticks mapp-1: at most its 10 ticks a second (a loaded machine may give
+    fewer), their sequence numbers only ever rising (two clocks interleave two sequences)."""
     key = keys.clock(R)
     before = len(p.samples(key))
     time.sleep(seconds)  # a measurement window, not a synchronisation
-    return (len(p.samples(key)) - before) / seconds
+    ticks = p.samples(key)[before:]
+    seqs = [t["seq"] for t in ticks]
+    return 0 < len(ticks) <= 12.5 * seconds and seqs == sorted(set(seqs))
 
 
 def test_kill_9_of_up_leaves_no_orphan_and_the_next_up_runs_one_of_each(tmp_path):
@@ -72,7 +75,7 @@ def test_kill_9_of_up_leaves_no_orphan_and_the_next_up_runs_one_of_each(tmp_path
             p.watch(keys.clock(R))
             p.wait_services(R, ALL_SERVICES, timeout_s=60)
             p.wait_value(keys.clock(R))
-            assert 8.0 <= tick_rate(p) <= 12.0  # one clock, not two
+            assert one_clock(p)  # one clock, not two
     finally:
         for proc in (first, second):
             if proc is not None and proc.poll() is None:
@@ -93,7 +96,7 @@ def test_a_second_instance_of_a_service_refuses_to_start(twin_factory, probe_sol
         cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert out.returncode == 3, out.stderr
     assert "another clock service already serves mapp-1" in out.stderr
-    assert 8.0 <= tick_rate(probe_solo) <= 12.0
+    assert one_clock(probe_solo)
 
 
 def test_two_instances_on_one_state_directory_are_refused(twin_factory, probe_solo):

@@ -18,13 +18,13 @@ from services.battery.circuit import solve_bus
 from services.battery.packs import Packs
 from services.battery.prediction import clipped_moments, percentiles, predict, start_of
 from services.composed import ComposedTwin
-from tests.harness import ROVERS
+from tests.harness import static_rover
 
 
 def variant(name: str, **battery) -> Rover:
     """A shipped rover with every load's noise and the pack's uncertainty removed, and the
     battery fields in ``battery`` changed; ``tick_hz``, ``umbilical`` at the top level."""
-    raw = msgspec.to_builtins(load_rover(ROVERS / name))
+    raw = msgspec.to_builtins(load_rover(static_rover(name)))  # parked without a drive: it drains
     for ld in raw["loads"]:
         ld["std_w"] = 0.0
     raw["battery"]["uncertainty"] = {}
@@ -120,7 +120,7 @@ def test_a_longer_step_is_the_twin_of_a_slower_clock():
 
 
 def test_the_default_step_keeps_a_long_horizon_within_max_steps():
-    rover = load_rover(ROVERS / "mapp.yaml")
+    rover = load_rover(static_rover("mapp.yaml"))
     out = predict(start_of(ComposedTwin(rover)), 8 * 3600.0, samples=2, seed=0)
     assert out.step_s == pytest.approx(2.9)  # 29 ticks: 8 h in 9931 steps
     assert out.horizon_s == pytest.approx(8 * 3600.0, abs=out.step_s)
@@ -149,7 +149,7 @@ def test_load_noise_spreads_the_futures_around_the_noiseless_one():
     """MAPP's loads with their noise: the futures spread, the noiseless run sits inside the
     spread, and a one-tick step (draws exactly as the loads service) and a 20-tick step
     (their per-rail mean) agree on the median and the spread."""
-    base = msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml"))
+    base = msgspec.to_builtins(load_rover(static_rover("mapp.yaml")))
     base["battery"]["capacity_j"] = 2e4
     base["battery"]["uncertainty"] = {}
     rover = msgspec.convert(base, Rover)
@@ -186,7 +186,7 @@ def test_uncertainty_spreads_capacity_resistance_and_generation():
 
 
 def test_bad_arguments_are_refused():
-    start = start_of(ComposedTwin(load_rover(ROVERS / "mapp.yaml")))
+    start = start_of(ComposedTwin(load_rover(static_rover("mapp.yaml"))))
     with pytest.raises(ValueError, match="horizon_s must be finite and > 0"):
         predict(start, 0.0, 10)
     with pytest.raises(ValueError, match="samples must be >= 1"):
