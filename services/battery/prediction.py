@@ -61,6 +61,9 @@ class Start(NamedTuple):
     fixed_load_w: dict[str, float]  # short, open, stuck: the power while the rail is on
     generation_w: float
     t_s: float = 0.0
+    # A load whose power follows a plan, tick by tick (the drive's load along a traverse),
+    # and then stays at the plan's last value; it replaces the load's noise or fixed power.
+    profile: tuple[str, tuple[float, ...]] | None = None
 
 
 def start_of(twin) -> Start:
@@ -137,7 +140,10 @@ class _Loads:
         self.rails = [r.name for r in rover.rails]
         # per rail: the loads in file order, each (nominal, std, max) or a fixed power
         self.members: list[list[tuple[float, float, float] | float]] = [[] for _ in self.rails]
+        planned = start.profile[0] if start.profile is not None else None
         for ld in rover.loads:
+            if ld.name == planned:
+                continue  # added each step from the plan
             held = start.fixed_load_w.get(ld.name)
             self.members[self.rails.index(ld.rail)].append(
                 held if held is not None else (ld.nominal_w, ld.std_w, ld.max_w))
@@ -244,16 +250,36 @@ def predict(start: Start, horizon_s: float, samples: int, seed: int | None = Non
                   _factors(rng, u.resistance_frac, samples))
     generation = start.generation_w * _factors(rng, u.generation_frac, samples)
     loads, pdm = _Loads(start, k, samples, rng), _Pdm(start, samples)
+    planned = _planned(start, k, steps)
     empty = np.where(packs.depleted | packs.uv_cutoff, 0.0, np.inf)
     report = max(1, steps // 20)
     for n in range(1, steps + 1):
         packs.step(dt)
         gone = packs.depleted | packs.uv_cutoff
         empty = np.where(np.isinf(empty) & gone, n * dt, empty)
-        packs.demand_w = pdm.bus_w(packs.soc, packs.operational, loads.next()) - generation
+        rail_w = loads.next()
+        if planned is not None:
+            rail, power_w = planned
+            rail_w = list(rail_w)
+            rail_w[rail] = rail_w[rail] + power_w[n - 1]
+        packs.demand_w = pdm.bus_w(packs.soc, packs.operational, rail_w) - generation
         if progress is not None and ((n % report == 0 and steps - n >= report // 2) or n == steps):
             progress(n, steps)
     return Outcome(start.t_s, steps * dt, dt, samples, empty, packs.soc)
+
+
+def _planned(start: Start, k: int, steps: int) -> tuple[int, np.ndarray] | None:
+    """The planned load's rail and its mean power over each step of ``k`` ticks."""
+    if start.profile is None:
+        return None
+    name, ticks = start.profile
+    load = next(ld for ld in start.rover.loads if ld.name == name)
+    per_tick = np.array(ticks or (0.0,), dtype=float)
+    need = steps * k
+    if len(per_tick) < need:
+        per_tick = np.concatenate([per_tick, np.full(need - len(per_tick), per_tick[-1])])
+    per_step = per_tick[:need].reshape(steps, k).mean(axis=1)
+    return [r.name for r in start.rover.rails].index(load.rail), per_step
 
 
 def _factors(rng: np.random.Generator, frac: float, n: int) -> np.ndarray:

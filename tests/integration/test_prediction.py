@@ -107,3 +107,18 @@ def test_lunaris_predict_asks_the_live_twin(mapp_twin):
     refused = subprocess.run(lunaris_cmd("predict", "--rover", "nobody", "--connect", twin.endpoint),
                              capture_output=True, text=True, cwd=ROOT, timeout=90)
     assert refused.returncode == 2 and "unknown rover 'nobody'" in refused.stderr
+
+
+def test_predict_from_a_file_with_a_traverse_and_back():
+    done = subprocess.run(lunaris_cmd("predict", "config/rovers/mapp.yaml", "--traverse",
+                                      "config/traverses/mapp-crater-rim.yaml", "--return",
+                                      "--hours", "2", "--samples", "50", "--seed", "1"),
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "mapp-crater-rim.yaml and back takes" in done.stdout
+    for args, says in ((["--return"], "--return needs --traverse"),
+                       (["--rover", R, "--traverse", "x.yaml"], "go with a rover FILE")):
+        bad = subprocess.run(lunaris_cmd("predict", *(["config/rovers/mapp.yaml"] if "--rover" not in args
+                                                       else []), *args),
+                             cwd=ROOT, capture_output=True, text=True, timeout=60)
+        assert bad.returncode == 2 and says in bad.stderr, bad.stderr

@@ -209,3 +209,27 @@ def test_the_vectorised_bus_solution_is_the_scalar_one_to_the_bit(cases):
         want = solve_bus(v, r, p)
         assert (voltage[k], current[k], bool(brownout[k])) == (
             want.voltage_v, want.current_a, want.brownout), (v, r, p)
+
+
+def test_a_traverse_profile_without_noise_is_the_composed_twin_driving_it():
+    """The drive load following a traverse, tick by tick, in every future: with no noise and
+    no uncertainty, the state of charge where the composed twin arrives (it drives the same
+    traverse, its drive coupled to the pack) is the prediction's, to a part in 10^4."""
+    from common.traverse import load_traverse
+    from services.drive.budget import power_profile, run_traverse
+    from tests.harness import ROOT, ROVERS
+
+    raw = msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml"))
+    for ld in raw["loads"]:
+        ld["std_w"] = 0.0
+    raw["battery"]["uncertainty"] = {}
+    rover = msgspec.convert(raw, Rover)
+    cmd = load_traverse(ROOT / "config" / "traverses" / "mapp-crater-rim.yaml", rover).command()
+    ticks = power_profile(rover, cmd)
+    budget = run_traverse(rover, cmd, 0.2, 4.0, 0)
+    assert budget.outcome == "arrived"
+    start = start_of(ComposedTwin(rover))._replace(profile=(rover.drive.load, tuple(ticks)))
+    out = predict(start, len(ticks) / rover.tick_hz, 3, step_ticks=1)
+    assert_allclose(out.soc_at_horizon, budget.final_soc, rtol=1e-4)
+    parked = predict(start_of(ComposedTwin(rover)), len(ticks) / rover.tick_hz, 1, step_ticks=1)
+    assert out.soc_at_horizon[0] < parked.soc_at_horizon[0] - 0.005  # the drive cost shows
