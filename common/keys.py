@@ -31,6 +31,7 @@ __all__ = [
     "cmd_rail",
     "control_reset",
     "control_restore",
+    "control_scenario",
     "control_snapshot",
     "drive_state",
     "event",
@@ -43,6 +44,7 @@ __all__ = [
     "faults_active",
     "faults_journal",
     "input_drive_traverse",
+    "input_panel_sun_angle",
     "input_radio_position",
     "input_sun_angle",
     "input_umbilical",
@@ -122,6 +124,11 @@ def input_sun_angle(rover: str) -> str:
     return f"{ROOT}/{rover}/input/sun_angle"
 
 
+def input_panel_sun_angle(rover: str, panel: str) -> str:
+    """One panel's sun angle: overrides ``input/sun_angle`` for that panel until deleted."""
+    return f"{ROOT}/{rover}/input/solar/{panel}/sun_angle"
+
+
 def input_radio_position(rover: str, radio: str) -> str:
     return f"{ROOT}/{rover}/input/radio/{radio}/position"
 
@@ -172,6 +179,11 @@ def control_snapshot(rover: str, name: str) -> str:
 
 def control_restore(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/control/restore/{name}"
+
+
+def control_scenario(rover: str) -> str:
+    """A scenario's progress, journalled by the faults service as ``scenario`` events."""
+    return f"{ROOT}/{rover}/control/scenario"
 
 
 def snapshots(rover: str) -> str:
@@ -250,6 +262,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("event", m.Event, "*"),
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),
+    _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),
     _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
     _f("input/umbilical", m.UmbilicalInput, "solar"),
     _f("input/drive/traverse", m.DriveTraverse, "drive"),
