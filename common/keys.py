@@ -14,6 +14,7 @@ refuses keys nobody owns.
 
 from __future__ import annotations
 
+import re
 from typing import Literal, NamedTuple
 
 import msgspec
@@ -24,6 +25,7 @@ __all__ = [
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
+    "SNAPSHOT_NAME",
     "Family",
     "battery_state",
     "clock",
@@ -64,6 +66,7 @@ __all__ = [
 ]
 
 ROOT = "lunaris"
+SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")  # a snapshot's name: one key chunk
 PLACEHOLDERS = ("load", "rail", "radio", "panel")  # the component kinds a key can name
 
 
