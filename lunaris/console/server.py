@@ -127,6 +127,10 @@ async def _logout(request: Request) -> Response:
     return response
 
 
+async def _favicon(request: Request) -> Response:
+    return Response(status_code=204)
+
+
 async def _index(request: Request) -> Response:
     return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
 
@@ -151,6 +155,7 @@ def make_app(session: zenoh.Session, accounts: Accounts | None, *, tls: bool = F
 
     app = Starlette(routes=[
         Route("/", _index),
+        Route("/favicon.ico", _favicon),
         Route("/login", _login, methods=["GET", "POST"]),
         Route("/logout", _logout, methods=["GET", "POST"]),
         *api.routes(),
