@@ -151,14 +151,19 @@ function drawRovers() {
 }
 function drawClock() {
   const c = val(S.rover, "clock"), el = $("#clock");
-  if (!c) { el.innerHTML = ""; return; }
-  const r = esc(S.rover);
-  el.innerHTML = `<span>sim t <b data-key="clock" data-field="t_s">${clockText(c.t_s)}</b></span>` +
-    `<span data-key="clock" data-field="time_scale">×${c.time_scale}</span>` +
-    (c.paused ? `<span class="paused" data-key="clock" data-field="paused">PAUSED</span>` : "") +
-    (c.paused ? `<button type="button" class="act" data-action="clock-resume" data-rover="${r}">Resume</button>`
-              : `<button type="button" class="act" data-action="clock-pause" data-rover="${r}">Pause</button>`);
-  guard(el);
+  if (!c) { el.innerHTML = ""; el.dataset.shape = ""; return; }
+  const r = esc(S.rover), shape = `${S.rover}/${c.paused}/${S.me?.may_act}`;
+  if (el.dataset.shape !== shape) {  // rebuilt only when it changes: a button must stay put
+    el.dataset.shape = shape;
+    el.innerHTML = `<span>sim t <b id="clock-t" data-key="clock" data-field="t_s"></b></span>` +
+      `<span id="clock-x" data-key="clock" data-field="time_scale"></span>` +
+      (c.paused ? `<span class="paused" data-key="clock" data-field="paused">PAUSED</span>` : "") +
+      (c.paused ? `<button type="button" class="act" data-action="clock-resume" data-rover="${r}">Resume</button>`
+                : `<button type="button" class="act" data-action="clock-pause" data-rover="${r}">Pause</button>`);
+    guard(el);
+  }
+  $("#clock-t").textContent = clockText(c.t_s);
+  $("#clock-x").textContent = `×${c.time_scale}`;
 }
 
 // -- views ----------------------------------------------------------------------------------------------
