@@ -57,8 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add.add_argument("--replace", action="store_true", help="change an existing user's role or password")
     rm = verbs.add_parser("remove", help="remove a user: their sign-ins end at once")
     rm.add_argument("name")
-    verbs.add_parser("list", help="list the users and their roles")
-    for q in (add, rm, users):
+    ls = verbs.add_parser("list", help="list the users and their roles")
+    for q in (add, rm, ls):
         q.add_argument("--accounts", metavar="FILE", default=argparse.SUPPRESS)
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import urllib.request
 
 import pytest
 from selenium.common.exceptions import StaleElementReferenceException
@@ -19,8 +21,9 @@ from selenium.webdriver.support.ui import WebDriverWait as _Wait
 
 from common import keys
 from common.config import load_rover
+from tests.console.browser import open_browser
 from tests.console.conftest import MAPP, R, shoot
-from tests.harness import wait_for
+from tests.harness import ROOT, lunaris_cmd, stop_process, wait_for
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -284,8 +287,6 @@ def test_a_recording_and_its_report_from_the_page(live, page, artefacts):
 
 
 def test_the_api_checks_every_write_with_the_twin_s_structs(live):
-    import urllib.request
-
     def put(tail: str, body: bytes, method: str = "PUT") -> tuple[int, dict]:
         req = urllib.request.Request(f"{live.console.url}/api/rovers/{R}/keys/{tail}", data=body,
                                      method=method, headers={"Content-Type": "application/json"})
@@ -309,3 +310,119 @@ def test_the_api_checks_every_write_with_the_twin_s_structs(live):
     status, me = live.console.get("/api/me")
     assert me == {"name": "local user", "role": "instructor", "local": True, "may_act": True,
                   "accounts": False}
+
+
+# -- accounts: sign-in, observers refused by the server ------------------------------------------
+
+PASSWORDS = {"ana": ("instructor", "ana-instructor-pw"), "obi": ("observer", "obi-observer-pw")}
+
+
+@pytest.fixture(scope="module")
+def guarded(live):
+    from tests.console.conftest import start_console
+    from tests.lunaris.conftest import run_tool
+
+    accounts = live.folder / "users.json"
+    for name, (role, password) in PASSWORDS.items():
+        done = subprocess.run(lunaris_cmd("console", "users", "add", name, "--role", role, "--accounts",
+                                          str(accounts), "--password-stdin"), input=password + "\n",
+                              capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert done.returncode == 0, done.stderr
+        assert f"{name} may sign in to the console as {role}" in done.stdout
+    listed = run_tool("console", "users", "list", "--accounts", str(accounts))
+    assert listed.stdout.split() == ["ana", "instructor", "obi", "observer"]
+    assert "argon2id" in accounts.read_text() and "obi-observer-pw" not in accounts.read_text()
+    console = start_console(live.endpoint, live.folder / "guarded", "--accounts", str(accounts))
+    try:
+        yield console, accounts
+    finally:
+        stop_process(console.proc, 10)
+
+
+def sign_in(driver, url: str, name: str, password: str) -> None:
+    driver.get(url + "/")
+    WebDriverWait(driver, 10).until(lambda d: "/login" in d.current_url)
+    driver.find_element(By.NAME, "user").send_keys(name)
+    driver.find_element(By.NAME, "password").send_keys(password)
+    driver.find_element(By.CSS_SELECTOR, "button[type=submit]").click()
+
+
+def fetch(driver, method: str, path: str, body: str = "") -> int:
+    """The page's own fetch: what a user who bypasses the page's disabled buttons would send."""
+    driver.set_script_timeout(20)
+    return driver.execute_async_script(
+        "const [m, p, b, done] = arguments; fetch(p, {method: m, body: m === 'GET' ? undefined : b, "
+        "headers: {'Content-Type': 'application/json'}}).then(r => done(r.status), e => done(-1));",
+        method, path, body)
+
+
+def test_without_a_sign_in_nothing_is_served(guarded):
+    console, _ = guarded
+    assert console.get("/api/me")[0] == 401
+    assert console.get(f"/api/rovers/{R}/snapshots")[0] == 401
+    with urllib.request.urlopen(console.url + "/", timeout=5) as r:  # redirected to the sign-in page
+        assert r.url.endswith("/login?next=/") and b"Sign in" in r.read()
+
+
+def test_an_observer_sees_everything_and_is_refused_every_change(live, guarded, artefacts):
+    console, accounts = guarded
+    p = live.probe
+    driver = open_browser(1280, 800)
+    try:
+        sign_in(driver, console.url, "obi", "wrong password")
+        WebDriverWait(driver, 10).until(lambda d: "Wrong user or password" in d.page_source)
+        sign_in(driver, console.url, "obi", PASSWORDS["obi"][1])
+        wait_text(driver, "battery/state", "soc", r"\d+\.\d %")
+        assert driver.find_element(By.ID, "observer").is_displayed()
+        assert "obi · observer" in driver.find_element(By.ID, "who").text
+        off = driver.find_element(By.CSS_SELECTOR, '[data-action="rail-off"][data-rail="12V"]')
+        assert not off.is_enabled()
+        shoot(driver, artefacts, "observer")
+        seen = len(p.samples(keys.event(R)))
+        key = keys.cmd_rail(R, "12V")
+        assert fetch(driver, "PUT", f"/api/rovers/{R}/keys/cmd/rail/12V", '{"on": false}') == 403
+        assert fetch(driver, "PUT", f"/api/rovers/{R}/keys/control/reset") == 403
+        assert fetch(driver, "DELETE", f"/api/rovers/{R}/keys/fault/battery/heating") == 403
+        assert fetch(driver, "POST", "/api/recordings", '{"name": "x"}') == 403
+        assert fetch(driver, "POST", "/api/scenarios", '{"file": "short-drill.yaml"}') == 403
+        assert fetch(driver, "GET", f"/api/rovers/{R}/snapshots") == 200  # reading is allowed
+        # Nothing changed: a probe's own put, made after, is the first thing the twin hears.
+        p.put(keys.under(R, "control/rewind"), b"")
+        p.wait_event(R, lambda e: e["key"] == keys.under(R, "control/rewind"))
+        assert not [e for e in p.samples(keys.event(R))[seen:]
+                    if e["key"] in (key, keys.control_reset(R)) or e["kind"] == "fault_cleared"]
+        assert p.value(keys.rail_state(R, "12V"))["state"] == "on"
+        # A user removed from the file is signed out at once.
+        run = subprocess.run(lunaris_cmd("console", "users", "remove", "obi", "--accounts", str(accounts)),
+                             capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert run.returncode == 0, run.stderr
+        assert fetch(driver, "GET", "/api/me") == 401
+    finally:
+        driver.quit()
+
+
+def test_an_instructor_signs_in_and_acts(live, guarded):
+    console, _ = guarded
+    driver = open_browser(1280, 800)
+    try:
+        sign_in(driver, console.url, "ana", PASSWORDS["ana"][1])
+        wait_text(driver, "battery/state", "soc", r"\d+\.\d %")
+        assert not driver.find_element(By.ID, "observer").is_displayed()
+        click(driver, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH2"]')
+        assert "the rail is now off" in last_answer(driver, "accepted")
+        live.probe.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "off")
+        click(driver, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH2"]')
+        live.probe.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "on")
+        driver.get(console.url + "/logout")
+        assert fetch(driver, "GET", "/api/me") == 401
+    finally:
+        driver.quit()
+
+
+def test_without_accounts_it_listens_on_loopback_only(live):
+    from tests.console.conftest import free_port
+    from tests.lunaris.conftest import run_tool
+
+    done = run_tool("console", "--http", f"0.0.0.0:{free_port()}", "--connect", live.endpoint)
+    assert done.returncode == 2
+    assert "without an accounts file the console listens on this computer only" in done.stderr
