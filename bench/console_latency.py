@@ -84,9 +84,8 @@ def main() -> int:
             driver = open_browser(1280, 800)
             driver.get(url + "/")
             wait_for(lambda: driver.execute_script(
-                "return !!document.querySelector('#main [data-key=\"rail/5V_CH2/state\"][data-field=\"state\"]')"
-                " && document.querySelector('#main [data-key=\"rail/5V_CH2/state\"]').textContent === 'on'"),
-                30, "the page")
+                "const el = document.querySelector('#main [data-key=\"rail/5V_CH2/state\"]"
+                "[data-field=\"state\"]'); return !!el && el.textContent === 'on'"), 30, "the page")
             driver.execute_script(OBSERVE)
             latencies = []
             for _ in range(args.faults):
@@ -98,8 +97,8 @@ def main() -> int:
                 latencies.append(seen - t0 * 1000.0)
                 n = len(p.samples(keys.event(R)))
                 p.delete(SHORT)
-                wait_for(lambda: any(e["kind"] == "fault_cleared" and e["key"] == SHORT
-                                     for e in p.samples(keys.event(R))[n:]), 10, "the clearing")
+                wait_for(lambda n=n: any(e["kind"] == "fault_cleared" and e["key"] == SHORT
+                                         for e in p.samples(keys.event(R))[n:]), 10, "the clearing")
                 p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
                 wait_for(lambda: driver.execute_script("return window.__seen.on || null"), 10, "back on")
             print(f"fault put by another client -> the page shows the trip: {percentiles(latencies)}")
