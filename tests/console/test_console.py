@@ -305,6 +305,11 @@ def test_the_api_checks_every_write_with_the_twin_s_structs(live):
     assert (code, body["verdict"]) == (409, "rejected") and "has no radio 'nosuch'" in body["message"]
     code, body = live.console.get("/api/rovers/no-such-rover/faults")
     assert code in (502, 504)
+    code, body = live.console.get(f"/api/rovers/{R}/journal?last=3")
+    assert code == 200 and len(body) == 3
+    assert live.console.get(f"/api/rovers/{R}/journal?last=x")[0] == 422
+    assert live.console.get(f"/api/rovers/{R}/prediction?hours=x")[0] == 422
+    assert live.console.get(f"/api/rovers/{R}/nothing")[0] == 404
     code, body = live.console.get(f"/api/rovers/{R}/faults")
     assert code == 200 and isinstance(body, list)
     status, me = live.console.get("/api/me")
