@@ -161,8 +161,9 @@ async def _query(request: Request) -> Response:
         return JSONResponse({"message": f"no such query {what!r}"}, status_code=404)
     ok, errors = await asyncio.to_thread(_get, request.app.state.session, selector, timeout)
     if not ok:
+        which = ", in a version with the prediction" if what == "prediction" else ""
         why = "; ".join(errors) or (f"nobody answered {selector} (is the service that answers it "
-                                    f"running{', in a version with the prediction' if what == 'prediction' else ''}?)")
+                                    f"running{which}?)")
         return JSONResponse({"message": why}, status_code=502 if errors else 504)
     return JSONResponse(ok[0])
 
