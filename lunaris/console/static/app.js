@@ -324,10 +324,10 @@ function drawFaults() {
       const bits = name.split("/"), kind = bits.pop();
       clear = btn("fault-clear", "Clear", `data-component="${esc(bits.join("/"))}" data-kind="${esc(kind)}"`);
     }
-    return `<tr data-fault="${esc(name)}"><td class="sev-${f.severity}">${esc(name)}</td><td>${esc(params)}</td>
-      <td>${f.origin}</td><td class="num">${f.since_t_s.toFixed(1)} s</td><td>${clear}</td></tr>`;
+    return `<tr data-fault="${esc(name)}"><td class="sev-${f.severity} wrap">${esc(name)}<br><small>${esc(f.origin)}${params ? " · " + esc(params) : ""}</small></td>
+      <td class="num">${f.since_t_s.toFixed(1)} s</td><td>${clear}</td></tr>`;
   }).join("");
-  el.innerHTML = rows ? `<table><tr><th>fault</th><th>value</th><th>origin</th><th class="num">since</th><th></th></tr>${rows}</table>`
+  el.innerHTML = rows ? `<table><tr><th>fault</th><th class="num">since</th><th></th></tr>${rows}</table>`
                       : `<p class="none">No active fault.</p>`;
   guard(el);
 }
@@ -348,17 +348,19 @@ function charts() {
   const width = Math.max(280, box.clientWidth - 4);
   box.innerHTML = `<h3><span style="color:#1b7f3b">━ state of charge %</span> · <span style="color:#8e3fb0">━ battery temperature °C</span></h3>`;
   if (h.t.length < 2) { box.innerHTML = "<p class='help'>The plots start after a few seconds.</p>"; setTimeout(() => { if (S.view === "live" && !S.charts.length) render(); }, 3000); return; }
-  const axis = (label, side) => ({label, side, size: 46, labelSize: 14, stroke: "#5f6b7a", grid: {stroke: "#eef0f3"}});
+  const axis = (label, side) => ({label, side, size: 46, labelSize: 14, space: 18, stroke: "#5f6b7a", grid: {stroke: "#eef0f3"}});
+  const clockAxis = {stroke: "#5f6b7a", grid: {stroke: "#eef0f3"}, size: 24,
+    values: (u, vals) => vals.map((v) => new Date(v * 1000).toLocaleTimeString([], {hour: "2-digit", minute: "2-digit", second: "2-digit"}))};
   const pad = (u, lo, hi) => (lo === null || hi === null ? [0, 1] : lo === hi ? [lo - 1, hi + 1] : [lo - (hi - lo) * 0.05, hi + (hi - lo) * 0.05]);
-  const soc = new uPlot({width, height: 105, legend: {show: false}, scales: {x: {time: true}, "%": {range: pad}, C: {range: pad}},
+  const soc = new uPlot({width, height: 100, legend: {show: false}, scales: {x: {time: true}, "%": {range: pad}, C: {range: pad}},
     series: [{}, {label: "state of charge %", stroke: "#1b7f3b", width: 2, scale: "%", points: {show: false}},
              {label: "temperature °C", stroke: "#8e3fb0", width: 1.5, scale: "C", points: {show: false}}],
-    axes: [{stroke: "#5f6b7a", grid: {stroke: "#eef0f3"}}, {...axis("%", 3), scale: "%"}, {...axis("°C", 1), scale: "C"}]},
+    axes: [clockAxis, {...axis("%", 3), scale: "%"}, {...axis("°C", 1), scale: "C"}]},
     [h.t, h.soc, h.temperature_c], box);
   box.insertAdjacentHTML("beforeend", `<h3><span style="color:#c0262d">━ loads W</span> · <span style="color:#e0a800">━ generation W</span></h3>`);
-  const pw = new uPlot({width, height: 105, legend: {show: false}, scales: {x: {time: true}, W: {range: pad}},
+  const pw = new uPlot({width, height: 100, legend: {show: false}, scales: {x: {time: true}, W: {range: pad}},
     series: [{}, {label: "loads W", stroke: "#c0262d", width: 1.5, scale: "W", points: {show: false}}, {label: "generation W", stroke: "#e0a800", width: 1.5, scale: "W", points: {show: false}}],
-    axes: [{stroke: "#5f6b7a", grid: {stroke: "#eef0f3"}}, {...axis("W", 3), scale: "W"}]},
+    axes: [clockAxis, {...axis("W", 3), scale: "W"}]},
     [h.t, h.load_w, h.generation_w], box);
   S.charts = [soc, pw];
 }
