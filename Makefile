@@ -14,15 +14,22 @@ $(STAMP): pyproject.toml
 	@touch $@
 
 # docker-compose (v1, Debian) validates docker-compose.yml in the tests; no engine needed.
+# chromium and chromium-driver (Debian) are the real browser the console's tests drive.
 system-deps:
 	@command -v docker-compose >/dev/null 2>&1 || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
 	    echo "installing docker-compose (Debian package) for the compose tests"; \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq docker-compose >/dev/null; \
 	  else echo "warning: docker-compose missing and cannot be installed; compose tests will skip"; fi; }
+	@{ command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; } || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing chromium and chromium-driver (Debian packages) for the console's browser tests"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null; \
+	  else echo "warning: chromium or chromedriver missing and cannot be installed; console browser tests will skip"; fi; }
 
+# The twin and the instructor console: open the address it prints (http://127.0.0.1:8080/).
 run: $(STAMP)
-	$(BIN)/lunaris up --rover $(ROVER)
+	$(BIN)/lunaris up --rover $(ROVER) --console
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

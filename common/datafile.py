@@ -177,7 +177,10 @@ def _check(value: Any, t: Any, path: str, problems: list[str]) -> None:
         if value is None and any(isinstance(m, mi.NoneType) for m in t.types):
             return
         members = [m for m in t.types if not isinstance(m, mi.NoneType)]
-        _check(value, members[0], path, problems)
+        # A mapping is checked against the mapping member, anything else against the first other.
+        mapping = [m for m in members if isinstance(m, mi.StructType | mi.DictType)]
+        others = [m for m in members if m not in mapping] or members
+        _check(value, (mapping or others)[0] if isinstance(value, dict) else others[0], path, problems)
     elif isinstance(t, mi.StructType):
         _check_struct(value, t, path, problems)
     elif isinstance(t, mi.ListType):

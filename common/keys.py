@@ -14,6 +14,7 @@ conditions, the gatekeeper that refuses keys nobody owns.
 
 from __future__ import annotations
 
+import re
 from typing import Literal, NamedTuple
 
 import msgspec
@@ -24,6 +25,7 @@ __all__ = [
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
+    "SNAPSHOT_NAME",
     "Family",
     "battery_state",
     "clock",
@@ -31,6 +33,7 @@ __all__ = [
     "cmd_rail",
     "control_reset",
     "control_restore",
+    "control_scenario",
     "control_snapshot",
     "drive_state",
     "event",
@@ -43,6 +46,7 @@ __all__ = [
     "faults_active",
     "faults_journal",
     "input_drive_traverse",
+    "input_panel_sun_angle",
     "input_radio_position",
     "input_sun_angle",
     "input_umbilical",
@@ -63,6 +67,7 @@ __all__ = [
 ]
 
 ROOT = "lunaris"
+SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")  # a snapshot's name: one key chunk
 PLACEHOLDERS = ("load", "rail", "radio", "panel")  # the component kinds a key can name
 
 
@@ -123,6 +128,11 @@ def input_sun_angle(rover: str) -> str:
     return f"{ROOT}/{rover}/input/sun_angle"
 
 
+def input_panel_sun_angle(rover: str, panel: str) -> str:
+    """One panel's sun angle: overrides ``input/sun_angle`` for that panel until deleted."""
+    return f"{ROOT}/{rover}/input/solar/{panel}/sun_angle"
+
+
 def input_radio_position(rover: str, radio: str) -> str:
     return f"{ROOT}/{rover}/input/radio/{radio}/position"
 
@@ -173,6 +183,11 @@ def control_snapshot(rover: str, name: str) -> str:
 
 def control_restore(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/control/restore/{name}"
+
+
+def control_scenario(rover: str) -> str:
+    """A scenario's progress, journalled by the faults service as ``scenario`` events."""
+    return f"{ROOT}/{rover}/control/scenario"
 
 
 def snapshots(rover: str) -> str:
@@ -257,6 +272,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("event", m.Event, "*"),
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),
+    _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),
     _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
     _f("input/umbilical", m.UmbilicalInput, "solar"),
     _f("input/drive/traverse", m.DriveTraverse, "drive"),

@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal, TypeVar
 import msgspec
 
 __all__ = [
+    "BARE_FIELD",
     "ActiveFault",
     "ActiveFaults",
     "BadInput",
@@ -43,6 +44,7 @@ __all__ = [
     "RadioPosition",
     "RailCommand",
     "RailState",
+    "ScenarioMark",
     "SolarPower",
     "SunAngle",
     "TraverseWaypoint",
@@ -199,7 +201,8 @@ class DriveState(_Msg):
 # What an event says happened: a refused input, a fault's life, an accepted command or
 # input, a change of the clock, a bug in a service.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
-                    "fault_resolved", "command", "input", "clock", "session", "internal_error"]
+                    "fault_resolved", "command", "input", "clock", "session", "scenario",
+                    "internal_error"]
 
 
 class Event(_Msg):
@@ -337,6 +340,25 @@ def _number(name: str, value: str) -> int | float:
     if isinstance(number, float) and not math.isfinite(number):
         raise BadInput(f"parameter {name!r} must be finite, got {value!r}")
     return number
+
+
+# The field a bare JSON number or boolean stands for, for the inputs and commands of one
+# parameter (``60`` on ``input/sun_angle``); the services, the CLI and the console read it here.
+BARE_FIELD: dict[type[msgspec.Struct], str] = {
+    SunAngle: "angle_deg",
+    UmbilicalInput: "connected",
+    RailCommand: "on",
+}
+
+
+class ScenarioMark(_Input):
+    """``control/scenario``: a scenario's progress, put by the player so that the journal (and
+    the debrief) marks when it started, each step that fired and how it ended."""
+
+    scenario: Annotated[str, msgspec.Meta(min_length=1, max_length=200)]
+    what: Literal["start", "step", "end"]
+    message: Annotated[str, msgspec.Meta(max_length=1000)]
+    step: Annotated[int, msgspec.Meta(ge=0, le=10_000)] | None = None
 
 
 def is_telemetry(struct: type[msgspec.Struct]) -> bool:

@@ -40,6 +40,7 @@ import zenoh.ext as zext
 
 from common import keys
 from common.fault_book import FaultBook
+from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
 from common.session import SessionKeeper, StateGet, StateReset, StateSet
 from common.state_store import StateStore
@@ -90,6 +91,7 @@ class Runtime:
         self._zid = ""
         self._lock_file: Any = None
         self._event_seq = 0
+        self._inputs: InputLog | None = None
         self.session: zenoh.Session | None = None
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -403,3 +405,16 @@ class Runtime:
     def reject(self, rover: str, key: str, reason: str) -> None:
         """Refuse an input: nothing changes, and a warning event says why."""
         self.event(rover, "warning", "rejected", key, f"rejected: {reason}")
+
+    def accepted_input(self, rover: str, key: str, message: str, params: dict | None = None) -> None:
+        """Journal an accepted input as an ``input`` event; a ramp's stream of them is folded
+        (:class:`~common.input_events.InputLog`): one event a second at most per key."""
+        if self._inputs is None:
+            self._inputs = InputLog()
+            self.every(0.2, lambda: self._input_events(self._inputs.flush(time.monotonic())
+                                                       if self._inputs else []))
+        self._input_events(self._inputs.offer(InputNote(rover, key, message, params), time.monotonic()))
+
+    def _input_events(self, notes: list[InputNote]) -> None:
+        for note in notes:
+            self.event(note.rover, "info", "input", note.key, note.message, note.params)

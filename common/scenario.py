@@ -8,6 +8,8 @@ A scenario::
 
     scenario: {name: Dust storm, description: ...}
     rover: mapp-1
+    start: reset              # optional: first the rover back to its rover file, or
+                              # {snapshot: NAME}: a saved snapshot restored
     time_scale: 20            # optional: clock speed while it plays (restored at the end)
     duration_s: 900           # optional: stop this long (sim time) after the start
     steps:
@@ -44,10 +46,11 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import msgspec
 
+from common import keys
 from common.conditions import parse_condition
 from common.config import Rover
 from common.datafile import (
@@ -69,6 +72,7 @@ __all__ = [
     "Scenario",
     "ScenarioError",
     "Step",
+    "describe_start",
     "load_scenario",
     "parse_scenario",
     "rover_id_of",
@@ -128,16 +132,30 @@ class Step(Strict, frozen=True):
     traverse: Any = None  # what input/drive/traverse takes, or "stop"
 
 
+class StartFromSnapshot(Strict, frozen=True):
+    snapshot: Annotated[str, msgspec.Meta(pattern=keys.SNAPSHOT_NAME.pattern)]
+
+
 class Scenario(Strict, frozen=True):
     scenario: ScenarioInfo
     rover: Annotated[str, msgspec.Meta(pattern=ID_PATTERN)]
     steps: list[Step]
+    start: Literal["reset"] | StartFromSnapshot | None = None
     time_scale: Annotated[float, msgspec.Meta(gt=0.0, le=10000.0)] | None = None
     duration_s: Positive | None = None
 
 
 ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail", "traverse")
 STOP = "stop"
+
+
+def describe_start(start: Literal["reset"] | StartFromSnapshot | None) -> str:
+    """How a scenario starts, in words."""
+    if start == "reset":
+        return "from a reset: the rover back to its rover file"
+    if isinstance(start, StartFromSnapshot):
+        return f"from the snapshot {start.snapshot!r}"
+    return "from the twin as it is"
 
 
 class ScenarioError(ConfigError):

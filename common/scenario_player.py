@@ -200,6 +200,33 @@ class Player:
         elif duration is None and not self._ramps and not self._drop_blocked():
             self.finish("no remaining step can fire")
 
+    def waiting(self, lookup: Lookup) -> str:
+        """What the scenario waits for now, in words (said at least every 10 s while it plays)."""
+        if self.finished:
+            return f"ended: {self.end_reason}"
+        for r in self.results:
+            if r.status not in ("waiting", "armed"):
+                continue
+            step = self.scenario.steps[r.index]
+            gate = self._gate(r.index)
+            cond = self.conditions[r.index]
+            if r.status == "waiting" and gate is not None and gate > self.t_rel:
+                what = f"its time, in {gate - self.t_rel:.0f} s"
+            elif cond is not None:
+                what = f"{cond.text} (now {cond.describe(lookup)})"
+                if step.timeout_s is not None and r.armed_t_s is not None:
+                    what += f", for {max(0.0, r.armed_t_s + step.timeout_s - self.t_rel):.0f} s more"
+            else:
+                what = describe_trigger(step)
+            return f"waiting for step {r.index + 1} {r.label!r}: {what}"
+        for i, start in self._ramps.items():
+            left = start + _ramp_length(self.scenario.steps[i]) - self.t_rel
+            return f"step {i + 1} {self.results[i].label!r} ramping, {left:.0f} s to go"
+        if self.scenario.duration_s is not None:
+            return (f"every step has played; the scenario ends at its duration of "
+                    f"{self.scenario.duration_s:g} s, in {self.scenario.duration_s - self.t_rel:.0f} s")
+        return "finishing"
+
     def _drop_blocked(self) -> bool:
         """Mark the steps chained to a step that will never fire; True if any can still fire."""
         for i, r in enumerate(self.results):

@@ -28,7 +28,6 @@ service ignores a control it cannot act on.
 
 from __future__ import annotations
 
-import re
 import sys
 import time
 from collections.abc import Callable
@@ -49,7 +48,7 @@ __all__ = ["RESTORE", "SNAPSHOT_NAME", "SessionKeeper", "StateGet", "StateReset"
 StateGet = Callable[[str], dict[str, Any]]
 StateSet = Callable[[str, dict[str, Any]], None]
 StateReset = Callable[[str], None]
-SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+SNAPSHOT_NAME = keys.SNAPSHOT_NAME
 RESTORE = "restore:"
 
 

@@ -35,6 +35,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "traverse": ("lunaris.traverse", "send a rover on a traverse, or stop it"),
     "predict": ("lunaris.predict", "Monte Carlo time to empty and state of charge, from a file or "
                 "the live twin"),
+    "rail": ("lunaris.rail", "switch a rail on or off, or reset it after a trip"),
+    "clock": ("lunaris.clock", "pause, resume or speed up a rover's simulated time"),
+    "input": ("lunaris.input", "set an input: sun angle, radio position, umbilical, traverse"),
+    "reset": ("lunaris.reset", "put a rover back to its rover file's initial conditions"),
+    "snapshot": ("lunaris.snapshot", "save, restore and list snapshots of a rover's session"),
+    "console": ("lunaris.console", "the instructor console in a web browser"),
 }
 
 

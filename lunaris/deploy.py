@@ -10,7 +10,9 @@
   for every identity (``credentials.txt``, the router's dictionary), one client
   configuration per identity (``client-<identity>.json5``, TLS with the CA inlined) and a
   certificate authority with the router's certificate (``tls/``, by ``openssl``).
-  ``--rotate USER`` gives one identity a new password and leaves the others.
+  ``--rotate USER`` gives one identity a new password and leaves the others. It also makes
+  the console's accounts file, empty (``lunaris console users add`` fills it), and never
+  overwrites it.
 - ``check DIR`` refuses secrets that cannot be trusted: a missing file, a shipped demo
   password, a short password, a client whose password is not the router's. The
   deployment runs it first and starts nothing when it fails.
@@ -319,6 +321,11 @@ def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
         path.write_text(json.dumps(client_config(user, creds[user], ca, connect), indent=2) + "\n")
         path.chmod(0o600)
         written.append(path.name)
+    accounts = folder / "console-accounts.json"
+    if not accounts.exists():  # people, not machines: made empty once, never overwritten
+        accounts.write_text('{"users": {}}\n')
+        accounts.chmod(0o600)
+        written.append(accounts.name)
     if rotate is None or "dashboard" in rotate:
         path = folder / "zenoh-bridge-ros2dds.json5"
         path.write_text(json.dumps(ros2dds_config(creds["dashboard"], ca), indent=2) + "\n")

@@ -8,6 +8,12 @@ step as it fires and the twin's answer to it (``fault_injected``, ``rejected``
 ...). At the end it prints a summary, puts the clock back to the speed it had,
 and exits 0 when every step fired and was accepted, 1 otherwise, 2 when it
 could not start.
+
+A scenario may start from a reset or a snapshot (``start``): the run asks for it and waits
+for the clock's first tick of the new epoch before it plays. It marks its start, each step
+and its end in the journal (``control/scenario``), and while it plays it is never silent
+for 10 s of wall time: it says what it waits for. Longer than 450 lines: one run's state
+(the telemetry, the answers awaited, the clock to put back) is one class, kept whole.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from common import keys
 from common.config import ConfigError, Rover, load_rover
 from common.connection import add_connection_args, write
 from common.messages import Event, decode
-from common.scenario import Scenario, ScenarioError, load_scenario, rover_id_of
+from common.scenario import Scenario, ScenarioError, describe_start, load_scenario, rover_id_of
 from common.scenario_player import Player, Write, describe_action, describe_trigger
 from lunaris.tooling import ToolError, describe_endpoint, ignored, open_session, require_rover
 
@@ -56,6 +62,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--clear-at-end", action="store_true",
                      help="clear the faults this scenario injected that are still active at the end")
     run.add_argument("--json-summary", metavar="FILE", help="also write the summary as JSON")
+    run.add_argument("--status-json", metavar="FILE",
+                     help="keep the steps' progress in this JSON file while it plays (the console)")
     add_connection_args(run)
 
     check = sub.add_parser("check", help="validate scenarios and print every problem")
@@ -145,6 +153,7 @@ class _Run:
         self.stop = threading.Event()
         self.started_wall = time.monotonic()
         self.first_clock: dict | None = None
+        self.last_said = time.monotonic()
         self.clock_changed = False
 
     # Zenoh callbacks -------------------------------------------------------------------
@@ -183,6 +192,7 @@ class _Run:
     def say(self, text: str) -> None:
         t = self.player.t_rel
         print(f"[t+{t:8.1f} s] {text}", flush=True)
+        self.last_said = time.monotonic()
 
     # the run ---------------------------------------------------------------------------
 
@@ -203,7 +213,9 @@ class _Run:
             require_rover(session, self.rover)  # also a round trip: our subscriptions are in place
             first = self._first_tick()
             self.session = session
-            self._set_clock(first)
+            self._mark("start", f"started ({describe_start(self.scenario.start)})")
+            start = self._start(first)
+            self._set_clock(start)
             code = self._play()
         finally:
             keep.clear()
@@ -219,21 +231,88 @@ class _Run:
         self.first_clock = first
         return first
 
-    def _set_clock(self, first: dict) -> None:
+    def _start(self, first: dict) -> dict:
+        """A reset, or a snapshot restored, when the scenario says so; the first tick after it."""
+        start = self.scenario.start
+        if start is None:
+            return first
+        key = (keys.control_reset(self.rover) if start == "reset"
+               else keys.control_restore(self.rover, start.snapshot))
+        cause = "reset" if start == "reset" else f"restore:{start.snapshot}"
+        print(f"starting {describe_start(start)} ...", flush=True)
+        write(self.session, key, b"")
+        deadline = time.monotonic() + self.args.wait
+        answered = False
+        while time.monotonic() < deadline and not self.stop.is_set():
+            try:
+                ev = self.events.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if ev.key == key and ev.kind == "rejected":
+                raise ToolError(f"cannot start: {ev.message}", 1)
+            if ev.key == key and ev.kind == "session":
+                answered = True
+                break
+        while answered and time.monotonic() < deadline and not self.stop.is_set():
+            try:
+                tick = self.ticks.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            if tick.get("cause") == cause and tick.get("epoch", 0) > first.get("epoch", 0):
+                print(f"{self.rover} is at its start: sim t {tick['t_s']:.1f} s", flush=True)
+                return tick
+        raise ToolError(f"no answer from {self.rover} to {key} within {self.args.wait:g} s", 2)
+
+    def _set_clock(self, now: dict) -> None:
         scale = self.args.time_scale or self.scenario.time_scale
-        if scale is not None and scale != first.get("time_scale"):
-            self._put(keys.clock_control(self.rover), {"time_scale": scale})
+        body: dict = {}
+        if scale is not None and scale != now.get("time_scale"):
+            body["time_scale"] = scale
+        if now.get("paused") and self.scenario.start is not None:
+            body["paused"] = False  # a snapshot saved paused: the scenario needs its clock running
+        if body:
+            self._put(keys.clock_control(self.rover), body)
             self.clock_changed = True
-            print(f"clock of {self.rover} set to x{scale:g} (was x{first.get('time_scale', 1):g})",
+            first = self.first_clock or now
+            print(f"clock of {self.rover} set to x{body.get('time_scale', now.get('time_scale', 1)):g}"
+                  f"{', running' if 'paused' in body else ''} (was x{first.get('time_scale', 1):g})",
                   flush=True)
+        elif self.scenario.start is not None and self.first_clock is not None and (
+                now.get("time_scale") != self.first_clock.get("time_scale")
+                or now.get("paused") != self.first_clock.get("paused")):
+            self.clock_changed = True  # the reset changed it: put it back at the end
+
+    def _mark(self, what: str, message: str, step: int | None = None) -> None:
+        """The scenario's progress in the journal (``scenario`` events), for the debrief."""
+        body: dict[str, object] = {"scenario": self.scenario.scenario.name, "what": what,
+                                   "message": message[:1000]}
+        if step is not None:
+            body["step"] = step
+        try:
+            write(self.session, keys.control_scenario(self.rover), json.dumps(body))
+        except zenoh.ZError as exc:  # the journal misses a mark; the scenario goes on
+            print(f"could not mark the journal: {exc}", file=sys.stderr, flush=True)
+
+    def _save_status(self) -> None:
+        if not self.args.status_json:
+            return
+        p = self.player
+        data = {"scenario": self.scenario.scenario.name, "rover": self.rover, "t_rel_s": p.t_rel,
+                "finished": p.finished, "end_reason": p.end_reason,
+                "waiting": p.waiting(self.lookup),
+                "steps": [{**asdict(r), "trigger": describe_trigger(self.scenario.steps[r.index]),
+                           "action": describe_action(self.scenario.steps[r.index])} for r in p.results]}
+        tmp = Path(self.args.status_json + ".tmp")
+        tmp.write_text(json.dumps(data))
+        tmp.replace(self.args.status_json)
 
     def _put(self, key: str, body: dict) -> None:
         write(self.session, key, json.dumps(body))
 
     def _play(self) -> int:
         player = self.player
-        last_status = time.monotonic()
         interrupted = False
+        last_saved = 0.0
         while not player.finished:
             if self.stop.is_set():
                 player.finish("interrupted")
@@ -250,14 +329,20 @@ class _Run:
                 self._step(tick)
             self._answers()
             now = time.monotonic()
-            if now - last_status >= 10.0:
-                last_status = now
+            if now - self.last_said >= 9.0:  # never silent for 10 s of wall time
                 self._status(tick)
+            if now - last_saved >= 0.5:
+                last_saved = now
+                self._save_status()
         self._wait_answers()
         self._finish_clock()
         if self.args.clear_at_end:
             self._clear_injected()
-        return self._summary(interrupted)
+        code = self._summary(interrupted)
+        self._mark("end", f"ended: {player.end_reason}; "
+                   + ("every step fired and was accepted" if code == 0 else "not every step played"))
+        self._save_status()
+        return code
 
     def _step(self, tick: dict) -> None:
         player = self.player
@@ -269,6 +354,8 @@ class _Run:
                 why = f" ({r.detail})" if r.detail else ""
                 named = f"{step.name}: " if step.name else ""
                 self.say(f"step {i + 1}/{len(player.results)} {named}{describe_action(step)}{why}")
+                self._mark("step", f"step {i + 1}/{len(player.results)} {named}{describe_action(step)}",
+                           i + 1)
                 if step.note:
                     self.say(f"    note: {step.note}")
             elif before[i] != r.status and r.status == "timed out":
@@ -342,15 +429,9 @@ class _Run:
                 time.sleep(0.05)
 
     def _status(self, tick: dict | None) -> None:
-        waiting = [(r, self.scenario.steps[r.index]) for r in self.player.results
-                   if r.status in ("waiting", "armed")]
-        if not waiting:
-            return
-        r, step = waiting[0]
-        cond = self.player.conditions[r.index]
-        now = f" now {cond.describe(self.lookup)}" if cond is not None else ""
-        sim = f"sim t {tick['t_s']:.1f} s, " if tick else "no clock tick lately, "
-        self.say(f"{sim}waiting for step {r.index + 1} {r.label!r}: {describe_trigger(step)}{now}")
+        sim = (f"sim t {tick['t_s']:.1f} s, " if tick
+               else "no clock tick lately (is the clock paused?), ")
+        self.say(sim + self.player.waiting(self.lookup))
 
     def _finish_clock(self) -> None:
         first = self.first_clock

@@ -45,6 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated services to run (default: all)")
     p.add_argument("--seed", type=int, default=None, help="random seed for the loads")
     p.add_argument("--no-status", action="store_true", help="no live status display")
+    p.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None, metavar="HOST:PORT",
+                   help="also serve the instructor console (default address 127.0.0.1:8080), "
+                        "supervised like the services")
+    p.add_argument("--console-accounts", metavar="FILE",
+                   help="the console's accounts file (without one it serves this computer only)")
 
 
 def _die_with_parent() -> None:
@@ -71,8 +76,17 @@ class Supervisor:
         self.restarts: dict[str, int] = dict.fromkeys(services, 0)
         self.failed: dict[str, str] = {}  # service -> why it is not restarted
         self._next_start: dict[str, float] = {}
+        self.commands: dict[str, list[str]] = {}  # processes other than services: the console
+
+    def add(self, name: str, args: list[str]) -> None:
+        """Supervise another ``lunaris`` command (the console) like a service."""
+        self.services.append(name)
+        self.restarts[name] = 0
+        self.commands[name] = [sys.executable, "-m", "lunaris.cli", *args]
 
     def command(self, service: str) -> list[str]:
+        if service in self.commands:
+            return self.commands[service]
         cmd = [sys.executable, "-m", "lunaris.cli", "run", service, "--connect", self.endpoint,
                "--state-dir", str(self.state_dir)]
         for f in self.rover_files:
@@ -225,6 +239,15 @@ def main(args: argparse.Namespace) -> int:
           f"{', '.join(r.id for r in rovers)}; state in {state_dir}", flush=True)
     sup = Supervisor(services, [os.path.abspath(f) for f in rover_files], listen[0], state_dir,
                      args.seed)
+    if args.console:
+        console = ["console", "--http", args.console, "--connect", listen[0]]
+        if args.console_accounts:
+            console += ["--accounts", args.console_accounts]
+        sup.add("console", console)
+        who = ("sign-in with the accounts of " + args.console_accounts if args.console_accounts
+               else "this computer only; you are the instructor")
+        print(f"[up] instructor console: http://{args.console}/  ({who}; its log: "
+              f"{sup.log_path('console')})", flush=True)
     status = _Status(router, [r.id for r in rovers])
     tty = sys.stdout.isatty() and not args.no_status
     try:

@@ -12,13 +12,15 @@ router goes away ("DISCONNECTED ... retrying"): Zenoh keeps trying to reconnect,
 and when it does the subscriptions are restored and the view says so.
 
 On a terminal the view is a full-screen ``rich`` display refreshed a few times a
-second (Ctrl-C quits); piped, it prints a snapshot every ``--interval`` seconds,
-or once with ``--once``.
+second (Ctrl-C quits); narrower than 110 columns it draws a compact layout that fits an
+80x24 terminal. Piped, it prints a snapshot every ``--interval`` seconds, or once with
+``--once``, as wide as the terminal the user reads on (stderr's), else 160 columns.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -191,11 +193,13 @@ def main(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     watcher.start()
     tty = sys.stdout.isatty() and not args.once
-    console = Console(width=args.width) if args.width else Console()
+    console = Console(width=args.width or _piped_width()) if args.width or not sys.stdout.isatty() \
+        else Console()
 
     def frame() -> RenderableType:
         watcher.refresh_connection()
-        return render(store.snapshot(), watcher.conn, args.rover, args.events)
+        return render(store.snapshot(), watcher.conn, args.rover, args.events,
+                      width=console.size.width, height=console.size.height)
 
     try:
         if args.once:
@@ -222,6 +226,20 @@ def main(args: argparse.Namespace) -> int:
         print(f"lunaris watch: {watcher.error}", file=sys.stderr)
         return 2
     return 0
+
+
+PIPED_WIDTH = 160  # a log or a file: wide enough for the whole layout
+
+
+def _piped_width() -> int:
+    """Piped, the width of the terminal the user reads on (stderr's), or ``PIPED_WIDTH``."""
+    for stream in (sys.stderr, sys.stdin):
+        try:
+            if stream.isatty():
+                return os.get_terminal_size(stream.fileno()).columns
+        except (OSError, ValueError):
+            continue
+    return PIPED_WIDTH
 
 
 def _once(args: argparse.Namespace, watcher: _Watcher, store: Store, console: Console, frame) -> int:

@@ -348,7 +348,10 @@ def render_rover(snap: Snapshot, rover: str, n_events: int) -> RenderableType:
     return Group(_rover_header(snap, rover), top, middle, _events_table(events, n_events, fleet=False))
 
 
-def render_fleet(snap: Snapshot, n_events: int) -> RenderableType:
+def render_fleet(snap: Snapshot, n_events: int, compact: bool = False) -> RenderableType:
+    if compact:
+        from lunaris.watch_compact import fleet_compact
+        return fleet_compact(snap, n_events)
     t = Table(title=f"fleet: {len(snap.rovers())} rover(s)", box=box.SIMPLE_HEAD, title_justify="left",
               title_style="bold")
     for name in ("rover", "sim t", "x", "SoC", "V", "A", "C", "to empty", "loads W", "gen W",
@@ -390,6 +393,17 @@ def render_fleet(snap: Snapshot, n_events: int) -> RenderableType:
     return Group(t, _faults_table(snap.faults, fleet=True), _events_table(snap.events, n_events, fleet=True))
 
 
-def render(snap: Snapshot, conn: Connection, rover: str | None, n_events: int) -> RenderableType:
-    body = render_rover(snap, rover, n_events) if rover else render_fleet(snap, n_events)
+COMPACT_BELOW = 110  # columns: narrower than this, the compact layout (an 80x24 terminal)
+
+
+def render(snap: Snapshot, conn: Connection, rover: str | None, n_events: int,
+           width: int = 200, height: int = 60) -> RenderableType:
+    """The frame; below ``COMPACT_BELOW`` columns a compact one that fits an 80x24 terminal."""
+    from lunaris.watch_compact import render_compact
+
+    compact = width < COMPACT_BELOW
+    if rover:
+        body = render_compact(snap, rover, height) if compact else render_rover(snap, rover, n_events)
+    else:
+        body = render_fleet(snap, n_events, compact)
     return Group(_banner(conn, snap.now), body)

@@ -16,6 +16,7 @@
   ``control/restore/<name>``): every service acts on its own state (``common.session``);
   this one answers each with the one ``session`` event that marks it in the journal, or
   refuses it, and answers ``get lunaris/<rover>/snapshots`` from what the services hold.
+  A scenario's progress (``control/scenario``) is journalled as ``scenario`` events.
 """
 
 from __future__ import annotations
@@ -29,7 +30,16 @@ import zenoh
 from common import keys
 from common.config import Rover
 from common.faults import check_component
-from common.messages import ActiveFault, ActiveFaults, BadInput, Event, SnapshotInfo, decode
+from common.messages import (
+    ActiveFault,
+    ActiveFaults,
+    BadInput,
+    Event,
+    ScenarioMark,
+    SnapshotInfo,
+    decode,
+    decode_input,
+)
 from common.runtime import Runtime, Sample
 from common.session import parse_control
 from services.faults.journal import Journal
@@ -92,6 +102,13 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                            "drive, so it cannot follow a traverse")
 
     def on_control(s: Sample) -> None:
+        if s.parts == ["control", "scenario"]:  # a scenario's progress, for the journal
+            if s.deleted:
+                raise BadInput("a scenario mark is a put")
+            mark = decode_input(s.payload, ScenarioMark)
+            rt.event(s.rover, "info", "scenario", s.key, f"scenario {mark.scenario!r}: {mark.message}",
+                     {"scenario": mark.scenario, "what": mark.what, "step": mark.step})
+            return
         control = parse_control(s.parts)
         if control is None:
             raise BadInput(f"no such control {'/'.join(s.parts)!r} (control/reset, "

@@ -6,6 +6,7 @@ from common import keys
 from common.config import Rover
 from common.faults import FaultKey, Params
 from common.messages import (
+    BARE_FIELD,
     BadInput,
     BatteryState,
     LoadPower,
@@ -87,14 +88,16 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                            f"(rails: {', '.join(m.switches)})")
         if s.deleted:
             raise BadInput("a rail command is a put, not a delete")
-        cmd = decode_input(s.payload, RailCommand, bare="on")
+        cmd = decode_input(s.payload, RailCommand, bare=BARE_FIELD[RailCommand])
         if cmd.on is None and not cmd.reset:
             raise BadInput('give {"on": true|false} or {"reset": true}')
         m.command(rail, on=cmd.on, reset=bool(cmd.reset))
         what = ", ".join(w for w in (None if cmd.on is None else f"on={cmd.on}".lower(),
                                      "reset" if cmd.reset else None) if w)
-        rt.event(s.rover, "info", "command", s.key, f"rail {rail}: {what}")
         publish(s.rover)  # at once: the loads follow the new rail state
+        now = next((r.state for r in m.compute()[0] if r.name == rail), "?")
+        rt.event(s.rover, "info", "command", s.key, f"rail {rail}: {what}; the rail is now {now}",
+                 {"on": cmd.on, "reset": bool(cmd.reset), "state": now})
 
     def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
         models[rover].apply_fault(fk, params)

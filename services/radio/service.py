@@ -64,9 +64,15 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             raise BadInput(f"radio {name} of {s.rover} follows the rover's drive (its site and "
                            "drive/state give the position); move the rover with a traverse on "
                            "input/drive/traverse")
+        if s.deleted:
+            raise BadInput("a radio position is a put: {\"distance_m\": D, \"angle_deg\": A}")
         pos = decode_input(s.payload, RadioPosition)
         radios[s.rover][name].set_position(pos.distance_m, pos.angle_deg)
         publish(s.rover, name, force=True)
+        link = radios[s.rover][name].link()
+        rt.accepted_input(s.rover, s.key, f"position to radio {name}: {pos.distance_m:g} m at "
+                          f"{pos.angle_deg:g} deg ({'in range' if link.in_range else 'out of range'})",
+                          {"distance_m": pos.distance_m, "angle_deg": pos.angle_deg})
 
     def on_drive(s: Sample) -> None:
         if s.deleted or s.rover not in following:

@@ -1,8 +1,9 @@
 """Solar panels and the umbilical.
 
 Panel power [W] = ``irradiance * area * efficiency * max(0, cos(angle)) *
-(1 - dust) * (1 - degradation)``; a disconnected panel gives nothing. The
-umbilical, when connected, can supply up to its ``power_w``.
+(1 - dust) * (1 - degradation)``; a disconnected panel gives nothing. The sun angle is the
+rover's (``input/sun_angle``) unless a panel has its own (``input/solar/<panel>/sun_angle``,
+until it is deleted). The umbilical, when connected, can supply up to its ``power_w``.
 """
 
 from __future__ import annotations
@@ -27,17 +28,22 @@ class SolarModel:
         self.cfg = rover.solar
         self.umbilical_cfg = rover.umbilical
         self.sun_angle_deg = rover.solar.sun_angle_deg
+        self.panel_angle_deg: dict[str, float] = {}  # panels with their own sun angle
         self.dust = {p.name: 0.0 for p in rover.solar.panels}
         self.disconnected: set[str] = set()
         self.umbilical_plugged = rover.umbilical.connected
         self.umbilical_fault = False
 
-    def state(self) -> dict[str, float | bool]:
+    def state(self) -> dict[str, float | bool | dict[str, float]]:
         """The inputs that evolve (the panels' faults are re-applied by their owner)."""
-        return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged}
+        return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged,
+                "panel_angle_deg": dict(self.panel_angle_deg)}
 
     def set_state(self, state: dict) -> None:
         self.sun_angle_deg = float(state.get("sun_angle_deg", self.cfg.sun_angle_deg))
+        names = set(self.dust)
+        self.panel_angle_deg = {n: float(a) for n, a in (state.get("panel_angle_deg") or {}).items()
+                                if n in names}
         self.umbilical_plugged = bool(state.get("umbilical_plugged", self.umbilical_cfg.connected))
 
     def reset(self) -> None:
@@ -60,15 +66,28 @@ class SolarModel:
     def panel_names(self) -> list[str]:
         return [p.name for p in self.cfg.panels]
 
+    def set_panel_angle(self, panel: str, angle_deg: float | None) -> None:
+        """Give one panel its own sun angle; None returns it to the rover's."""
+        if panel not in self.dust:
+            raise ValueError(f"no panel {panel!r}")
+        if angle_deg is None:
+            self.panel_angle_deg.pop(panel, None)
+        else:
+            self.panel_angle_deg[panel] = angle_deg
+
+    def angle_of(self, panel: str) -> float:
+        """The sun angle a panel sees [deg]."""
+        return self.panel_angle_deg.get(panel, self.sun_angle_deg)
+
     def panels(self) -> list[tuple[str, float, float, list[str]]]:
-        """``(panel, power_w, dust, faults)`` for every panel."""
+        """``(panel, power_w, dust, faults)`` for every panel (its angle: :meth:`angle_of`)."""
         out = []
         for p in self.cfg.panels:
             dust = self.dust[p.name]
             faults = (["dust"] if dust > 0.0 else []) + (
                 ["disconnect"] if p.name in self.disconnected else [])
             power = 0.0 if p.name in self.disconnected else panel_power(
-                self.cfg.irradiance_w_per_m2, p.area_m2, p.efficiency, self.sun_angle_deg,
+                self.cfg.irradiance_w_per_m2, p.area_m2, p.efficiency, self.angle_of(p.name),
                 dust, p.degradation)
             out.append((p.name, power, dust, faults))
         return out

@@ -1,11 +1,22 @@
-"""Solar service: panel power and the umbilical; ``input/sun_angle`` moves the sun."""
+"""Solar service: panel power and the umbilical; ``input/sun_angle`` moves the sun (for one
+panel ``input/solar/<panel>/sun_angle``, until deleted), ``input/umbilical`` plugs it in.
+Each accepted input is journalled as an ``input`` event."""
 
 from __future__ import annotations
 
 from common import keys
 from common.config import Rover
 from common.faults import FaultKey, Params
-from common.messages import Clock, SolarPower, SunAngle, UmbilicalInput, UmbilicalState, decode_input
+from common.messages import (
+    BARE_FIELD,
+    BadInput,
+    Clock,
+    SolarPower,
+    SunAngle,
+    UmbilicalInput,
+    UmbilicalState,
+    decode_input,
+)
 from common.runtime import Runtime, Sample
 from services.solar.model import SolarModel
 
@@ -20,7 +31,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         t = rt.t_s[rover]
         for name, power_w, dust, faults in m.panels():
             rt.publish(keys.solar_power(rover, name), SolarPower(
-                t_s=t, power_w=power_w, sun_angle_deg=m.sun_angle_deg, dust=dust, faults=faults))
+                t_s=t, power_w=power_w, sun_angle_deg=m.angle_of(name), dust=dust, faults=faults))
         rt.publish(keys.umbilical_state(rover), UmbilicalState(
             t_s=t, connected=m.umbilical_connected, power_w=m.umbilical_power_w))
 
@@ -28,13 +39,36 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         publish(rover)
 
     def on_sun(s: Sample) -> None:
-        models[s.rover].sun_angle_deg = decode_input(s.payload, SunAngle, bare="angle_deg").angle_deg
+        if s.deleted:
+            raise BadInput("the rover's sun angle cannot be deleted: put another angle")
+        angle = decode_input(s.payload, SunAngle, bare=BARE_FIELD[SunAngle]).angle_deg
+        models[s.rover].sun_angle_deg = angle
         publish(s.rover)
+        rt.accepted_input(s.rover, s.key, f"sun angle {angle:g} deg", {"angle_deg": angle})
+
+    def on_panel_sun(s: Sample) -> None:
+        m, panel = models[s.rover], s.parts[2]
+        if panel not in m.panel_names():
+            raise BadInput(f"rover {s.rover} has no panel {panel!r} "
+                           f"(panels: {', '.join(m.panel_names()) or 'none'})")
+        if s.deleted:
+            m.set_panel_angle(panel, None)
+            message = f"panel {panel} back to the rover's sun angle ({m.sun_angle_deg:g} deg)"
+        else:
+            angle = decode_input(s.payload, SunAngle, bare=BARE_FIELD[SunAngle]).angle_deg
+            m.set_panel_angle(panel, angle)
+            message = f"sun angle {angle:g} deg on panel {panel}"
+        publish(s.rover)
+        rt.accepted_input(s.rover, s.key, message)
 
     def on_umbilical(s: Sample) -> None:
-        models[s.rover].umbilical_plugged = decode_input(
-            s.payload, UmbilicalInput, bare="connected").connected
+        if s.deleted:
+            raise BadInput('the umbilical input is a put: {"connected": true|false}')
+        plugged = decode_input(s.payload, UmbilicalInput, bare=BARE_FIELD[UmbilicalInput]).connected
+        models[s.rover].umbilical_plugged = plugged
         publish(s.rover)
+        rt.accepted_input(s.rover, s.key, "umbilical " + ("plugged in" if plugged else "unplugged"),
+                          {"connected": plugged})
 
     def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
         models[rover].apply_fault(fk, params)
@@ -42,6 +76,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.input_sun_angle("*"), on_sun)
+    rt.subscribe(keys.input_panel_sun_angle("*", "*"), on_panel_sun)
     rt.subscribe(keys.input_umbilical("*"), on_umbilical)
     rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_fault)
     rt.faults.own("umbilical", None, apply_fault)

@@ -203,3 +203,22 @@ def test_the_image_layout_runs_lunaris(tmp_path: Path) -> None:
     where = subprocess.run([sys.executable, "-c", "import common; print(common.__file__)"],
                            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
     assert where.stdout.startswith(str(root)), where.stdout
+
+
+def test_the_console_runs_with_its_own_identity_and_requires_a_sign_in(compose: dict[str, Any],
+                                                                      made_secrets: Path) -> None:
+    console = compose["services"]["console"]
+    assert console["image"] == compose["services"]["clock"]["image"]
+    assert console["restart"] == "unless-stopped" and "router" in console["depends_on"]
+    command = console["command"]
+    assert command[0] == "console"
+    mounts = _mounts(console)
+    accounts = command[command.index("--accounts") + 1]
+    assert Path(mounts[accounts]) == SECRETS / "console-accounts.json"
+    assert (made_secrets / "console-accounts.json").read_text().strip() == '{"users": {}}'
+    zenoh_config = console["environment"]["LUNARIS_ZENOH_CONFIG"]
+    assert Path(mounts[zenoh_config]) == SECRETS / "client-console.json5"
+    assert console["ports"] in (["127.0.0.1:8080:8080/tcp"],
+                                [{"host_ip": "127.0.0.1", "published": "8080", "target": 8080,
+                                  "protocol": "tcp", "mode": "ingress"}])
+    assert command[command.index("--recordings") + 1].startswith(STATE_DIR)

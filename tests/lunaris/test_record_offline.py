@@ -25,7 +25,7 @@ from common.messages import (
     encode,
 )
 from lunaris.record import ENVELOPE, KeyWrite, Recorder, json_schema, schema_for
-from lunaris.report import draw, load_session
+from lunaris.report import add_thresholds, draw, load_session, place_labels
 
 R = "mapp-1"
 
@@ -151,9 +151,9 @@ def test_the_report_draws_a_recording(tmp_path: Path):
     sessions = load_session(path)
     s = sessions[R]
     assert s.battery["soc"][1][0] == pytest.approx(0.95) and sorted(s.loads) == ["imu", "nav_camera"]
-    assert [e["kind"] for e in s.events] == ["fault_injected"] and s.span_s == (10.0, 14.0)
+    assert [e["kind"] for e in s.events] == ["fault_injected"] and s.span_s == (0.0, 4.0)
     fig = draw(s, "test")
-    assert len(fig.axes) == 6  # five plots and the current's twin axis
+    assert len(fig.axes) == 8  # the timeline, five plots, the radio links and the current's twin axis
     fig.savefig(tmp_path / "out.png")
     assert (tmp_path / "out.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -167,7 +167,62 @@ def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
     s = load_session(path)[R]
     assert s.path == ([5.0] * 5, [0.0, 2.0, 4.0, 6.0, 8.0], [9.5, 10.5, 11.5, 12.5, 13.5])
     fig = draw(s, "test")
-    assert len(fig.axes) == 8  # the five plots, the current's twin axis, the path and its colour bar
-    path_ax = fig.axes[5]
+    assert len(fig.axes) == 10  # the timeline, 5 plots, radios, the twin axis, the path and its colour bar
+    path_ax = fig.axes[7]
     assert path_ax.get_xlabel() == "x, east [m]" and "drive's power" in path_ax.get_title()
     assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last
+
+
+def _event(t: float, kind: str, key: str, message: str, wall: int, params=None):
+    ev = Event(t_s=t, severity="info", source="x", kind=kind, key=f"lunaris/{R}/{key}", message=message,
+               params=params, source_id="s", seq=int(t * 10) + len(message))
+    return (f"lunaris/{R}/event", encode(ev), False, wall)
+
+
+def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: Path):
+    wall = 1_700_000_000_000_000_000
+    samples = [_event(2.0, "fault_injected", "fault/battery/heating", "replayed", wall)]  # before
+    for i in range(10):  # t 10..19, then a reset: t 0..9 of the next epoch goes on at 10 s
+        epoch, t = (0, 10.0 + i) if i < 5 else (1, float(i - 5))
+        cause = "reset" if epoch else ""
+        samples += [(f"lunaris/{R}/clock", encode(Clock(t, 0.1, i, 1.0, False, epoch, cause)), False,
+                     wall + 10 * i),
+                    (f"lunaris/{R}/battery/state", encode(BatteryState(
+                        t, 5e5, 5.3e5, 0.9, 16.6, 16.5, 2.0, 33.0, 20.0, True, 0, [], 3600.0)), False,
+                     wall + 10 * i + 1),
+                    (f"lunaris/{R}/radio/lander/link", encode(RadioLink(t, i % 3 != 0, 1.0, 0.0)), False,
+                     wall + 10 * i + 2)]
+    samples += [_event(11.0, "command", "cmd/rail/12V", "rail 12V: on=false; the rail is now off", wall + 15),
+                _event(12.0, "input", "input/sun_angle", "sun angle 75 deg", wall + 25),
+                _event(13.0, "scenario", "control/scenario", "scenario 'd': step 1/2 dust", wall + 35,
+                       {"what": "step"}),
+                _event(0.0, "session", "control/reset", "session reset", wall + 51)]
+    path = tmp_path / "s.mcap"
+    buf = io.BytesIO()
+    rec = Recorder(buf, "test")
+    for sample in sorted(samples, key=lambda x: x[3]):
+        assert rec.write(*sample)
+    rec.finish()
+    path.write_bytes(buf.getvalue())
+    s = load_session(path)[R]
+    assert s.span_s == (0.0, 8.0)  # the reset goes on from where the recording was
+    assert [(e["kind"], e["at_s"]) for e in s.events] == [
+        ("fault_injected", None), ("command", 1.0), ("input", 2.0), ("scenario", 3.0), ("session", 4.0)]
+    assert "from" in add_thresholds(s, None)
+    assert (60.0, "alarm 60 C") in s.thresholds["temperature"]
+    assert (15.0, "5V_CH2 shed") in s.thresholds["soc"]
+    fig = draw(s, "test")
+    assert "1 event(s) from before the recording" in fig._suptitle.get_text()
+    timeline = fig.axes[0]
+    texts = [t.get_text() for t in timeline.texts]
+    assert "rail 12V: on=false; the rail is now off" in texts and "step 1/2 dust" in texts
+    assert "replayed" not in " ".join(texts)
+
+
+def test_labels_never_overlap_and_the_rest_are_counted():
+    marks = [(float(t), "label-" + "x" * 10) for t in range(100)]
+    placed, dropped = place_labels(marks, 100.0, 100, 3)
+    assert dropped == 100 - len(placed) > 0
+    for row in range(3):
+        ts = sorted(t for t, _, r in placed if r == row)
+        assert all(b - a >= 18 for a, b in zip(ts, ts[1:], strict=False))  # 16 chars + 2 apart

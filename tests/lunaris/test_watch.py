@@ -247,3 +247,29 @@ def test_watch_shows_the_rover_live_through_a_fault_and_a_router_restart(tmp_pat
         if term is not None:
             term.close()
         router.close()
+
+
+def test_an_80x24_terminal_gets_a_compact_view_that_fits():
+    conn = Connection("tcp/127.0.0.1:7447", state="connected")
+    for rover in (R, None):
+        console = Console(width=80, height=24, record=True, force_terminal=True, color_system="standard")
+        console.print(render(_snapshot(), conn, rover, 8, width=80, height=24))
+        lines = console.export_text().rstrip("\n").split("\n")
+        assert len(lines) <= 24, "\n".join(lines)
+        assert max(len(line) for line in lines) <= 80
+        text = "\n".join(lines)
+        assert "battery" in text or "fleet" in text
+        if rover:
+            assert "5V_CH2" in text and "tripped" in text and "over_temperature" in text
+
+
+def test_piped_once_is_as_wide_as_the_reader_s_terminal_or_160(monkeypatch):
+    import lunaris.watch as watch
+
+    class Pipe:
+        def isatty(self) -> bool:
+            return False
+
+    monkeypatch.setattr(watch.sys, "stderr", Pipe())
+    monkeypatch.setattr(watch.sys, "stdin", Pipe())
+    assert watch._piped_width() == watch.PIPED_WIDTH == 160

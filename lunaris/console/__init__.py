@@ -1,0 +1,147 @@
+"""``lunaris console``: the instructor console in a web browser (SPEC §8a).
+
+    lunaris console                                   # http://127.0.0.1:8080/, you are the instructor
+    lunaris console --accounts users.json --http 0.0.0.0:8080
+    lunaris console users add ana --role instructor --accounts users.json
+
+Without an accounts file it listens on loopback only and whoever opens the page is the
+instructor (it says so when it starts). With one, every page and API call needs a sign-in,
+observers may watch but not change anything, and it may listen on any address. The modules:
+:mod:`~lunaris.console.server` (the web server and the sign-in gate),
+:mod:`~lunaris.console.live` (the twin's values, pushed to the pages),
+:mod:`~lunaris.console.api` (writes and queries), :mod:`~lunaris.console.auth` (accounts),
+:mod:`~lunaris.console.extras` (scenarios, recordings, reports), ``static/`` (the page).
+"""
+
+from __future__ import annotations
+
+import argparse
+import getpass
+import os
+import sys
+from pathlib import Path
+
+from common.connection import add_connection_args
+from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
+from lunaris.tooling import ToolError, describe_endpoint, open_session
+
+__all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http"]
+
+DEFAULT_HTTP = "127.0.0.1:8080"
+ACCOUNTS_ENV = "LUNARIS_CONSOLE_ACCOUNTS"
+REPO = Path(__file__).resolve().parent.parent.parent
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--http", default=DEFAULT_HTTP, metavar="HOST:PORT",
+                   help=f"where the console listens (default {DEFAULT_HTTP})")
+    p.add_argument("--accounts", metavar="FILE", default=os.environ.get(ACCOUNTS_ENV),
+                   help=f"the users who may sign in (default ${ACCOUNTS_ENV}; none: loopback only, "
+                        "the local user is the instructor)")
+    p.add_argument("--scenarios", metavar="DIR", default=str(REPO / "config" / "scenarios"),
+                   help="the scenarios offered (default config/scenarios)")
+    p.add_argument("--recordings", metavar="DIR", default="recordings",
+                   help="where recordings are made and listed (default ./recordings)")
+    p.add_argument("--tls-cert", metavar="FILE", help="serve HTTPS with this certificate (PEM)")
+    p.add_argument("--tls-key", metavar="FILE", help="... and this private key (PEM)")
+    p.add_argument("--wait", type=float, default=None, metavar="S",
+                   help="how long to wait for the Zenoh router (default: for ever)")
+    add_connection_args(p)
+    sub = p.add_subparsers(dest="action", metavar="ACTION")
+    users = sub.add_parser("users", help="add, remove and list the console's users")
+    verbs = users.add_subparsers(dest="verb", required=True, metavar="VERB")
+    add = verbs.add_parser("add", help="add a user (asks for the password)")
+    add.add_argument("name")
+    add.add_argument("--role", choices=ROLES, required=True)
+    add.add_argument("--password-stdin", action="store_true", help="read the password from standard input")
+    add.add_argument("--replace", action="store_true", help="change an existing user's role or password")
+    rm = verbs.add_parser("remove", help="remove a user: their sign-ins end at once")
+    rm.add_argument("name")
+    ls = verbs.add_parser("list", help="list the users and their roles")
+    for q in (add, rm, ls):
+        q.add_argument("--accounts", metavar="FILE", default=argparse.SUPPRESS)
+
+
+def parse_http(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ToolError(f"--http {text!r}: give HOST:PORT, e.g. {DEFAULT_HTTP}")
+    return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        if args.action == "users":
+            return _users(args)
+        return _serve(args)
+    except (ToolError, AccountsError) as exc:
+        print(f"lunaris console: {exc}", file=sys.stderr)
+        return getattr(exc, "code", 2)
+
+
+def _users(args: argparse.Namespace) -> int:
+    if not args.accounts:
+        raise ToolError(f"give --accounts FILE (or set ${ACCOUNTS_ENV})")
+    if args.verb == "list":
+        for name, role in Accounts(args.accounts).users().items():
+            print(f"{name:<24} {role}")
+        return 0
+    if args.verb == "remove":
+        Accounts.remove(args.accounts, args.name)
+        print(f"removed {args.name} from {args.accounts}")
+        return 0
+    if args.password_stdin:
+        password = sys.stdin.readline().rstrip("\n")
+    else:
+        password = getpass.getpass(f"password for {args.name}: ")
+        if getpass.getpass("again: ") != password:
+            raise ToolError("the two passwords differ", 1)
+    Accounts.add(args.accounts, args.name, args.role, password, replace=args.replace)
+    print(f"{args.name} may sign in to the console as {args.role} ({args.accounts})")
+    return 0
+
+
+def _serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from lunaris.console.server import make_app
+
+    host, port = parse_http(args.http)
+    accounts = Accounts(args.accounts) if args.accounts else None
+    if accounts is None and not is_loopback(host):
+        raise ToolError(f"without an accounts file the console listens on this computer only "
+                        f"(loopback), not on {host}: add users with `lunaris console users add NAME "
+                        f"--role instructor --accounts FILE`, then give --accounts FILE")
+    if bool(args.tls_cert) != bool(args.tls_key):
+        raise ToolError("give both --tls-cert and --tls-key")
+    session = open_session(args, wait_s=args.wait, on_waiting=lambda: print(
+        f"waiting for the Zenoh router at {describe_endpoint(args)} ...", flush=True))
+    connection = [a for ep in args.connect or [] for a in ("--connect", ep)]
+    if args.config:
+        connection += ["--config", args.config]
+    app = make_app(session, accounts, tls=bool(args.tls_cert), scenarios_dir=Path(args.scenarios),
+                   recordings_dir=Path(args.recordings), connection=connection)
+    scheme = "https" if args.tls_cert else "http"
+    shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+    print(f"Lunaris console: {scheme}://{shown}:{port}/  (twin at {describe_endpoint(args)})", flush=True)
+    if accounts is None:
+        print("  no accounts file: listening on this computer only, and you, the local user, "
+              "are the instructor", flush=True)
+    else:
+        users = accounts.users()
+        n = sum(1 for r in users.values() if r == "instructor")
+        print(f"  sign-in required: {len(users)} user(s) in {args.accounts}, {n} instructor(s)"
+              + ("" if users else f" - add one with lunaris console users add NAME --role "
+                                  f"instructor --accounts {args.accounts}"), flush=True)
+        if not args.tls_cert and not is_loopback(host):
+            print("  warning: passwords cross the network in clear text: give --tls-cert and "
+                  "--tls-key, or put the console behind an HTTPS proxy", flush=True)
+    config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False,
+                            timeout_graceful_shutdown=1, ssl_certfile=args.tls_cert,
+                            ssl_keyfile=args.tls_key, lifespan="on")
+    try:
+        uvicorn.Server(config).run()
+    finally:
+        session.close()
+    print("Lunaris console: stopped", flush=True)
+    return 0

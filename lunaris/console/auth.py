@@ -1,0 +1,190 @@
+"""Who may use the console, and what they may do.
+
+Without an accounts file the console serves loopback only and the local user is the
+instructor: whoever can open the page on this computer can already run ``lunaris`` here.
+With an accounts file every page and API call needs a signed-in user, and the console may
+listen on other addresses. A user is an ``instructor`` (may change the twin) or an
+``observer`` (sees everything, changes nothing: every change it attempts is refused by the
+server with HTTP 403, whatever the page shows).
+
+The accounts file is JSON, made and changed with ``lunaris console users add|remove|list``::
+
+    {"users": {"ana": {"role": "instructor", "password_hash": "$argon2id$v=19$..."}}}
+
+Passwords are kept only as Argon2id hashes (``argon2-cffi``). The file is read again when it
+changes, so a user added, removed or given another role counts at once, without a restart;
+a removed user's sign-ins end with it. Sign-ins are random tokens held by the server (an
+HTTP-only, same-site cookie), for ``SESSION_S`` at most.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import os
+import secrets
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from argon2 import PasswordHasher
+from argon2.exceptions import InvalidHashError, VerificationError
+
+__all__ = ["COOKIE", "ROLES", "Accounts", "AccountsError", "SignIns", "User", "is_loopback", "LOCAL"]
+
+ROLES = ("instructor", "observer")
+Role = Literal["instructor", "observer"]
+COOKIE = "lunaris_console"
+SESSION_S = 12 * 3600.0
+MIN_PASSWORD = 8
+_hasher = PasswordHasher()
+_DUMMY = _hasher.hash("not a password of anyone")  # verified against for unknown users
+
+
+class AccountsError(ValueError):
+    """An accounts file that cannot be used, or a change that cannot be made."""
+
+
+@dataclass(frozen=True)
+class User:
+    name: str
+    role: Role
+    local: bool = False  # the loopback user of a console without accounts
+
+    @property
+    def may_act(self) -> bool:
+        return self.role == "instructor"
+
+
+LOCAL = User("local user", "instructor", local=True)
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+class Accounts:
+    """The accounts file, read again whenever it changes on disk."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._stamp: tuple[int, int] | None = None
+        self._users: dict[str, dict] = {}
+        self.reload()
+
+    def reload(self) -> None:
+        try:
+            st = self.path.stat()
+        except FileNotFoundError:
+            raise AccountsError(f"{self.path}: no such accounts file (make one with "
+                                f"lunaris console users add NAME --accounts {self.path})") from None
+        stamp = (st.st_mtime_ns, st.st_size)
+        if stamp == self._stamp:
+            return
+        self._users = _read(self.path)
+        self._stamp = stamp
+
+    def users(self) -> dict[str, Role]:
+        self.reload()
+        return {name: u["role"] for name, u in sorted(self._users.items())}
+
+    def user(self, name: str) -> User | None:
+        """The user as the file says now (None: no longer there)."""
+        self.reload()
+        u = self._users.get(name)
+        return None if u is None else User(name, u["role"])
+
+    def check(self, name: str, password: str) -> User | None:
+        """The user if the password is theirs; the same work is done for an unknown name."""
+        self.reload()
+        u = self._users.get(name)
+        try:
+            _hasher.verify(u["password_hash"] if u else _DUMMY, password)
+        except (VerificationError, InvalidHashError):
+            return None
+        return None if u is None else User(name, u["role"])
+
+    # -- changes (the users command) -----------------------------------------------------------
+
+    @staticmethod
+    def add(path: str | os.PathLike, name: str, role: str, password: str, replace: bool = False) -> None:
+        path = Path(path)
+        if role not in ROLES:
+            raise AccountsError(f"role must be {' or '.join(ROLES)}, got {role!r}")
+        if not name or len(name) > 64 or not all(c.isalnum() or c in "._-@" for c in name):
+            raise AccountsError(f"bad user name {name!r}: letters, digits, '.', '_', '-', '@'")
+        if len(password) < MIN_PASSWORD:
+            raise AccountsError(f"the password must have at least {MIN_PASSWORD} characters")
+        users = _read(path) if path.exists() else {}
+        if name in users and not replace:
+            raise AccountsError(f"user {name!r} exists (give --replace to change the role or password)")
+        users[name] = {"role": role, "password_hash": _hasher.hash(password)}
+        _write(path, users)
+
+    @staticmethod
+    def remove(path: str | os.PathLike, name: str) -> None:
+        users = _read(Path(path))
+        if name not in users:
+            raise AccountsError(f"no user {name!r} in {path}")
+        del users[name]
+        _write(Path(path), users)
+
+
+def _read(path: Path) -> dict[str, dict]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise AccountsError(f"{path}: not a readable accounts file: {exc}") from None
+    users = data.get("users") if isinstance(data, dict) else None
+    if not isinstance(users, dict):
+        raise AccountsError(f'{path}: expected {{"users": {{NAME: {{"role": ..., "password_hash": ...}}}}}}')
+    for name, u in users.items():
+        if (not isinstance(u, dict) or u.get("role") not in ROLES
+                or not isinstance(u.get("password_hash"), str)):
+            raise AccountsError(f"{path}: user {name!r} needs a role ({' or '.join(ROLES)}) and a "
+                                "password_hash")
+    return users
+
+
+def _write(path: Path, users: dict[str, dict]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as f:
+        json.dump({"users": users}, f, indent=2)
+        f.write("\n")
+    os.replace(tmp, path)
+
+
+class SignIns:
+    """Random tokens of the signed-in users, held by the server."""
+
+    def __init__(self, accounts: Accounts):
+        self.accounts = accounts
+        self._tokens: dict[str, tuple[str, float]] = {}  # token -> (user name, expiry)
+
+    def open(self, user: User) -> str:
+        token = secrets.token_urlsafe(32)
+        self._tokens[token] = (user.name, time.time() + SESSION_S)
+        return token
+
+    def close(self, token: str | None) -> None:
+        if token:
+            self._tokens.pop(token, None)
+
+    def user(self, token: str | None) -> User | None:
+        """The user of a token, as the accounts file says now; None if it is not valid."""
+        got = self._tokens.get(token or "")
+        if got is None:
+            return None
+        name, expiry = got
+        user = self.accounts.user(name) if time.time() < expiry else None
+        if user is None:
+            self._tokens.pop(token or "", None)
+        return user

@@ -1,0 +1,254 @@
+"""The console's longer jobs: scenarios played, sessions recorded, debrief reports drawn.
+
+Each runs as its own ``lunaris`` process, as an instructor would run it in a terminal, with
+the console's own connection settings: ``lunaris scenario run`` (its progress lines and its
+step table, rewritten as it plays, are shown on the page; Stop is Ctrl-C, so the scenario
+ends as it always does: the clock put back, a summary), ``lunaris record`` (Stop is Ctrl-C:
+the file is complete) and ``lunaris report`` (an HTML debrief, drawn once per recording and
+kept beside it). One scenario and one recording at a time: a second start is refused, with
+the reason, rather than doubled.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import zenoh
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Route
+
+from common.scenario import ScenarioError, describe_start, load_scenario
+from lunaris.console.auth import User
+
+__all__ = ["Extras", "routes"]
+
+NAME = re.compile(r"^[A-Za-z0-9_.-]{1,80}$")
+LINES = 400
+
+
+class _Job:
+    """A ``lunaris`` process and what it printed."""
+
+    def __init__(self, args: list[str], what: str):
+        self.what = what
+        self.started = time.time()
+        self.lines: deque[str] = deque(maxlen=LINES)
+        self.proc = subprocess.Popen([sys.executable, "-m", "lunaris.cli", *args], stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
+                                     bufsize=1)
+        self._reader = asyncio.get_running_loop().run_in_executor(None, self._read)
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip("\n"))
+        self.proc.wait()
+
+    @property
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> None:
+        if self.running:
+            self.proc.send_signal(signal.SIGINT)
+
+    def kill(self) -> None:
+        if self.running:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+
+
+class Extras:
+    def __init__(self, session: zenoh.Session, scenarios_dir: Path | None, recordings_dir: Path | None,
+                 connection: list[str]):
+        self.session = session
+        self.scenarios_dir = scenarios_dir
+        self.recordings_dir = recordings_dir
+        self.connection = connection
+        self.scenario: _Job | None = None
+        self.scenario_file: str | None = None
+        self.status_file = Path(tempfile.mkdtemp(prefix="lunaris-console-")) / "scenario.json"
+        self.recording: _Job | None = None
+        self.recording_file: Path | None = None
+
+    def close(self) -> None:
+        for job in (self.scenario, self.recording):
+            if job is not None:
+                job.kill()
+
+    # -- scenarios ----------------------------------------------------------------------------
+
+    def scenarios(self) -> list[dict[str, Any]]:
+        if self.scenarios_dir is None or not self.scenarios_dir.is_dir():
+            return []
+        out: list[dict[str, Any]] = []
+        for path in sorted(self.scenarios_dir.glob("*.yaml")):
+            try:
+                sc = load_scenario(path)
+            except ScenarioError as exc:
+                out.append({"file": path.name, "problems": exc.problems})
+                continue
+            out.append({"file": path.name, "name": sc.scenario.name, "description": sc.scenario.description,
+                        "rover": sc.rover, "steps": len(sc.steps), "time_scale": sc.time_scale,
+                        "duration_s": sc.duration_s, "start": describe_start(sc.start)})
+        return out
+
+    def play(self, file: str) -> str | None:
+        """Start a scenario; the reason it cannot start, or None."""
+        if self.scenario is not None and self.scenario.running:
+            return f"a scenario is already playing ({self.scenario_file}): stop it first"
+        if self.scenarios_dir is None or not NAME.match(file) or not (self.scenarios_dir / file).is_file():
+            return f"no scenario {file!r}"
+        self.status_file.unlink(missing_ok=True)
+        self.scenario = _Job(["scenario", "run", str(self.scenarios_dir / file), "--status-json",
+                              str(self.status_file), *self.connection], "scenario")
+        self.scenario_file = file
+        return None
+
+    def scenario_status(self) -> dict[str, Any]:
+        job = self.scenario
+        if job is None:
+            return {"file": None}
+        try:
+            status = json.loads(self.status_file.read_text())
+        except (OSError, ValueError):
+            status = None
+        return {"file": self.scenario_file, "running": job.running, "exit": job.proc.poll(),
+                "lines": list(job.lines), "status": status, "started": job.started}
+
+    # -- recordings ---------------------------------------------------------------------------
+
+    def recordings(self) -> list[dict[str, Any]]:
+        folder = self.recordings_dir
+        if folder is None or not folder.is_dir():
+            return []
+        out = []
+        for path in sorted(folder.glob("*.mcap"), key=lambda p: p.stat().st_mtime, reverse=True):
+            st = path.stat()
+            out.append({"name": path.name, "bytes": st.st_size, "modified": st.st_mtime,
+                        "report": path.with_suffix(".html").is_file()})
+        return out
+
+    def record(self, name: str) -> str | None:
+        if self.recording is not None and self.recording.running:
+            return f"already recording to {self.recording_file}: stop it first"
+        if self.recordings_dir is None:
+            return "this console has no folder for recordings (lunaris console --recordings DIR)"
+        stem = name.removesuffix(".mcap")
+        if not NAME.match(stem):
+            return f"bad name {name!r}: letters, digits, '.', '_' and '-'"
+        path = self.recordings_dir / f"{stem}.mcap"
+        if path.exists():
+            return f"{path.name} exists: choose another name"
+        self.recordings_dir.mkdir(parents=True, exist_ok=True)
+        self.recording = _Job(["record", str(path), *self.connection], "record")
+        self.recording_file = path
+        return None
+
+    def recording_status(self) -> dict[str, Any]:
+        job = self.recording
+        if job is None:
+            return {"file": None}
+        return {"file": self.recording_file.name if self.recording_file else None,
+                "running": job.running, "started": job.started, "lines": list(job.lines)[-3:]}
+
+    async def report(self, name: str) -> tuple[Path | None, str]:
+        if self.recordings_dir is None or not NAME.match(name.removesuffix(".mcap")):
+            return None, f"no recording {name!r}"
+        path = self.recordings_dir / name
+        if not path.is_file():
+            return None, f"no recording {name!r}"
+        if self.recording is not None and self.recording.running and self.recording_file == path:
+            return None, "this recording is still going on: stop it first"
+        out = path.with_suffix(".html")
+        if not out.is_file() or out.stat().st_mtime < path.stat().st_mtime:
+            done = await asyncio.to_thread(subprocess.run, [sys.executable, "-m", "lunaris.cli", "report",
+                                                            str(path), "-o", str(out)],
+                                           capture_output=True, text=True, timeout=300)
+            if done.returncode != 0:
+                return None, (done.stderr or done.stdout).strip()
+        return out, ""
+
+
+def _forbidden(user: User) -> JSONResponse:
+    return JSONResponse({"verdict": "forbidden", "message": f"{user.name} is an observer: observers "
+                         "see everything and change nothing"}, status_code=403)
+
+
+async def _body(request: Request) -> dict[str, Any]:
+    try:
+        data = json.loads(await request.body() or b"{}")
+    except ValueError:
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+async def _scenarios(request: Request) -> Response:
+    ex: Extras = request.app.state.extras
+    if request.method == "GET":
+        return JSONResponse({"scenarios": await asyncio.to_thread(ex.scenarios),
+                             "playing": ex.scenario_status()})
+    user: User = request.scope["state"]["user"]
+    if not user.may_act:
+        return _forbidden(user)
+    body = await _body(request)
+    if body.get("action") == "stop":
+        if ex.scenario is None or not ex.scenario.running:
+            return JSONResponse({"verdict": "rejected", "message": "no scenario is playing"}, status_code=409)
+        ex.scenario.stop()
+        return JSONResponse({"verdict": "accepted", "message": "stopping the scenario"})
+    why = ex.play(str(body.get("file", "")))
+    if why:
+        return JSONResponse({"verdict": "rejected", "message": why}, status_code=409)
+    return JSONResponse({"verdict": "accepted", "message": f"playing {body.get('file')}"})
+
+
+async def _recordings(request: Request) -> Response:
+    ex: Extras = request.app.state.extras
+    if request.method == "GET":
+        return JSONResponse({"recordings": await asyncio.to_thread(ex.recordings),
+                             "recording": ex.recording_status(),
+                             "folder": str(ex.recordings_dir) if ex.recordings_dir else None})
+    user: User = request.scope["state"]["user"]
+    if not user.may_act:
+        return _forbidden(user)
+    body = await _body(request)
+    if body.get("action") == "stop":
+        if ex.recording is None or not ex.recording.running:
+            return JSONResponse({"verdict": "rejected", "message": "nothing is being recorded"},
+                                status_code=409)
+        ex.recording.stop()
+        return JSONResponse({"verdict": "accepted", "message": "recording stopped"})
+    why = ex.record(str(body.get("name", "")))
+    if why:
+        return JSONResponse({"verdict": "rejected", "message": why}, status_code=409)
+    return JSONResponse({"verdict": "accepted", "message": f"recording to {ex.recording_file}"})
+
+
+async def _report(request: Request) -> Response:
+    out, why = await request.app.state.extras.report(request.path_params["name"])
+    if out is None:
+        return JSONResponse({"message": why}, status_code=404)
+    return FileResponse(out, media_type="text/html")
+
+
+def routes() -> list[Route]:
+    return [
+        Route("/api/scenarios", _scenarios, methods=["GET", "POST"]),
+        Route("/api/recordings", _recordings, methods=["GET", "POST"]),
+        Route("/recordings/{name}/report", _report),
+    ]

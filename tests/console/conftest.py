@@ -1,0 +1,171 @@
+"""A twin, the console serving it, and a headless Chromium: what the console's tests share.
+
+The console runs as ``lunaris console`` in its own process, as an instructor runs it; the
+browser is Debian's Chromium driven by Selenium (``make test`` installs both as root, see the
+Makefile's ``system-deps``). Screenshots of each view are saved under the session's artefact
+folder (printed at the end), and into ``docs/images`` with ``LUNARIS_DOC_IMAGES=1``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import urllib.request
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from common import keys
+from tests.console.browser import available, open_browser, size_viewport
+from tests.harness import (
+    ALL_SERVICES,
+    ROOT,
+    Probe,
+    Twin,
+    env_without_zenoh_config,
+    free_endpoint,
+    lunaris_cmd,
+    open_router,
+    static_rover,
+    stop_process,
+    wait_for,
+)
+
+R = "mapp-1"
+MAPP = static_rover("mapp.yaml")
+DOC_IMAGES = ROOT / "docs" / "images"
+
+if not available():
+    pytest.skip("Debian's chromium and chromium-driver are not installed (make system-deps as root)",
+                allow_module_level=True)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Console:
+    url: str
+    proc: subprocess.Popen
+    log: Path
+
+    def get(self, path: str) -> tuple[int, dict]:
+        try:
+            with urllib.request.urlopen(self.url + path, timeout=5) as r:
+                return r.status, json.loads(r.read())
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read() or b"{}")
+
+
+def start_console(endpoint: str, folder: Path, *extra: str) -> Console:
+    """``lunaris console`` on a free loopback port; returns once it shows the rover live."""
+    port = free_port()
+    folder.mkdir(parents=True, exist_ok=True)
+    log = folder / f"console-{port}.log"
+    with open(log, "ab") as out:
+        proc = subprocess.Popen(lunaris_cmd("console", "--http", f"127.0.0.1:{port}", "--connect", endpoint,
+                                            "--recordings", str(folder / "recordings"), *extra),
+                                stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=ROOT,
+                                env=env_without_zenoh_config())
+    c = Console(f"http://127.0.0.1:{port}", proc, log)
+
+    def up() -> bool:
+        assert proc.poll() is None, log.read_text()
+        try:
+            urllib.request.urlopen(c.url + "/favicon.ico", timeout=1)
+            return True
+        except OSError:
+            return False
+    wait_for(up, 30, "the console to answer", poll_s=0.2)
+    return c
+
+
+@dataclass
+class Live:
+    endpoint: str
+    twin: Twin
+    probe: Probe
+    console: Console
+    folder: Path
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory) -> Iterator[Live]:
+    endpoint = free_endpoint()
+    router = open_router(endpoint)
+    folder = tmp_path_factory.mktemp("console")
+    scenarios = folder / "scenarios"
+    scenarios.mkdir()
+    (scenarios / "short-drill.yaml").write_text(SCENARIO)
+    try:
+        with Twin(endpoint, [MAPP], folder / "state") as twin, Probe(endpoint) as p:
+            p.watch(f"{keys.ROOT}/{R}/**")
+            p.wait_services(R, ALL_SERVICES)
+            p.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
+            console = start_console(endpoint, folder, "--scenarios", str(scenarios))
+            try:
+                yield Live(endpoint, twin, p, console, folder)
+            finally:
+                stop_process(console.proc, 10)
+                print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
+    finally:
+        router.close()
+
+
+SCENARIO = """\
+scenario: {name: Short drill, description: dust on the left panel for a moment}
+rover: mapp-1
+start: reset
+time_scale: 5
+steps:
+  - name: dust settles
+    at_s: 2
+    inject: {component: solar/left, kind: dust, value: 0.25}
+  - name: dust blown off
+    after_s: 3
+    clear: {component: solar/left, kind: dust}
+"""
+
+
+@pytest.fixture(scope="session")
+def artefacts(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("screenshots")
+    yield folder
+    print(f"\nconsole screenshots: {folder}")
+
+
+@pytest.fixture(scope="module")
+def browser(live) -> Iterator:
+    driver = open_browser(1280, 800)
+    driver.set_page_load_timeout(30)
+    try:
+        yield driver
+    finally:
+        driver.quit()
+
+
+def settle(driver) -> None:
+    """Two animation frames: the page has laid itself out again (after a resize, a click)."""
+    driver.set_script_timeout(10)
+    driver.execute_async_script(
+        "const done = arguments[0]; requestAnimationFrame(() => requestAnimationFrame(() => done()));")
+
+
+def shoot(driver, artefacts: Path, name: str, width: int = 1280, height: int = 800) -> Path:
+    """A screenshot of what the page shows at this size, kept as a test artefact."""
+    size_viewport(driver, width, height)
+    settle(driver)
+    path = artefacts / f"{name}.png"
+    driver.save_screenshot(str(path))
+    if os.environ.get("LUNARIS_DOC_IMAGES"):
+        DOC_IMAGES.mkdir(parents=True, exist_ok=True)
+        driver.save_screenshot(str(DOC_IMAGES / f"console-{name}.png"))
+    size_viewport(driver, 1280, 800)
+    return path

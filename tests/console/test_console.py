@@ -1,0 +1,433 @@
+"""The instructor console in a real browser, against a running twin (issue 11).
+
+Every test drives headless Chromium through the page as an instructor would (clicks, forms,
+the confirmation dialogs) and checks the effect twice: on the page, and on the twin's Zenoh
+keys through the probe.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import urllib.request
+
+import pytest
+from selenium.common.exceptions import StaleElementReferenceException
+from selenium.webdriver.common.by import By
+from selenium.webdriver.support import expected_conditions as ec
+from selenium.webdriver.support.select import Select
+from selenium.webdriver.support.ui import WebDriverWait as _Wait
+
+from common import keys
+from common.config import load_rover
+from tests.console.browser import open_browser
+from tests.console.conftest import MAPP, R, shoot
+from tests.harness import ROOT, lunaris_cmd, stop_process, wait_for
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def WebDriverWait(driver, timeout_s: float) -> _Wait:  # noqa: N802 - selenium's own name
+    """Selenium's wait, through the page re-drawing an element while it is looked at."""
+    return _Wait(driver, timeout_s, poll_frequency=0.05,
+                 ignored_exceptions=(StaleElementReferenceException,))
+
+
+def field(driver, tail: str, name: str):
+    return driver.find_element(By.CSS_SELECTOR, f'#main [data-key="{tail}"][data-field="{name}"]')
+
+
+def wait_text(driver, tail: str, name: str, pattern: str, timeout_s: float = 10.0) -> str:
+    """The text of a value on the page once it matches ``pattern``."""
+    def check(d):
+        text = field(d, tail, name).text
+        return text if re.search(pattern, text) else False
+    return WebDriverWait(driver, timeout_s).until(check, f"{tail} {name} to match {pattern!r}")
+
+
+def view(driver, name: str) -> None:
+    driver.find_element(By.CSS_SELECTOR, f'#views [data-view="{name}"]').click()
+    WebDriverWait(driver, 10).until(lambda d: d.find_element(
+        By.CSS_SELECTOR, f'#views [data-view="{name}"]').get_attribute("class") == "on")
+
+
+def click(driver, selector: str) -> None:
+    WebDriverWait(driver, 10).until(ec.element_to_be_clickable((By.CSS_SELECTOR, selector))).click()
+
+
+def last_answer(driver, verdict: str, timeout_s: float = 10.0) -> str:
+    """The text of the newest answer on the page once it has this verdict."""
+    def check(d):
+        got = d.find_elements(By.CSS_SELECTOR, f'#answers .answer[data-verdict="{verdict}"]')
+        return got[0].text if got else False
+    text = WebDriverWait(driver, timeout_s).until(check, f"an answer {verdict!r}")
+    driver.execute_script("document.querySelector('#answers').innerHTML = ''")
+    return text
+
+
+def accept_dialog(driver) -> None:
+    WebDriverWait(driver, 10).until(ec.alert_is_present()).accept()
+
+
+@pytest.fixture(scope="module")
+def page(live, browser):
+    browser.get(live.console.url + "/")
+    wait_text(browser, "battery/state", "soc", r"\d+\.\d %")
+    return browser
+
+
+def test_the_page_shows_the_twin_live(live, page, artefacts):
+    p = live.probe
+    before = field(page, "clock", "t_s").text if page.find_elements(
+        By.CSS_SELECTOR, '#main [data-key="clock"]') else None
+    first = page.find_element(By.CSS_SELECTOR, '#clock [data-key="clock"][data-field="t_s"]').text
+    WebDriverWait(page, 10).until(lambda d: d.find_element(
+        By.CSS_SELECTOR, '#clock [data-key="clock"][data-field="t_s"]').text != first, "sim time to move")
+    assert before is None
+    rails = {e.get_attribute("data-rail") for e in page.find_elements(
+        By.CSS_SELECTOR, f'[data-action="rail-off"][data-rover="{R}"]')}
+    assert {"12V", "5V_CH2", "3V3_CH2"} <= rails
+    volts = p.wait_value(keys.rail_state(R, "12V"))["voltage_v"]
+    assert wait_text(page, "rail/12V/state", "voltage_v", r"\d") == f"{volts:.2f}"
+    assert field(page, "radio/lander/link", "in_range").text in ("IN RANGE", "OUT OF RANGE")
+    WebDriverWait(page, 15).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#charts .uplot"))
+    shoot(page, artefacts, "live")
+    shoot(page, artefacts, "live-tablet", 768, 1024)
+
+
+def _fault_form(page, component: str, kind: str, value: str | None) -> None:
+    view(page, "faults")
+    Select(page.find_element(By.ID, "f-comp")).select_by_value(component)
+    Select(page.find_element(By.ID, "f-kind")).select_by_value(kind)
+    if value is not None:
+        box = page.find_element(By.CSS_SELECTOR, "#f-params input[data-param]")
+        box.clear()
+        box.send_keys(value)
+
+
+def test_inject_and_clear_a_fault_from_the_page(live, page, artefacts):
+    p = live.probe
+    _fault_form(page, "battery", "heating", "400")
+    click(page, f'#f-buttons [data-action="fault-inject"][data-rover="{R}"][data-component="battery"]'
+                '[data-kind="heating"]')
+    assert "injected battery/heating" in last_answer(page, "accepted")
+    p.wait_value(keys.battery_state(R), lambda b: "heating" in b["faults"])  # on the twin's keys
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(
+        By.CSS_SELECTOR, '#faults-list tr[data-fault="battery/heating"]'))  # on the page
+    shoot(page, artefacts, "faults")
+    view(page, "live")
+    wait_text(page, "battery/state", "faults", "heating")
+    click(page, '#faults-list [data-action="fault-clear"][data-component="battery"][data-kind="heating"]')
+    assert "cleared battery/heating" in last_answer(page, "accepted")
+    p.wait_value(keys.battery_state(R), lambda b: "heating" not in b["faults"])
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#faults-list .none"))
+    wait_text(page, "battery/state", "faults", "none")
+
+
+def test_bad_input_is_refused_in_words_and_nothing_is_sent(live, page):
+    p = live.probe
+    key = keys.fault(R, "solar/left", "dust")
+    seen = len(p.samples(keys.event(R)))
+    _fault_form(page, "solar/left", "dust", "1.5")
+    click(page, '#f-buttons [data-action="fault-inject"]')
+    assert "fraction must be at most 1.0" in last_answer(page, "invalid")
+    # The twin's own rejection, in its words: clearing a fault that is not active.
+    _fault_form(page, "umbilical", "disconnect", None)
+    click(page, '#f-buttons [data-action="fault-clear"]')
+    assert "no active fault umbilical/disconnect to clear" in last_answer(page, "rejected")
+    assert not [e for e in p.samples(keys.event(R))[seen:] if e["key"] == key]  # 1.5 never sent
+    assert p.value(keys.solar_power(R, "left"))["dust"] == 0.0
+
+
+def test_rails_off_on_and_reset_from_the_page(live, page):
+    p = live.probe
+    view(page, "live")
+    click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH2"]')
+    assert "the rail is now off" in last_answer(page, "accepted")
+    p.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "off")
+    wait_text(page, "rail/3V3_CH2/state", "state", "^off$")
+    click(page, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH2"]')
+    last_answer(page, "accepted")
+    p.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "on")
+    # A trip, seen on the page, reset from the page once the short is gone.
+    p.put(keys.fault(R, "load/nav_camera", "short"), b"")
+    wait_text(page, "rail/5V_CH2/state", "state", "tripped")
+    p.delete(keys.fault(R, "load/nav_camera", "short"))
+    p.wait_event(R, lambda e: e["kind"] == "fault_cleared" and "nav_camera" in e["key"])
+    click(page, f'[data-action="rail-reset"][data-rover="{R}"][data-rail="5V_CH2"]')
+    assert "the rail is now on" in last_answer(page, "accepted")
+    p.wait_value(keys.rail_state(R, "5V_CH2"), lambda r: r["state"] == "on")
+    wait_text(page, "rail/5V_CH2/state", "state", "^on$")
+
+
+def test_clock_pause_and_resume_from_the_page(live, page):
+    p = live.probe
+    click(page, f'#clock [data-action="clock-pause"][data-rover="{R}"]')
+    assert "clock paused" in last_answer(page, "accepted")
+    p.wait_value(keys.clock(R), lambda c: c["paused"])
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#clock .paused"))
+    click(page, f'#clock [data-action="clock-resume"][data-rover="{R}"]')
+    assert "clock running" in last_answer(page, "accepted")
+    p.wait_value(keys.clock(R), lambda c: not c["paused"])
+    WebDriverWait(page, 10).until(lambda d: not d.find_elements(By.CSS_SELECTOR, "#clock .paused"))
+
+
+def test_reset_brings_the_charge_back_to_the_rover_file(live, page, artefacts):
+    p = live.probe
+    initial = load_rover(MAPP).battery.initial_soc
+    p.put(keys.clock_control(R), {"time_scale": 300})
+    p.put(keys.fault(R, "battery", "capacity_loss"), 0.2)
+    p.wait_value(keys.battery_state(R), lambda b: b["soc"] < initial - 0.01)
+    view(page, "session")
+    shoot(page, artefacts, "session")
+    seen = len(p.samples(keys.battery_state(R)))
+    click(page, f'[data-action="reset"][data-rover="{R}"]')
+    accept_dialog(page)
+    assert "session reset" in last_answer(page, "accepted")
+    b = wait_for(lambda: next((b for b in p.samples(keys.battery_state(R))[seen:]
+                               if b["soc"] == initial and b["t_s"] < 1), None), 10,
+                 "the battery back at the rover file's initial state of charge")
+    assert "capacity_loss" not in b["faults"] and b["capacity_j"] == load_rover(MAPP).battery.capacity_j
+    assert p.wait_value(keys.clock(R), lambda c: c["cause"] == "reset")["time_scale"] == 1.0
+    view(page, "live")
+    wait_text(page, "battery/state", "soc", f"^{initial * 100:.1f} %$")
+    wait_text(page, "battery/state", "faults", "none")
+
+
+def test_a_snapshot_restore_brings_the_stored_energy_back(live, page):
+    p = live.probe
+    p.put(keys.clock_control(R), {"time_scale": 300})
+    p.wait_value(keys.battery_state(R), lambda b: b["soc"] < 0.999)
+    p.put(keys.clock_control(R), {"paused": True})
+    paused = p.wait_value(keys.clock(R), lambda c: c["paused"])
+    saved = p.wait_value(keys.battery_state(R), lambda b: b["t_s"] == paused["t_s"])
+    view(page, "session")
+    name = page.find_element(By.ID, "snap-name")
+    name.clear()
+    name.send_keys("before-drill")
+    click(page, f'[data-action="snapshot-save"][data-rover="{R}"]')
+    assert "before-drill" in last_answer(page, "accepted")
+    restore = '#snapshots [data-action="snapshot-restore"][data-snapshot="before-drill"]'
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, restore)
+                                  or d.find_element(By.ID, "snap-refresh").click())
+    p.put(keys.clock_control(R), {"paused": False})
+    p.put(keys.fault(R, "load/survival_heater", "stuck"), 15)
+    p.wait_value(keys.battery_state(R), lambda b: b["energy_j"] < saved["energy_j"] - 2000)
+    click(page, restore)
+    accept_dialog(page)
+    assert "restored" in last_answer(page, "accepted")
+    b = p.wait_value(keys.battery_state(R), lambda b: abs(b["energy_j"] - saved["energy_j"]) < 1.0)
+    assert b["t_s"] == saved["t_s"]
+    view(page, "live")
+    wait_text(page, "battery/state", "energy_j", re.escape(f"{saved['energy_j'] / 1000:.1f} kJ"))
+    p.wait_value(keys.load_power(R, "survival_heater"), lambda ld: "stuck" not in ld["faults"])
+    p.put(keys.clock_control(R), {"paused": False, "time_scale": 1})
+    p.wait_value(keys.clock(R), lambda c: not c["paused"] and c["time_scale"] == 1)
+
+
+def test_inputs_from_the_page(live, page, artefacts):
+    p = live.probe
+    view(page, "inputs")
+    box = page.find_element(By.ID, "sun-left")
+    box.clear()
+    box.send_keys("80")
+    click(page, f'[data-action="input-panel-sun"][data-rover="{R}"][data-panel="left"]')
+    assert "sun angle 80 deg on panel left" in last_answer(page, "accepted")
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 80)
+    assert p.value(keys.solar_power(R, "right"))["sun_angle_deg"] != 80
+    shoot(page, artefacts, "inputs")
+    click(page, '[data-action="input-panel-sun-clear"][data-panel="left"]')
+    last_answer(page, "accepted")
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 60)
+    click(page, '[data-action="input-umbilical"][data-value="true"]')
+    assert "umbilical plugged in" in last_answer(page, "accepted")
+    p.wait_value(keys.umbilical_state(R), lambda u: u["connected"])
+    click(page, '[data-action="input-umbilical"][data-value="false"]')
+    last_answer(page, "accepted")
+    p.wait_value(keys.umbilical_state(R), lambda u: not u["connected"])
+
+
+def test_a_scenario_played_from_the_page(live, page, artefacts):
+    p = live.probe
+    view(page, "scenarios")
+    click(page, '[data-play="short-drill.yaml"]')
+    assert "playing" in last_answer(page, "accepted")
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.25, timeout_s=30)
+    WebDriverWait(page, 60).until(lambda d: "ended" in d.find_element(By.ID, "sc-play").text)
+    text = page.find_element(By.ID, "sc-play").text
+    assert "every step has played" in text and "accepted" in text
+    shoot(page, artefacts, "scenarios")
+    marks = [e for e in p.samples(keys.event(R)) if e["kind"] == "scenario"]
+    assert [e["params"]["what"] for e in marks][-4:] == ["start", "step", "step", "end"]
+    p.wait_value(keys.clock(R), lambda c: c["time_scale"] == 1)  # the speed put back
+
+
+def test_a_recording_and_its_report_from_the_page(live, page, artefacts):
+    view(page, "recordings")
+    name = page.find_element(By.ID, "rec-name")
+    name.clear()
+    name.send_keys("drill-1")
+    click(page, "#rec-start")
+    assert "recording to" in last_answer(page, "accepted")
+    mcap = live.folder / "recordings" / "drill-1.mcap"
+    wait_for(lambda: "messages" in live.console.get("/api/recordings")[1]["recording"]["lines"][-1:][0]
+             if live.console.get("/api/recordings")[1]["recording"]["lines"] else False, 20,
+             "the recorder's progress")
+    click(page, "#rec-stop")
+    last_answer(page, "accepted")
+    wait_for(mcap.is_file, 20, "the recording")
+    click(page, "#rec-refresh")
+    link = WebDriverWait(page, 10).until(lambda d: d.find_element(By.LINK_TEXT, "Open the report"))
+    shoot(page, artefacts, "recordings")
+    page.get(link.get_attribute("href"))
+    WebDriverWait(page, 120).until(lambda d: "Events" in d.page_source)
+    page.back()
+    wait_text(page, "battery/state", "soc", r"\d+\.\d %")
+
+
+def test_the_api_checks_every_write_with_the_twin_s_structs(live):
+    def put(tail: str, body: bytes, method: str = "PUT") -> tuple[int, dict]:
+        req = urllib.request.Request(f"{live.console.url}/api/rovers/{R}/keys/{tail}", data=body,
+                                     method=method, headers={"Content-Type": "application/json"})
+        try:
+            with urllib.request.urlopen(req, timeout=10) as r:
+                return r.status, json.loads(r.read())
+        except urllib.error.HTTPError as exc:
+            return exc.code, json.loads(exc.read())
+
+    assert put("clock/control", b'{"time_scale": -1}') == (
+        422, {"verdict": "invalid", "message": "not sent: time_scale must be above 0.0", "event": None})
+    assert put("input/sun_angle", b'{"angle": 3}')[1]["message"].startswith("not sent: angle is not")
+    assert put("cmd/nothing", b"1")[0] == 422
+    assert put("input/sun_angle", b"", "DELETE")[0] == 422
+    code, body = put("input/radio/nosuch/position", b'{"distance_m": 1, "angle_deg": 0}')
+    assert (code, body["verdict"]) == (409, "rejected") and "has no radio 'nosuch'" in body["message"]
+    code, body = live.console.get("/api/rovers/no-such-rover/faults")
+    assert code in (502, 504)
+    code, body = live.console.get(f"/api/rovers/{R}/journal?last=3")
+    assert code == 200 and len(body) == 3
+    assert live.console.get(f"/api/rovers/{R}/journal?last=x")[0] == 422
+    assert live.console.get(f"/api/rovers/{R}/prediction?hours=x")[0] == 422
+    assert live.console.get(f"/api/rovers/{R}/nothing")[0] == 404
+    code, body = live.console.get(f"/api/rovers/{R}/faults")
+    assert code == 200 and isinstance(body, list)
+    status, me = live.console.get("/api/me")
+    assert me == {"name": "local user", "role": "instructor", "local": True, "may_act": True,
+                  "accounts": False}
+
+
+# -- accounts: sign-in, observers refused by the server ------------------------------------------
+
+PASSWORDS = {"ana": ("instructor", "ana-instructor-pw"), "obi": ("observer", "obi-observer-pw")}
+
+
+@pytest.fixture(scope="module")
+def guarded(live):
+    from tests.console.conftest import start_console
+    from tests.lunaris.conftest import run_tool
+
+    accounts = live.folder / "users.json"
+    for name, (role, password) in PASSWORDS.items():
+        done = subprocess.run(lunaris_cmd("console", "users", "add", name, "--role", role, "--accounts",
+                                          str(accounts), "--password-stdin"), input=password + "\n",
+                              capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert done.returncode == 0, done.stderr
+        assert f"{name} may sign in to the console as {role}" in done.stdout
+    listed = run_tool("console", "users", "list", "--accounts", str(accounts))
+    assert listed.stdout.split() == ["ana", "instructor", "obi", "observer"]
+    assert "argon2id" in accounts.read_text() and "obi-observer-pw" not in accounts.read_text()
+    console = start_console(live.endpoint, live.folder / "guarded", "--accounts", str(accounts))
+    try:
+        yield console, accounts
+    finally:
+        stop_process(console.proc, 10)
+
+
+def sign_in(driver, url: str, name: str, password: str) -> None:
+    driver.get(url + "/")
+    WebDriverWait(driver, 10).until(lambda d: "/login" in d.current_url)
+    driver.find_element(By.NAME, "user").send_keys(name)
+    driver.find_element(By.NAME, "password").send_keys(password)
+    driver.find_element(By.CSS_SELECTOR, "button[type=submit]").click()
+
+
+def fetch(driver, method: str, path: str, body: str = "") -> int:
+    """The page's own fetch: what a user who bypasses the page's disabled buttons would send."""
+    driver.set_script_timeout(20)
+    return driver.execute_async_script(
+        "const [m, p, b, done] = arguments; fetch(p, {method: m, body: m === 'GET' ? undefined : b, "
+        "headers: {'Content-Type': 'application/json'}}).then(r => done(r.status), e => done(-1));",
+        method, path, body)
+
+
+def test_without_a_sign_in_nothing_is_served(guarded):
+    console, _ = guarded
+    assert console.get("/api/me")[0] == 401
+    assert console.get(f"/api/rovers/{R}/snapshots")[0] == 401
+    with urllib.request.urlopen(console.url + "/", timeout=5) as r:  # redirected to the sign-in page
+        assert r.url.endswith("/login?next=/") and b"Sign in" in r.read()
+
+
+def test_an_observer_sees_everything_and_is_refused_every_change(live, guarded, artefacts):
+    console, accounts = guarded
+    p = live.probe
+    driver = open_browser(1280, 800)
+    try:
+        sign_in(driver, console.url, "obi", "wrong password")
+        WebDriverWait(driver, 10).until(lambda d: "Wrong user or password" in d.page_source)
+        sign_in(driver, console.url, "obi", PASSWORDS["obi"][1])
+        wait_text(driver, "battery/state", "soc", r"\d+\.\d %")
+        assert driver.find_element(By.ID, "observer").is_displayed()
+        assert "obi · observer" in driver.find_element(By.ID, "who").text
+        off = driver.find_element(By.CSS_SELECTOR, '[data-action="rail-off"][data-rail="12V"]')
+        assert not off.is_enabled()
+        shoot(driver, artefacts, "observer")
+        seen = len(p.samples(keys.event(R)))
+        key = keys.cmd_rail(R, "12V")
+        assert fetch(driver, "PUT", f"/api/rovers/{R}/keys/cmd/rail/12V", '{"on": false}') == 403
+        assert fetch(driver, "PUT", f"/api/rovers/{R}/keys/control/reset") == 403
+        assert fetch(driver, "DELETE", f"/api/rovers/{R}/keys/fault/battery/heating") == 403
+        assert fetch(driver, "POST", "/api/recordings", '{"name": "x"}') == 403
+        assert fetch(driver, "POST", "/api/scenarios", '{"file": "short-drill.yaml"}') == 403
+        assert fetch(driver, "GET", f"/api/rovers/{R}/snapshots") == 200  # reading is allowed
+        # Nothing changed: a probe's own put, made after, is the first thing the twin hears.
+        p.put(keys.under(R, "control/rewind"), b"")
+        p.wait_event(R, lambda e: e["key"] == keys.under(R, "control/rewind"))
+        assert not [e for e in p.samples(keys.event(R))[seen:]
+                    if e["key"] in (key, keys.control_reset(R)) or e["kind"] == "fault_cleared"]
+        assert p.value(keys.rail_state(R, "12V"))["state"] == "on"
+        # A user removed from the file is signed out at once.
+        run = subprocess.run(lunaris_cmd("console", "users", "remove", "obi", "--accounts", str(accounts)),
+                             capture_output=True, text=True, timeout=60, cwd=ROOT)
+        assert run.returncode == 0, run.stderr
+        assert fetch(driver, "GET", "/api/me") == 401
+    finally:
+        driver.quit()
+
+
+def test_an_instructor_signs_in_and_acts(live, guarded):
+    console, _ = guarded
+    driver = open_browser(1280, 800)
+    try:
+        sign_in(driver, console.url, "ana", PASSWORDS["ana"][1])
+        wait_text(driver, "battery/state", "soc", r"\d+\.\d %")
+        assert not driver.find_element(By.ID, "observer").is_displayed()
+        click(driver, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH2"]')
+        assert "the rail is now off" in last_answer(driver, "accepted")
+        live.probe.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "off")
+        click(driver, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH2"]')
+        live.probe.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "on")
+        driver.get(console.url + "/logout")
+        assert fetch(driver, "GET", "/api/me") == 401
+    finally:
+        driver.quit()
+
+
+def test_without_accounts_it_listens_on_loopback_only(live):
+    from tests.console.conftest import free_port
+    from tests.lunaris.conftest import run_tool
+
+    done = run_tool("console", "--http", f"0.0.0.0:{free_port()}", "--connect", live.endpoint)
+    assert done.returncode == 2
+    assert "without an accounts file the console listens on this computer only" in done.stderr

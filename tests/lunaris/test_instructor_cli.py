@@ -1,0 +1,93 @@
+"""``lunaris rail``, ``clock``, ``input``, ``reset`` and ``snapshot`` against a running twin: each
+confirmed by the twin's answer, with ``lunaris fault``'s exit codes (0, 1, 2)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from common import keys
+from tests.lunaris.conftest import R, run_tool
+
+pytestmark = pytest.mark.timeout(90)
+
+
+def test_rail_off_on_and_a_rejection(live):
+    p, ep = live.probe, live.endpoint
+    done = run_tool("rail", R, "3V3_CH2", "off", "--connect", ep)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("accepted: command") and "the rail is now off" in done.stdout
+    p.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "off")
+    assert "the rail is now on" in run_tool("rail", R, "3V3_CH2", "on", "--connect", ep).stdout
+    bad = run_tool("rail", R, "9V", "on", "--connect", ep)
+    assert bad.returncode == 1 and "has no rail '9V'" in bad.stdout
+    solar = run_tool("rail", R, "SOLAR", "off", "--connect", ep, "--json")
+    assert solar.returncode == 1 and json.loads(solar.stdout)["kind"] == "rejected"
+
+
+def test_clock_pause_resume_scale(live):
+    p, ep = live.probe, live.endpoint
+    done = run_tool("clock", R, "pause", "--connect", ep)
+    assert done.returncode == 0 and "clock paused" in done.stdout, done.stderr
+    p.wait_value(keys.clock(R), lambda c: c["paused"])
+    assert "clock paused at x5" in run_tool("clock", R, "scale", "5", "--connect", ep).stdout
+    done = run_tool("clock", R, "resume", "--connect", ep)
+    assert "clock running at x5" in done.stdout
+    assert run_tool("clock", R, "scale", "1", "--connect", ep).returncode == 0
+    p.wait_value(keys.clock(R), lambda c: not c["paused"] and c["time_scale"] == 1)
+    bad = run_tool("clock", R, "scale", "-2", "--connect", ep)
+    assert bad.returncode == 1 and "time_scale" in bad.stderr  # refused before sending
+    assert run_tool("clock", R, "scale", "--connect", ep).returncode == 1
+
+
+def test_inputs_sun_panel_position_umbilical(live):
+    p, ep = live.probe, live.endpoint
+    done = run_tool("input", R, "sun_angle", "70", "--connect", ep)
+    assert done.returncode == 0 and "accepted: input" in done.stdout and "sun angle 70 deg" in done.stdout
+    p.wait_value(keys.solar_power(R, "right"), lambda s: s["sun_angle_deg"] == 70)
+    done = run_tool("input", R, "solar/left/sun_angle", "20", "--connect", ep)
+    assert "on panel left" in done.stdout, done.stderr
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 20)
+    assert p.value(keys.solar_power(R, "right"))["sun_angle_deg"] == 70
+    done = run_tool("input", R, "solar/left/sun_angle", "--delete", "--connect", ep)
+    assert "back to the rover's sun angle" in done.stdout
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 70)
+    done = run_tool("input", R, "radio/lander/position", "300", "45", "--connect", ep)
+    assert done.returncode == 0 and "300 m at 45 deg" in done.stdout, done.stdout + done.stderr
+    done = run_tool("input", R, "umbilical", "true", "--connect", ep)
+    assert "umbilical plugged in" in done.stdout
+    p.wait_value(keys.umbilical_state(R), lambda u: u["connected"])
+    assert run_tool("input", R, "umbilical", "false", "--connect", ep).returncode == 0
+    assert run_tool("input", R, "sun_angle", "60", "--connect", ep).returncode == 0
+    assert run_tool("input", R, "radio/lander/position", "0", "0", "--connect", ep).returncode == 0
+    # Refused before sending, in the Struct's words; refused by the twin, in its words.
+    bad = run_tool("input", R, "sun_angle", "500", "--connect", ep)
+    assert bad.returncode == 1 and "<= 360" in bad.stderr
+    bad = run_tool("input", R, "solar/middle/sun_angle", "5", "--connect", ep)
+    assert bad.returncode == 1 and "has no panel 'middle'" in bad.stdout
+    bad = run_tool("input", R, "drive/traverse", '{"waypoints": [{"x_m": 1, "y_m": 0, "z_m": 0}]}',
+                   "--connect", ep)
+    assert bad.returncode == 1 and "no drive section" in bad.stdout
+    assert run_tool("input", R, "wind", "3", "--connect", ep).returncode == 1
+    assert run_tool("input", R, "sun_angle", "--delete", "--connect", ep).returncode == 1
+
+
+def test_reset_and_snapshots(live):
+    p, ep = live.probe, live.endpoint
+    done = run_tool("snapshot", "save", R, "cli-1", "--connect", ep)
+    assert done.returncode == 0 and "snapshot 'cli-1' saved" in done.stdout, done.stderr
+    listed = run_tool("snapshot", "list", R, "--connect", ep)
+    assert listed.returncode == 0 and listed.stdout.startswith("cli-1"), listed.stdout
+    assert json.loads(run_tool("snapshot", "list", R, "--json", "--connect", ep).stdout)[0]["name"] == "cli-1"
+    done = run_tool("snapshot", "restore", R, "cli-1", "--connect", ep)
+    assert done.returncode == 0 and "restored" in done.stdout
+    bad = run_tool("snapshot", "restore", R, "never", "--connect", ep)
+    assert bad.returncode == 1 and "no snapshot 'never'" in bad.stdout
+    assert run_tool("snapshot", "save", R, "bad name", "--connect", ep).returncode == 1
+    assert run_tool("snapshot", "save", R, "--connect", ep).returncode == 1
+    done = run_tool("reset", R, "--connect", ep)
+    assert done.returncode == 0 and "session reset" in done.stdout
+    p.wait_value(keys.clock(R), lambda c: c["cause"] == "reset")
+    gone = run_tool("reset", "no-such-rover", "--connect", ep, "--wait", "3")
+    assert gone.returncode == 2 and "unknown rover" in gone.stderr
