@@ -278,9 +278,11 @@ def test_a_recording_and_its_report_from_the_page(live, page, artefacts):
     last_answer(page, "accepted")
     wait_for(mcap.is_file, 20, "the recording")
     click(page, "#rec-refresh")
-    link = WebDriverWait(page, 10).until(lambda d: d.find_element(By.LINK_TEXT, "Open the report"))
+    # the list is drawn again as the recorder reports, so the link is read inside the wait
+    href = WebDriverWait(page, 10).until(
+        lambda d: d.find_element(By.LINK_TEXT, "Open the report").get_attribute("href"))
     shoot(page, artefacts, "recordings")
-    page.get(link.get_attribute("href"))
+    page.get(href)
     WebDriverWait(page, 120).until(lambda d: "Events" in d.page_source)
     page.back()
     wait_text(page, "battery/state", "soc", r"\d+\.\d %")
