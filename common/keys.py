@@ -44,6 +44,8 @@ __all__ = [
     "faults_journal",
     "input_drive_traverse",
     "input_radio_position",
+    "input_solar_dust",
+    "input_solar_sun_angle",
     "input_sun_angle",
     "input_umbilical",
     "load_power",
@@ -120,6 +122,14 @@ def input_drive_traverse(rover: str) -> str:
 
 def input_sun_angle(rover: str) -> str:
     return f"{ROOT}/{rover}/input/sun_angle"
+
+
+def input_solar_sun_angle(rover: str, panel: str) -> str:
+    return f"{ROOT}/{rover}/input/solar/{panel}/sun_angle"
+
+
+def input_solar_dust(rover: str, panel: str) -> str:
+    return f"{ROOT}/{rover}/input/solar/{panel}/dust"
 
 
 def input_radio_position(rover: str, radio: str) -> str:
@@ -251,6 +261,8 @@ FAMILIES: tuple[Family, ...] = (
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),
     _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
+    _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),
+    _f("input/solar/{panel}/dust", m.DustInput, "solar"),
     _f("input/umbilical", m.UmbilicalInput, "solar"),
     _f("input/drive/traverse", m.DriveTraverse, "drive"),
     _f("cmd/rail/{rail}", m.RailCommand, "power"),

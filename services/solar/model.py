@@ -8,6 +8,7 @@ umbilical, when connected, can supply up to its ``power_w``.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from common.config import Rover
 from common.faults import FaultKey, FractionParams, Params
@@ -27,18 +28,50 @@ class SolarModel:
         self.cfg = rover.solar
         self.umbilical_cfg = rover.umbilical
         self.sun_angle_deg = rover.solar.sun_angle_deg
-        self.dust = {p.name: 0.0 for p in rover.solar.panels}
+        self.dust = {p.name: 0.0 for p in rover.solar.panels}  # the dust fault's fraction
+        self.input_dust: dict[str, float] = {}  # dust set as an input (the dashboard's)
+        self.panel_sun_deg: dict[str, float] = {}  # per-panel sun angles over the global one
         self.disconnected: set[str] = set()
         self.umbilical_plugged = rover.umbilical.connected
         self.umbilical_fault = False
 
-    def state(self) -> dict[str, float | bool]:
+    def state(self) -> dict[str, Any]:
         """The inputs that evolve (the panels' faults are re-applied by their owner)."""
-        return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged}
+        return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged,
+                "panel_sun_deg": dict(self.panel_sun_deg), "input_dust": dict(self.input_dust)}
 
     def set_state(self, state: dict) -> None:
         self.sun_angle_deg = float(state.get("sun_angle_deg", self.cfg.sun_angle_deg))
         self.umbilical_plugged = bool(state.get("umbilical_plugged", self.umbilical_cfg.connected))
+        names = set(self.dust)
+        self.panel_sun_deg = {k: float(v) for k, v in state.get("panel_sun_deg", {}).items()
+                              if k in names}
+        self.input_dust = {k: float(v) for k, v in state.get("input_dust", {}).items() if k in names}
+
+    def set_panel_sun(self, panel: str, angle_deg: float | None) -> None:
+        """The sun angle of one panel (``input/solar/<panel>/sun_angle``); None returns the
+        panel to the global angle."""
+        if panel not in self.dust:
+            raise ValueError(f"no panel {panel!r} (panels: {', '.join(self.dust) or 'none'})")
+        if angle_deg is None:
+            self.panel_sun_deg.pop(panel, None)
+        else:
+            self.panel_sun_deg[panel] = angle_deg
+
+    def set_input_dust(self, panel: str, fraction: float | None) -> None:
+        """Dust on a panel as an input (``input/solar/<panel>/dust``, what the dashboard
+        sends); it combines with a dust fault as two layers: ``1 - (1 - a)(1 - b)``. None
+        clears it."""
+        if panel not in self.dust:
+            raise ValueError(f"no panel {panel!r} (panels: {', '.join(self.dust) or 'none'})")
+        if fraction is None:
+            self.input_dust.pop(panel, None)
+        else:
+            self.input_dust[panel] = fraction
+
+    def sun_deg(self, panel: str) -> float:
+        """The sun angle a panel sees: its own when set, else the global one."""
+        return self.panel_sun_deg.get(panel, self.sun_angle_deg)
 
     def reset(self) -> None:
         """The rover file's sun angle and umbilical."""
@@ -64,11 +97,12 @@ class SolarModel:
         """``(panel, power_w, dust, faults)`` for every panel."""
         out = []
         for p in self.cfg.panels:
-            dust = self.dust[p.name]
-            faults = (["dust"] if dust > 0.0 else []) + (
+            fault_dust = self.dust[p.name]
+            dust = 1.0 - (1.0 - fault_dust) * (1.0 - self.input_dust.get(p.name, 0.0))
+            faults = (["dust"] if fault_dust > 0.0 else []) + (
                 ["disconnect"] if p.name in self.disconnected else [])
             power = 0.0 if p.name in self.disconnected else panel_power(
-                self.cfg.irradiance_w_per_m2, p.area_m2, p.efficiency, self.sun_angle_deg,
+                self.cfg.irradiance_w_per_m2, p.area_m2, p.efficiency, self.sun_deg(p.name),
                 dust, p.degradation)
             out.append((p.name, power, dust, faults))
         return out
