@@ -99,8 +99,10 @@ def main(args: argparse.Namespace) -> int:
     if args.service == "bridge":
         options["mapping_file"] = args.bridge_config
         options["fleet"] = [r.id for r in fleet]
-    with Runtime(args.service, [r.id for r in rovers], config_from_args(args),
-                 args.state_dir) as rt:
+    state_dir = args.state_dir
+    if state_dir is not None and n > 1:  # each shard its own lock and state
+        state_dir = os.path.join(state_dir, f"{args.service}-{k}of{n}")
+    with Runtime(args.service, [r.id for r in rovers], config_from_args(args), state_dir) as rt:
         try:
             rt.claim()
         except AlreadyRunning as exc:
