@@ -327,14 +327,18 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         for rover in diag_outlets:
             publish_diagnostics(rover)
 
-    # One subscription per family of keys (lunaris/*/rail/*/state ...); samples are told apart
-    # by their exact key above.
-    patterns = {_family(o.binding.mapping.key).pattern() for ol in by_key.values() for o in ol}
-    patterns |= {_family(data_key("{rover}", c)).pattern() for cs in comps.values() for c in cs}
-    for pattern in sorted(patterns):
+    # One subscription per family of keys (lunaris/*/rail/*/state ...), samples told apart by
+    # their exact key above. A bridge that serves part of the fleet (a shard) subscribes for
+    # its own rovers only: the other shards' samples never reach it.
+    fams = {_family(o.binding.mapping.key) for ol in by_key.values() for o in ol}
+    fams |= {_family(data_key("{rover}", c)) for cs in comps.values() for c in cs}
+    fleet_size = len(fleet) if fleet is not None else len(rovers)
+    served = ["*"] if len(rovers) == fleet_size else sorted(rover_cfg)
+    for pattern in sorted({f.pattern(r) for f in fams for r in served}):
         rt.subscribe(pattern, on_twin, history=True)
     if diag_outlets:
-        rt.subscribe(keys.faults_active("*", "*"), on_faults, history=True)
+        for r in served:
+            rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True)
         rt.every(opts.diagnostics_period_s, periodic_diagnostics)
     if any(o.period_s for ol in by_key.values() for o in ol):
         rt.every(RATE_TIMER_S, flush_due)
