@@ -523,3 +523,26 @@ def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, route
     # one rail's values together, in the dashboard's order
     i = list(table).index("12V voltage")
     assert list(table)[i:i + 4] == ["12V voltage", "12V current", "12V power", "12V current limit"]
+
+
+def test_rates_hold_continuous_values_and_let_discrete_changes_through(dashboard, probe):
+    twin, tap = dashboard
+    settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
+    t0 = time.monotonic()
+    time.sleep(3.0)  # the twin ticks at 10 Hz: the battery's key ~10/s, the PDM's topics 2/s
+    t1 = time.monotonic()
+
+    def per_s(key: str) -> float:
+        return sum(1 for r in tap.history(key) if t0 <= r.t_mono < t1) / (t1 - t0)
+    assert per_s(keys.battery_state(R)) >= 8.0
+    pdm = per_s("pdm/battery_voltage_mv")
+    assert 1.0 <= pdm <= 2.7, f"{pdm:.2f} PDM samples per second at rate_hz 2"
+    assert 3.0 <= per_s("battery_state") <= 5.7  # rate_hz 5
+    # a discrete change (the rail's state) is not held back by the rate
+    t2 = time.monotonic()
+    probe.put(keys.fault(R, "rail/5V_CH2", "fail"))
+    settle(lambda: [] if _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2,
+                                lambda m: m["data"] == 0) else ["0 mV"], what="0 mV")
+    latency = _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2, lambda m: m["data"] == 0) - t2
+    assert latency < 0.25, f"the failed rail took {latency * 1e3:.0f} ms at rate_hz 2"
+    probe.delete(keys.fault(R, "rail/5V_CH2", "fail"))
