@@ -7,10 +7,12 @@ STAMP   = $(VENV)/.installed
 
 .PHONY: run test lint typecheck reference bench system-deps clean
 
+# dev: the tools of make test; test-ros2: real ROS 2 (the rclpy wheels of the ros2 extra) and an
+# independent rmw_zenoh client, which the bridge's tests run against.
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,test-ros2]'
 	@touch $@
 
 # docker-compose (v1, Debian) validates docker-compose.yml in the tests; no engine needed.

@@ -78,14 +78,16 @@ END_POINTS: list[Callable[[], EndPoint]] = [
 SERVICES = ("clock", "battery", "loads", "power", "solar", "faults")
 
 
-def run(n: int = 200, services=SERVICES, extra=None, paused: bool = True) -> list[EndPoint]:
+def run(n: int = 200, services=SERVICES, extra=None, paused: bool = True,
+        settled: Callable[[], bool] | None = None) -> list[EndPoint]:
     """``paused``: hold the clock so the fault is the only change; otherwise the twin runs
-    at 10 Hz underneath (and only the end points that need no quiet baseline are timed)."""
+    at 10 Hz underneath (and only the end points that need no quiet baseline are timed).
+    ``settled``: also waited for before each put (an end point's baseline is back)."""
     ends = [e for e in (make() for make in END_POINTS) if paused or not e.needs_quiet]
     with running_twin([ROOT / "config/rovers/mapp.yaml"], services, extra) as (probe, _, _):
         probe.watch(f"lunaris/{R}/**")
-        subs = [probe.session.declare_subscriber(
-            e.key, lambda s, e=e: e.on_sample(s.payload.to_bytes())) for e in ends]
+        subs = [probe.session.declare_subscriber(  # an end point without a key feeds itself
+            e.key, lambda s, e=e: e.on_sample(s.payload.to_bytes())) for e in ends if e.key]
         probe.wait_services(R, services)
         probe.put(keys.clock_control(R), {"paused": paused})
         probe.wait_value(keys.clock(R), lambda c: c["paused"] == paused)
@@ -105,6 +107,9 @@ def run(n: int = 200, services=SERVICES, extra=None, paused: bool = True) -> lis
             probe.wait_value(RAIL, lambda v: v["state"] == "on")
             # let the battery settle on the restored demand before the next put
             probe.wait_value(keys.battery_state(R), lambda b: True)
+            deadline = time.monotonic() + 5.0
+            while settled is not None and not settled() and time.monotonic() < deadline:
+                time.sleep(0.01)
             time.sleep(0.02)
         del subs
     return ends

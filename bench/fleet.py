@@ -1,17 +1,26 @@
-"""Fleet: one process per model kind serving 25 MAPP-class rovers at 10 Hz (SPEC §10).
+"""Fleet: one process per model kind serving N MAPP-class rovers at 10 Hz (SPEC §10).
 
-Runs the services for N copies of mapp.yaml (ids mapp-01 ...) for a while and
-reports, per second of wall time: clock ticks, battery states, power summaries and
-the bridge's BatteryState messages received per rover (at least 10 each when keeping
-up; the battery and PDM also republish at once when an input changes), how far the battery's
-and the PDM's sim time trail the clock, and each service process's CPU use.
-Run: `.venv/bin/python bench/fleet.py [ROVERS] [SECONDS]`.
+Runs the services for N copies of the MAPP rover without its drive (ids mapp-01 ...), the
+bridge shared by B processes (``--bridges``, default 2, each ``--shard k/B``), for a while,
+and reports per second of wall time:
+
+- clock ticks, battery states and power summaries per rover (10.00 when keeping up), and how
+  far the battery's and the PDM's sim time trail the clock (at most one tick: 100 ms);
+- every bridge topic (ros2dds keys ``mapp_NN/<topic>``) per rover against its mapping's
+  ``rate_hz`` (a topic without a rate follows its twin key);
+- each service process's CPU and resident memory (RSS), and the total;
+- while the fleet runs, the fault-to-dashboard latency: load shorts on mapp-01's nav_camera,
+  each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
+  50 ms), cleared and the rail reset between shorts.
+
+Run: ``.venv/bin/python bench/fleet.py [ROVERS] [SECONDS] [--bridges B] [--faults N]``.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
-import sys
+import re
 import tempfile
 import threading
 import time
@@ -19,12 +28,15 @@ from collections import defaultdict
 from pathlib import Path
 
 import msgspec
-from benchlib import ROOT, machine, running_twin
+from benchlib import ROOT, machine, percentiles, running_twin
 
 from common import keys
 from common.messages import BatteryState, Clock, PowerSummary
+from services.bridge.mapping import load_mapping
+from tests import rosmsg
+from tests.harness import static_rover
 
-SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults", "bridge")
+SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
 
 
 def cpu_s(pid: int) -> float:
@@ -32,17 +44,79 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+def topic_rates() -> dict[str, float | None]:
+    """Each outbound topic pattern of the shipped mapping (a regex over the bare topic) ->
+    its rate_hz (None: as its twin key)."""
+    out: dict[str, float | None] = {}
+    for m in load_mapping(ROOT / "config/bridge/default.yaml").mappings:
+        if m.direction == "out" and m.convert != "diagnostics" and not m.key.endswith("drive/state"):
+            out[re.sub(r"\\\{[a-z_]+\\\}", "[^/]+", re.escape(m.topic.strip("/")))] = m.rate_hz
+    return out
+
+
+def fault_latencies(probe, n: int) -> list[float]:
+    """Shorts on mapp-01's nav_camera, each timed to its /diagnostics (ros2dds) on the dashboard."""
+    rover, diag = "mapp-01", "mapp_01/diagnostics"
+    short = keys.fault(rover, "load/nav_camera", "short")
+    rail = keys.rail_state(rover, "5V_CH2")
+    done = threading.Event()
+    armed: list[float] = []
+    out: list[float] = []
+
+    def on_diag(s) -> None:
+        if not armed:
+            return
+        msg = rosmsg.decode("diagnostic_msgs/msg/DiagnosticArray", s.payload.to_bytes())
+        if any(st.name == f"{rover}/load/nav_camera" and "short" in [v.key for v in st.values]
+               for st in msg.status):
+            out.append((time.perf_counter() - armed.pop()) * 1e3)
+            done.set()
+
+    sub = probe.session.declare_subscriber(diag, on_diag)
+    probe.wait_value(rail, lambda v: v["state"] == "on", timeout_s=30)
+    for i in range(n):
+        done.clear()
+        armed[:] = [time.perf_counter()]
+        probe.session.put(short, b"")
+        if not done.wait(5.0):
+            print(f"  fault {i}: no short on {diag} within 5 s", flush=True)
+            armed.clear()
+        probe.session.delete(short)
+        probe.wait_event(rover, lambda ev: ev["kind"] == "fault_cleared" and ev["key"] == short)
+        probe.history.clear()
+        probe.put(keys.cmd_rail(rover, "5V_CH2"), {"reset": True})
+        probe.wait_value(rail, lambda v: v["state"] == "on")
+        time.sleep(0.05)
+    del sub
+    return out
+
+
 def main() -> None:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 25
-    seconds = float(sys.argv[2]) if len(sys.argv) > 2 else 20.0
-    base = (ROOT / "config/rovers/mapp.yaml").read_text()
+    p = argparse.ArgumentParser()
+    p.add_argument("rovers", nargs="?", type=int, default=25)
+    p.add_argument("seconds", nargs="?", type=float, default=20.0)
+    p.add_argument("--bridges", type=int, default=2)
+    p.add_argument("--faults", type=int, default=200, help="shorts timed while the fleet runs")
+    args = p.parse_args()
+    n, seconds, nb = args.rovers, args.seconds, args.bridges
+    ids = [f"mapp-{i:02d}" for i in range(1, n + 1)]
+    base = static_rover("mapp.yaml").read_text()
+    bridges = [f"bridge-{k}" for k in range(1, nb + 1)]
+    services = (*SERVICES, *bridges)
     with tempfile.TemporaryDirectory(prefix="lunaris-fleet-") as tmp:
         files = []
-        for i in range(1, n + 1):
-            f = Path(tmp) / f"mapp-{i:02d}.yaml"
-            f.write_text(base.replace("id: mapp-1", f"id: mapp-{i:02d}"))
+        for rid in ids:
+            f = Path(tmp) / f"{rid}.yaml"
+            f.write_text(base.replace("id: mapp-1", f"id: {rid}"))
             files.append(f)
-        print(f"fleet: {n} MAPP rovers at 10 Hz, {seconds:g} s ({machine()})")
+        print(f"fleet: {n} MAPP rovers at 10 Hz, {nb} bridge process(es), {seconds:g} s ({machine()})")
         counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
         latest_t: dict[tuple[str, str], float] = {}
         lags: dict[str, list[float]] = defaultdict(list)
@@ -62,49 +136,98 @@ def main() -> None:
                         lags[kind].append(latest_t.get(("clock", rover), t) - t)
             return cb
 
-        with running_twin(files, SERVICES) as (probe, twin, _):
-            for r in (f"mapp-{i:02d}" for i in (1, n)):
-                probe.wait_services(r, SERVICES, timeout_s=60)
+        topic_count: dict[str, int] = defaultdict(int)  # "mapp_01/pdm/..." -> samples
+
+        def on_bridge(s) -> None:
+            with lock:
+                topic_count[str(s.key_expr)] += 1
+
+        extra = {b: ["--shard", f"{k}/{nb}"] for k, b in enumerate(bridges, start=1)}
+        with running_twin(files, services, extra) as (probe, twin, _):
+            for r in (ids[0], ids[-1]):
+                probe.wait_services(r, (*SERVICES, "bridge"), timeout_s=120)
+            probe.watch(f"lunaris/{ids[0]}/**")
             subs = [probe.session.declare_subscriber(f"lunaris/*/{k}", on(kind)) for kind, k in
                     (("clock", "clock"), ("battery", "battery/state"), ("power", "power/summary"))]
-
-            def on_bridge(s) -> None:  # ros2dds key of the fleet topic /mapp_NN/battery_state
-                rover = str(s.key_expr).split("/")[0].replace("_", "-")
+            subs.append(probe.session.declare_subscriber("mapp_$*/**", on_bridge))
+            # Start-up: every bridge declares its publishers with their first samples; measure
+            # once every rover's BatteryState flows, and transients have passed.
+            t_up = time.monotonic()
+            while time.monotonic() - t_up < 120:
                 with lock:
-                    counts["bridge"][rover] += 1
-            subs.append(probe.session.declare_subscriber("*/battery_state", on_bridge))
-            time.sleep(2.0)  # let start-up transients pass before measuring
+                    flowing = sum(1 for k in topic_count if k.endswith("/battery_state"))
+                if flowing >= n:
+                    break
+                time.sleep(0.5)
+            print(f"  every rover's dashboard topics flowing {time.monotonic() - t_up:.1f} s after the "
+                  f"services were up ({flowing}/{n} BatteryState)", flush=True)
+            time.sleep(3.0)
             with lock:
                 counts.clear()
                 lags.clear()
-                t_clock0 = {r: latest_t.get(("clock", r), 0.0) for r in (f"mapp-{i:02d}" for i in
-                                                                          range(1, n + 1))}
+                topic_count.clear()
+                t_clock0 = {r: latest_t.get(("clock", r), 0.0) for r in ids}
             cpu0 = {s: cpu_s(p.pid) for s, p in twin.procs.items()}
             w0 = time.monotonic()
             time.sleep(seconds)
             wall = time.monotonic() - w0
             cpu1 = {s: cpu_s(p.pid) for s, p in twin.procs.items()}
+            rss = {s: rss_mb(p.pid) for s, p in twin.procs.items()}
             with lock:
                 snap = {k: dict(v) for k, v in counts.items()}
                 sim_advance = [latest_t.get(("clock", r), 0.0) - t0 for r, t0 in t_clock0.items()]
                 lag = {k: sorted(v) for k, v in lags.items()}
+                topics = dict(topic_count)
+            report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss)
+            latencies = fault_latencies(probe, args.faults) if args.faults else []
             del subs
-    for kind in ("clock", "battery", "power", "bridge"):
-        per = [snap.get(kind, {}).get(f"mapp-{i:02d}", 0) / wall for i in range(1, n + 1)]
+    if latencies:
+        print(f"  fault -> {ids[0]} /diagnostics (ros2dds) while the fleet runs: {percentiles(latencies)}")
+
+
+def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss) -> None:
+    n = len(ids)
+    verdict: list[str] = []
+    for kind in ("clock", "battery", "power"):
+        per = [snap.get(kind, {}).get(r, 0) / wall for r in ids]
         print(f"  {kind:<8} samples per rover per second: min {min(per):.2f}  "
               f"mean {sum(per) / n:.2f}  (>= 10.00 when keeping up)")
+        if min(per) < 9.95:
+            verdict.append(f"{kind} at {min(per):.2f}/s for its slowest rover")
     print(f"  sim time advanced per wall second: min {min(sim_advance) / wall:.3f}  "
           f"max {max(sim_advance) / wall:.3f}")
     for kind, v in lag.items():
         if v:
             print(f"  {kind:<8} sim-time lag behind the clock: p50 {v[len(v) // 2] * 1e3:.0f} ms  "
                   f"p99 {v[int(0.99 * (len(v) - 1))] * 1e3:.0f} ms  max {v[-1] * 1e3:.0f} ms")
+            if v[-1] > 0.1 + 1e-6:
+                verdict.append(f"{kind} up to {v[-1] * 1e3:.0f} ms behind the clock")
+    print("  bridge topics, messages per rover per second (min / mean over rovers and topics):")
+    for pattern, rate in topic_rates().items():
+        per: list[float] = []
+        for key, c in topics.items():
+            ns, _, bare = key.partition("/")
+            if re.fullmatch(pattern, bare):
+                per.append(c / wall)
+        if per:
+            want = f"rate_hz {rate:g}" if rate else "as its key"
+            if rate and min(per) < 0.9 * rate:
+                verdict.append(f"{pattern} at {min(per):.2f}/s (rate_hz {rate:g})")
+            print(f"    {pattern:<36} min {min(per):5.2f}  mean {sum(per) / len(per):5.2f}  "
+                  f"({want}, {len(per)} topics)")
     total = 0.0
-    for s in SERVICES:
+    for s in services:
         used = (cpu1[s] - cpu0[s]) / wall * 100
         total += used
-        print(f"  cpu {s:<8} {used:5.1f} %")
-    print(f"  cpu total    {total:5.1f} % of one core ({total / (os.cpu_count() or 1):.1f} % of the machine)")
+        print(f"  {s:<9} cpu {used:5.1f} %   rss {rss[s]:6.1f} MB")
+    print(f"  cpu total    {total:5.1f} % of one core ({total / (os.cpu_count() or 1):.1f} % of the "
+          f"machine); rss total {sum(rss.values()):.0f} MB", flush=True)
+    if total >= 160.0:
+        verdict.append(f"total CPU {total:.0f} % of one core (target < 160 %)")
+    saturated = [s for s in services if (cpu1[s] - cpu0[s]) / wall > 0.9]
+    if saturated:
+        verdict.append(f"saturated: {', '.join(saturated)}")
+    print("  keeps up: yes" if not verdict else "  BREAKS: " + "; ".join(verdict[:8]), flush=True)
 
 
 if __name__ == "__main__":

@@ -48,6 +48,7 @@ __all__ = [
     "input_drive_traverse",
     "input_panel_sun_angle",
     "input_radio_position",
+    "input_solar_dust",
     "input_sun_angle",
     "input_umbilical",
     "load_power",
@@ -131,6 +132,11 @@ def input_sun_angle(rover: str) -> str:
 def input_panel_sun_angle(rover: str, panel: str) -> str:
     """One panel's sun angle: overrides ``input/sun_angle`` for that panel until deleted."""
     return f"{ROOT}/{rover}/input/solar/{panel}/sun_angle"
+
+
+def input_solar_dust(rover: str, panel: str) -> str:
+    """The dashboard's dust on one panel, besides the instructor's dust fault."""
+    return f"{ROOT}/{rover}/input/solar/{panel}/dust"
 
 
 def input_radio_position(rover: str, radio: str) -> str:
@@ -274,6 +280,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("input/sun_angle", m.SunAngle, "solar"),
     _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),
     _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
+    _f("input/solar/{panel}/dust", m.DustInput, "solar"),
     _f("input/umbilical", m.UmbilicalInput, "solar"),
     _f("input/drive/traverse", m.DriveTraverse, "drive"),
     _f("cmd/rail/{rail}", m.RailCommand, "power"),

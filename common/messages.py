@@ -31,6 +31,7 @@ __all__ = [
     "DriveState",
     "DriveStatus",
     "DriveTraverse",
+    "DustInput",
     "Event",
     "EventKind",
     "Severity",
@@ -264,8 +265,17 @@ class SunAngle(_Input):
     angle_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
 
 
+class DustInput(_Input):
+    """Dust laid on one panel as an input (the dashboard's), 0..1 of its output lost."""
+
+    fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+
+
 class RadioPosition(_Input):
-    distance_m: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+    """A negative distance is a position on the opposite bearing (the source report's own
+    test: -5 m at 180 deg is 5 m at 0 deg)."""
+
+    distance_m: Annotated[float, msgspec.Meta(ge=-1e9, le=1e9)]
     angle_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
 
 
@@ -346,6 +356,7 @@ def _number(name: str, value: str) -> int | float:
 # parameter (``60`` on ``input/sun_angle``); the services, the CLI and the console read it here.
 BARE_FIELD: dict[type[msgspec.Struct], str] = {
     SunAngle: "angle_deg",
+    DustInput: "fraction",
     UmbilicalInput: "connected",
     RailCommand: "on",
 }

@@ -360,23 +360,29 @@ class Runtime:
         self.publish_bytes(key, encode(msg), zenoh.Encoding.APPLICATION_JSON, reliable=reliable)
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
-                      attachment: bytes | None = None, *, reliable: bool = False) -> None:
+                      attachment: bytes | None = None, *, reliable: bool = False,
+                      heartbeat_s: float | None = None) -> None:
         """Publish an already encoded payload (CDR for the bridge), with the same last-value
-        cache as :meth:`publish`."""
+        cache as :meth:`publish`. ``heartbeat_s``: the publisher (declared on first use) also
+        sends a sporadic heartbeat, so an advanced subscriber that missed the last sample
+        fetches it from the cache (what rmw_zenoh's transient-local publishers do)."""
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._declare_publisher(key, 1, encoding, reliable)
+            pub = self._declare_publisher(key, 1, encoding, reliable, heartbeat_s)
         pub.put(payload, attachment=attachment)
 
     def _declare_publisher(self, key: str, cache: int,
                            encoding: zenoh.Encoding = zenoh.Encoding.APPLICATION_JSON,
-                           reliable: bool = False) -> Any:
+                           reliable: bool = False, heartbeat_s: float | None = None) -> Any:
         pub = zext.declare_advanced_publisher(
             self.zenoh_session, key,
             encoding=encoding,
             congestion_control=(zenoh.CongestionControl.BLOCK if reliable
                                 else zenoh.CongestionControl.DROP),
             cache=zext.CacheConfig(max_samples=cache),
+            sample_miss_detection=(None if heartbeat_s is None
+                                   else zext.MissDetectionConfig(heartbeat=None,
+                                                                sporadic_heartbeat=heartbeat_s)),
             publisher_detection=True,
         )
         self._publishers[key] = pub

@@ -31,6 +31,15 @@ from pathlib import Path
 from typing import Any
 
 from common import keys
+from lunaris.deploy_dashboard import (
+    FLEET_FILES,
+    dashboard_keys,
+    fleet_names,
+    inbound_regexes,
+    rmw_zenoh_config,
+    ros2dds_config,
+)
+from services.bridge.bindings import RoverNames
 from services.bridge.mapping import MappingFile, load_mapping
 from services.bridge.service import DEFAULT_MAPPING
 
@@ -84,34 +93,15 @@ def _answered(service: str) -> list[str]:
     return out
 
 
-def _topic_key(topic: str) -> str:
-    """A mapping topic template as a key chunk sequence: placeholders become ``$*``."""
-    return re.sub(r"\{[a-z_]*\}", "$*", topic.strip("/"))
-
-
-def dashboard_keys(mf: MappingFile) -> tuple[list[str], list[str]]:
-    """(keys the dashboard reads, keys it writes) in every enabled flavour of a mapping."""
-    out = mf.bridge.outputs
-    reads: list[str] = []
-    writes: list[str] = []
-    for m in mf.mappings:
-        topic = _topic_key(m.topic)
-        flavours = ([topic] if out.ros2dds.enabled else []) \
-            + ([f"{out.json.prefix}/{topic}" if out.json.prefix else topic] if out.json.enabled else []) \
-            + ([f"*/{topic}/**"] if out.rmw_zenoh.enabled else [])
-        (writes if m.direction == "in" else reads).extend(flavours)
-    return sorted(set(reads)), sorted(set(writes))
-
-
 def _rule(rule_id: str, permission: str, flows: list[str], messages: list[str],
           key_exprs: list[str]) -> dict[str, Any]:
     return {"id": rule_id, "permission": permission, "flows": flows, "messages": messages,
             "key_exprs": key_exprs}
 
 
-def acl(mf: MappingFile) -> dict[str, Any]:
+def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
     """The router's ``access_control`` section."""
-    reads, writes = dashboard_keys(mf)
+    reads, writes = dashboard_keys(mf, fleet)
     inbound = sorted({m.key.replace("{rover}", "*") for m in mf.mappings if m.direction == "in"})
     inbound = [re.sub(r"\{[a-z_]*\}", "*", k) for k in inbound]
     ros = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
@@ -175,19 +165,25 @@ def acl(mf: MappingFile) -> dict[str, Any]:
             "policies": policies}
 
 
-def router_config(mf: MappingFile) -> dict[str, Any]:
+def router_config(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
     return {
         "mode": "router",
         # Inside the container; docker-compose.yml decides which host address publishes it.
         "listen": {"endpoints": ["tls/0.0.0.0:7447"]},
         "connect": {"endpoints": []},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
+        # What ROS 2 nodes on rmw_zenoh need: rmw_zenoh's own router turns gossip on, so its
+        # peers find each other and connect directly; with gossip off (everywhere here) the
+        # router forwards between peers that are not connected to each other, and it stamps
+        # samples (rmw_zenoh's router and sessions enable timestamping).
+        "routing": {"router": {"peers_failover_brokering": True}},
+        "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
         "transport": {
             "auth": {"usrpwd": {"dictionary_file": f"{ROUTER_SECRETS}/credentials.txt"}},
             "link": {"tls": {"listen_certificate": f"{ROUTER_SECRETS}/tls/router.crt",
                              "listen_private_key": f"{ROUTER_SECRETS}/tls/router.key"}},
         },
-        "access_control": acl(mf),
+        "access_control": acl(mf, fleet),
     }
 
 
@@ -216,11 +212,12 @@ def _compact(text: str) -> str:
                   lambda m: "[" + ", ".join(re.findall(r'"[^"]*"', m.group(1))) + "]", text)
 
 
-def render_router_config(mf: MappingFile) -> str:
+def render_router_config(mf: MappingFile, fleet: list[RoverNames] | None = None) -> str:
+    fleet = fleet if fleet is not None else fleet_names()
     what = {i: PEOPLE.get(i, f"the {i.removeprefix('lunaris-')} service: its own keys only")
             for i in IDENTITIES}
     lines = "".join(f"//   {i:<18} {w}\n" for i, w in what.items())
-    return _HEADER.format(identities=lines) + _compact(json.dumps(router_config(mf), indent=2)) + "\n"
+    return _HEADER.format(identities=lines) + _compact(json.dumps(router_config(mf, fleet), indent=2)) + "\n"
 
 
 # -- secrets ---------------------------------------------------------------------------------
@@ -253,17 +250,6 @@ def client_config(user: str, password: str, ca_pem: bytes | None, connect: str) 
     return conf
 
 
-def ros2dds_config(password: str, ca_pem: bytes | None) -> dict[str, Any]:
-    """zenoh-bridge-ros2dds for a dashboard on DDS (the compose profile ``ros2dds``): the
-    ``dashboard`` identity, host networking, so it reaches the router on the host's port.
-    Zenoh -> DDS: every topic the bridge publishes in the ros2dds flavour; DDS -> Zenoh: only
-    the inbound topic (the router's access control enforces the same limit)."""
-    conf = client_config("dashboard", password, ca_pem, "tls/127.0.0.1:7447")
-    conf["plugins"] = {"ros2dds": {"allow": {"publishers": ["/curr_to_receiving_radio_m"],
-                                             "subscribers": [".*"]}}}
-    return conf
-
-
 def _openssl(*args: str, cwd: Path) -> None:
     out = subprocess.run(["openssl", *args], cwd=cwd, capture_output=True, text=True)
     if out.returncode != 0:
@@ -293,7 +279,8 @@ def make_certificates(folder: Path, hosts: list[str]) -> None:
 
 
 def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
-                 rotate: list[str] | None = None) -> list[str]:
+                 rotate: list[str] | None = None, fleet: list[RoverNames] | None = None,
+                 mf: MappingFile | None = None) -> list[str]:
     """Make (or, with ``rotate``, renew some of) the secrets of a deployment; returns what
     was written."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -327,10 +314,18 @@ def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
         accounts.chmod(0o600)
         written.append(accounts.name)
     if rotate is None or "dashboard" in rotate:
-        path = folder / "zenoh-bridge-ros2dds.json5"
-        path.write_text(json.dumps(ros2dds_config(creds["dashboard"], ca), indent=2) + "\n")
-        path.chmod(0o600)
-        written.append(path.name)
+        fleet = fleet if fleet is not None else fleet_names()
+        mf = mf if mf is not None else load_mapping(DEFAULT_MAPPING)
+        base = mf.bridge.outputs.ros2.domain_id or 0
+        files = {f"zenoh-bridge-ros2dds-{r.id}.json5": ros2dds_config(
+            creds["dashboard"], ca, r.id, mf.bridge.rover_domains.get(r.id, base + place),
+            inbound_regexes(mf)) for place, r in enumerate(fleet)}
+        files["rmw-zenoh-dashboard.json5"] = rmw_zenoh_config(creds["dashboard"], ca, connect)
+        for name, conf in files.items():
+            path = folder / name
+            path.write_text(json.dumps(conf, indent=2) + "\n")
+            path.chmod(0o600)
+            written.append(path.name)
     return written
 
 
@@ -372,6 +367,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", required=True, metavar="ACTION")
     a = sub.add_parser("acl", help="write the router configuration with its access control")
     a.add_argument("--bridge-config", metavar="FILE", help="bridge mapping (default: the shipped one)")
+    a.add_argument("--rover", action="append", metavar="FILE",
+                   help=f"the deployment's rovers, in order (default {' '.join(FLEET_FILES)})")
     a.add_argument("--output", metavar="FILE", default=str(ROUTER_FILE))
     a.add_argument("--check", action="store_true", help="exit 1 if the file is not up to date")
     s = sub.add_parser("secrets", help="make passwords, client configurations and certificates")
@@ -392,7 +389,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     if args.action == "acl":
         mf = load_mapping(args.bridge_config or DEFAULT_MAPPING)
-        text = render_router_config(mf)
+        text = render_router_config(mf, fleet_names(args.rover or FLEET_FILES))
         out = Path(args.output)
         if args.check:
             if not out.is_file() or out.read_text() != text:

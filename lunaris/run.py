@@ -1,5 +1,10 @@
 """``lunaris run SERVICE --rover FILE``: one service, as a container runs it.
 
+``--shard K/N`` splits a fleet over N processes of one service: this one serves the K-th
+rover of the list, the (K+N)-th, and so on (the bridge shares a large fleet so). The bridge
+still knows the whole fleet: each rover keeps its own ROS 2 domain and topic names whichever
+process serves it.
+
 A service module may define ``serves(rover) -> bool``: the rovers it has nothing to do for
 are left out (the drive serves only rovers with a ``drive`` section). When that leaves no
 rover, the service says so and exits 0 at once: ``lunaris up`` does not start it then, and a
@@ -18,7 +23,7 @@ from common.connection import add_connection_args, config_from_args
 from common.runtime import AlreadyRunning, Runtime
 
 __all__ = ["ALREADY_RUNNING", "CONFIG_ERROR", "SERVICES", "SUPERVISOR_ENV", "add_arguments",
-           "load_rovers", "main", "served"]
+           "load_rovers", "main", "parse_shard", "served"]
 
 CONFIG_ERROR = 2  # exit status: a rover file, mapping or option that cannot work (do not retry)
 ALREADY_RUNNING = 3  # exit status: another instance serves these rovers (do not retry)
@@ -35,6 +40,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed (loads)")
     p.add_argument("--bridge-config", metavar="FILE", default=None,
                    help="bridge mapping (bridge service only)")
+    p.add_argument("--shard", metavar="K/N", default=None,
+                   help="serve only every N-th rover of the list from the K-th (1 <= K <= N): "
+                        "a fleet shared by N processes of the service")
     add_connection_args(p)
 
 
@@ -63,18 +71,38 @@ def served(service: str, rovers: list[Rover]) -> list[Rover]:
     return [r for r in rovers if serves is None or serves(r)]
 
 
+def parse_shard(text: str | None) -> tuple[int, int]:
+    """``"2/4"`` -> (2, 4); ValueError naming the problem."""
+    if text is None:
+        return 1, 1
+    k, sep, n = text.partition("/")
+    if not (sep and k.isdigit() and n.isdigit() and 1 <= int(k) <= int(n)):
+        raise ValueError(f"--shard: expected K/N with 1 <= K <= N, got {text!r}")
+    return int(k), int(n)
+
+
 def main(args: argparse.Namespace) -> int:
-    rovers = served(args.service, load_rovers(args.rover))
+    try:
+        k, n = parse_shard(args.shard)
+    except ValueError as exc:
+        print(f"lunaris run: {exc}", file=sys.stderr)
+        return CONFIG_ERROR
+    fleet = load_rovers(args.rover)
+    rovers = served(args.service, fleet[k - 1::n])
     module = importlib.import_module(f"services.{args.service}.service")
     if not rovers:
         print(f"lunaris {args.service}: no rover to serve (none of {', '.join(args.rover)} "
-              f"needs it); exiting", flush=True)
+              f"{'in shard ' + args.shard + ' ' if args.shard else ''}needs it); exiting",
+              flush=True)
         return 0
     options: dict[str, object] = {"seed": args.seed}
     if args.service == "bridge":
         options["mapping_file"] = args.bridge_config
-    with Runtime(args.service, [r.id for r in rovers], config_from_args(args),
-                 args.state_dir) as rt:
+        options["fleet"] = [r.id for r in fleet]
+    state_dir = args.state_dir
+    if state_dir is not None and n > 1:  # each shard its own lock and state
+        state_dir = os.path.join(state_dir, f"{args.service}-{k}of{n}")
+    with Runtime(args.service, [r.id for r in rovers], config_from_args(args), state_dir) as rt:
         try:
             rt.claim()
         except AlreadyRunning as exc:

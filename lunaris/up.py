@@ -44,6 +44,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--services", default=",".join(SERVICES),
                    help="comma-separated services to run (default: all)")
     p.add_argument("--seed", type=int, default=None, help="random seed for the loads")
+    p.add_argument("--bridge-config", metavar="FILE", default=None,
+                   help="the bridge's mapping (default config/bridge/default.yaml)")
+    p.add_argument("--bridges", type=int, default=1, metavar="N",
+                   help="bridge processes sharing the fleet (default 1)")
     p.add_argument("--no-status", action="store_true", help="no live status display")
     p.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None, metavar="HOST:PORT",
                    help="also serve the instructor console (default address 127.0.0.1:8080), "
@@ -66,14 +70,21 @@ class Supervisor:
     """Starts the services and restarts any that exit while it runs."""
 
     def __init__(self, services: list[str], rover_files: list[str], endpoint: str,
-                 state_dir: Path, seed: int | None):
+                 state_dir: Path, seed: int | None, bridge_config: str | None = None,
+                 bridges: int = 1):
+        if bridges > 1 and "bridge" in services:
+            at = services.index("bridge")
+            services = (services[:at] + [f"bridge-{k}" for k in range(1, bridges + 1)]
+                        + services[at + 1:])
         self.services = services
         self.rover_files = rover_files
         self.endpoint = endpoint
         self.state_dir = state_dir
         self.seed = seed
+        self.bridge_config = bridge_config
+        self.bridges = bridges
         self.procs: dict[str, subprocess.Popen] = {}
-        self.restarts: dict[str, int] = dict.fromkeys(services, 0)
+        self.restarts: dict[str, int] = dict.fromkeys(self.services, 0)
         self.failed: dict[str, str] = {}  # service -> why it is not restarted
         self._next_start: dict[str, float] = {}
         self.commands: dict[str, list[str]] = {}  # processes other than services: the console
@@ -87,12 +98,17 @@ class Supervisor:
     def command(self, service: str) -> list[str]:
         if service in self.commands:
             return self.commands[service]
-        cmd = [sys.executable, "-m", "lunaris.cli", "run", service, "--connect", self.endpoint,
+        kind, _, shard = service.partition("-")
+        cmd = [sys.executable, "-m", "lunaris.cli", "run", kind, "--connect", self.endpoint,
                "--state-dir", str(self.state_dir)]
         for f in self.rover_files:
             cmd += ["--rover", f]
         if self.seed is not None:
             cmd += ["--seed", str(self.seed)]
+        if kind == "bridge" and self.bridge_config is not None:
+            cmd += ["--bridge-config", self.bridge_config]
+        if shard:
+            cmd += ["--shard", f"{shard}/{self.bridges}"]
         return cmd
 
     def log_path(self, service: str) -> Path:
@@ -224,6 +240,15 @@ def main(args: argparse.Namespace) -> int:
         print(f"[up] {service} not started: no rover needs it ({service} serves only rovers "
               f"with a {service} section)", flush=True)
         services.remove(service)
+    if args.bridges < 1:
+        print(f"--bridges: expected 1 or more, got {args.bridges}", file=sys.stderr)
+        return 2
+    bridge_config = None
+    if args.bridge_config is not None:
+        bridge_config = os.path.abspath(args.bridge_config)
+        if not os.path.isfile(bridge_config):
+            print(f"--bridge-config: no such file {args.bridge_config}", file=sys.stderr)
+            return 2
     expected = {r.id: sum(1 for s in services if served(s, [r])) for r in rovers}
     listen = args.listen or [DEFAULT_ENDPOINT]
     temp_state = args.state_dir is None
@@ -238,7 +263,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"[up] router listening on {', '.join(listen)}; rovers: "
           f"{', '.join(r.id for r in rovers)}; state in {state_dir}", flush=True)
     sup = Supervisor(services, [os.path.abspath(f) for f in rover_files], listen[0], state_dir,
-                     args.seed)
+                     args.seed, bridge_config, args.bridges)
     if args.console:
         console = ["console", "--http", args.console, "--connect", listen[0]]
         if args.console_accounts:

@@ -124,8 +124,10 @@ class Twin:
         self.logs: dict[str, Path] = {}
 
     def start(self, service: str) -> subprocess.Popen:
-        args = ["run", service, "--connect", self.endpoint, "--state-dir", str(self.state_dir),
-                "--seed", str(self.seed)]
+        """``service`` may be ``kind-k`` (``bridge-2``): another process of that kind, whose
+        arguments (``--shard 2/3``) come from ``extra``."""
+        args = ["run", service.split("-")[0], "--connect", self.endpoint, "--state-dir",
+                str(self.state_dir), "--seed", str(self.seed)]
         for f in self.rover_files:
             args += ["--rover", f]
         args += self.extra.get(service, [])

@@ -24,7 +24,7 @@ from common.config import Battery, Rover
 from common.messages import ActiveFault, BadInput, BatteryState, DriveState
 from services.bridge.bindings import rover_names
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants
-from services.bridge.mapping import Mapping
+from services.bridge.mapping import JOINT_STATE, Mapping
 
 __all__ = [
     "DIAG_ERROR",
@@ -55,7 +55,8 @@ def _round_half_away(x: float) -> int:
 
 
 def _ros_kind(m: Mapping) -> str:
-    return SCALAR_TYPES.get(m.type) or ARRAY_TYPES.get(m.type) or ""
+    return SCALAR_TYPES.get(m.type) or ARRAY_TYPES.get(m.type) or (
+        "float64" if m.type == JOINT_STATE else "")
 
 
 def _scaled(m: Mapping, value: Any) -> bool | int | float | None:
@@ -83,12 +84,18 @@ def out_value(m: Mapping, payload: msgspec.Struct) -> bool | int | float | None:
     return _scaled(m, getattr(payload, m.field))
 
 
-def out_message(m: Mapping, payload: msgspec.Struct) -> dict | None:
-    """A std_msgs one-value or MultiArray message from a twin payload; None to publish nothing."""
+def out_message(m: Mapping, payload: msgspec.Struct, stamp_ns: int = 0) -> dict | None:
+    """A std_msgs one-value or MultiArray message, or a ``sensor_msgs/msg/JointState`` carrying
+    several named values (``name`` and ``position``, stamped ``stamp_ns``), from a twin
+    payload; None to publish nothing."""
     if m.fields:
         values = [_scaled(m, getattr(payload, f)) for f in m.fields]
         if any(v is None for v in values):
             return None
+        if m.type == JOINT_STATE:
+            return {"header": {"stamp": stamp(stamp_ns), "frame_id": m.frame_id},
+                    "name": list(m.joint_names or m.fields), "position": values,
+                    "velocity": [], "effort": []}
         return _multi_array(m.fields, values)
     value = out_value(m, payload)
     return None if value is None else {"data": value}

@@ -20,6 +20,9 @@ from common.datafile import ConfigError, Strict, doc, field_kind, parse_yaml, re
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants, typestore
 
 __all__ = [
+    "MAX_DOMAIN",
+    "JOINT_STATE",
+    "OTHERWISE",
     "CONVERTERS",
     "FLAVOURS",
     "PLACEHOLDERS",
@@ -32,7 +35,7 @@ __all__ = [
     "ros_name",
 ]
 
-FLAVOURS = ("ros2dds", "rmw_zenoh", "json")
+FLAVOURS = ("ros2dds", "rmw_zenoh", "json", "ros2")
 PLACEHOLDERS = keys.PLACEHOLDERS  # component placeholders; {rover} is always there
 _PLACEHOLDER = re.compile(r"\{([a-z_]*)\}")
 
@@ -42,7 +45,9 @@ _PLACEHOLDER = re.compile(r"\{([a-z_]*)\}")
 
 class Ros2DdsOutput(Strict, frozen=True):
     """Key = topic without the leading ``/``, CDR payload: what ``zenoh-bridge-ros2dds``
-    forwards to DDS."""
+    forwards to DDS. In a fleet the key starts with the rover's namespace
+    (``mapp_1/battery_state``): that rover's ``zenoh-bridge-ros2dds`` runs with that namespace
+    and gives its DDS domain the plain topic."""
 
     enabled: bool = True
 
@@ -51,24 +56,42 @@ class RmwZenohOutput(Strict, frozen=True):
     """A ROS 2 node on ``rmw_zenoh``: keyed topics, attachments, liveliness tokens."""
 
     enabled: bool = True
-    domain_id: Annotated[int, doc("ROS_DOMAIN_ID of the dashboard")] = 0
+    domain_id: Annotated[int, doc("ROS_DOMAIN_ID of the dashboard (of the fleet's first rover; "
+                                  "the next rovers take the next domains)")] = 0
     node: Annotated[str, doc("the node that owns the bridge's publishers")] = "lunaris_bridge"
     namespace: Annotated[str, doc("the node's namespace")] = "/"
 
 
 class JsonOutput(Strict, frozen=True):
-    """Key = ``prefix/`` + topic without the leading ``/``; the ROS message fields as JSON."""
+    """Key = ``prefix/`` + topic without the leading ``/`` (in a fleet ``prefix/<rover>/``
+    + topic); the ROS message fields as JSON, for web and scripting clients."""
 
-    enabled: bool = True
+    enabled: bool = False
     prefix: Annotated[str, doc("before every key; keeps them apart from the ros2dds keys")] = "json"
 
 
+class Ros2Output(Strict, frozen=True):
+    """The bridge as a ROS 2 node itself (``rclpy``, the ``lunaris[ros2]`` extra) on the
+    dashboard's own middleware: no other bridge between DDS and the twin. The ROS 2
+    environment (``RMW_IMPLEMENTATION``, ``FASTDDS_BUILTIN_TRANSPORTS`` ...) is passed
+    through; outbound topics are reliable, transient-local, keep-last 1."""
+
+    enabled: bool = False
+    domain_id: Annotated[int | None, doc("ROS_DOMAIN_ID of the fleet's first rover (the next "
+                                         "rovers take the next domains); default: the "
+                                         "ROS_DOMAIN_ID of the environment, else 0")] = None
+    node: Annotated[str, doc("the node's name")] = "lunaris_bridge"
+    namespace: Annotated[str, doc("the node's namespace")] = "/"
+
+
 class Outputs(Strict, frozen=True):
-    """The flavours of the dashboard's topics on Zenoh; each can be disabled."""
+    """The flavours of the dashboard's topics; each costs only when enabled. The default: a
+    dashboard on DDS through ``zenoh-bridge-ros2dds`` and one on ``rmw_zenoh``."""
 
     ros2dds: Ros2DdsOutput = Ros2DdsOutput()
     rmw_zenoh: RmwZenohOutput = RmwZenohOutput()
     json: JsonOutput = JsonOutput()
+    ros2: Ros2Output = Ros2Output()
 
 
 class BridgeOptions(Strict, frozen=True):
@@ -76,8 +99,16 @@ class BridgeOptions(Strict, frozen=True):
 
     ros_distro: Annotated[str, doc("jazzy: rmw_zenoh keys carry RIHS01 type hashes; humble: "
                                    "TypeHashNotSupported")] = "jazzy"
-    topic_prefix: Annotated[str, doc("before every topic when the bridge serves one rover")] = ""
-    fleet_topic_prefix: Annotated[str, doc("instead, when it serves several")] = "/{rover}"
+    topic_prefix: Annotated[str, doc("before every topic when the fleet has one rover")] = ""
+    fleet_topic_prefix: Annotated[str, doc("before every topic when the fleet has several rovers "
+                                           "(default none: each rover's dashboard has its own "
+                                           "ROS 2 domain and sees the plain names)")] = ""
+    rover_domains: Annotated[dict[str, int], doc("ROS 2 domain of a rover, by id (default: "
+                                                 "the flavour's domain_id + the rover's place "
+                                                 "in the fleet)")] = {}
+    fleet_namespace: Annotated[str, doc("in a fleet, the ros2dds and json keys start with this "
+                                        "(the namespace of the rover's zenoh-bridge-ros2dds)")] \
+        = "/{rover}"
     stamp: Annotated[str, doc("header stamps: wall (the ROS default) or sim (the twin's t_s)")] = "wall"
     diagnostics_period_s: Annotated[float, doc("the DiagnosticArray is also republished this "
                                                "often [s]")] = 1.0
@@ -107,6 +138,15 @@ class Mapping(Strict, frozen=True):
                                        "(see Converters)")] = None
     frame_id: Annotated[str, doc("header.frame_id of messages that have a header")] = ""
     options: Annotated[dict[str, str], doc("converter options")] = {}
+    rate_hz: Annotated[float | None, doc("out: at most this many messages a second (the latest "
+                                         "value); a change of a discrete field (a state, a "
+                                         "flag, the faults) is still published at once. "
+                                         "Default: every sample")] = None
+    otherwise: Annotated[str, doc("a key naming a component the rover lacks: error (refuse "
+                                  "the rover), first (its first one of that kind), skip (no "
+                                  "topic for that rover)")] = "error"
+    joint_names: Annotated[list[str] | None, doc("JointState: the names of the fields' values "
+                                                 "(default the field names)")] = None
     label: Annotated[str | None, doc("how the dashboard names the value (lunaris pdm)")] = None
     unit: Annotated[str | None, doc("the value's unit, as the dashboard shows it")] = None
     group: Annotated[str | None, doc("pdm: part of the PDM device distribution")] = None
@@ -137,6 +177,9 @@ CONVERTERS: dict[str, Converter] = {
 _ROS_TOKEN = r"[A-Za-z_][A-Za-z0-9_]*"
 ROS_TOPIC = re.compile(rf"^(/{_ROS_TOKEN})+$")
 _ROS_NODE = re.compile(rf"^{_ROS_TOKEN}$")
+MAX_DOMAIN = 232  # the largest ROS_DOMAIN_ID
+OTHERWISE = ("error", "first", "skip")
+JOINT_STATE = "sensor_msgs/msg/JointState"
 
 
 def ros_name(value: str) -> str:
@@ -197,24 +240,29 @@ def _option_problems(o: BridgeOptions) -> list[str]:
         problems += [f"bridge.{name}: {p}" for p in _topic_problems(prefix, allow_empty=True)]
         if set(_placeholders(prefix)) - {"rover"}:
             problems.append(f"bridge.{name}: only {{rover}} may appear in a prefix")
-    if "{rover}" not in o.fleet_topic_prefix:
-        problems.append("bridge.fleet_topic_prefix: must contain {rover}, or the rovers of a "
-                        "fleet would publish on the same topics")
+    for rover, domain in o.rover_domains.items():
+        if not 0 <= domain <= MAX_DOMAIN:
+            problems.append(f"bridge.rover_domains.{rover}: expected 0..{MAX_DOMAIN}, got {domain}")
+    if "{rover}" not in o.fleet_namespace:
+        problems.append("bridge.fleet_namespace: must contain {rover}, or the rovers of a fleet "
+                        "would publish on the same keys")
+    else:
+        problems += [f"bridge.fleet_namespace: {p}" for p in _topic_problems(o.fleet_namespace)]
     for name in ("diagnostics_period_s", "stale_after_s"):
         if not getattr(o, name) > 0.0:
             problems.append(f"bridge.{name}: must be > 0, got {getattr(o, name)}")
     out = o.outputs
-    if not (out.ros2dds.enabled or out.rmw_zenoh.enabled or out.json.enabled):
+    if not (out.ros2dds.enabled or out.rmw_zenoh.enabled or out.json.enabled or out.ros2.enabled):
         problems.append("bridge.outputs: every output is disabled")
-    if not 0 <= out.rmw_zenoh.domain_id <= 232:
-        problems.append(f"bridge.outputs.rmw_zenoh.domain_id: expected 0..232, "
-                        f"got {out.rmw_zenoh.domain_id}")
-    if not _ROS_NODE.match(out.rmw_zenoh.node):
-        problems.append(f"bridge.outputs.rmw_zenoh.node: {out.rmw_zenoh.node!r} is not a ROS 2 "
-                        "node name")
-    if out.rmw_zenoh.namespace != "/":
-        problems += [f"bridge.outputs.rmw_zenoh.namespace: {p}"
-                     for p in _topic_problems(out.rmw_zenoh.namespace)]
+    for name, node in (("rmw_zenoh", out.rmw_zenoh), ("ros2", out.ros2)):
+        if node.domain_id is not None and not 0 <= node.domain_id <= MAX_DOMAIN:
+            problems.append(f"bridge.outputs.{name}.domain_id: expected 0..{MAX_DOMAIN}, "
+                            f"got {node.domain_id}")
+        if not _ROS_NODE.match(node.node):
+            problems.append(f"bridge.outputs.{name}.node: {node.node!r} is not a ROS 2 node name")
+        if node.namespace != "/":
+            problems += [f"bridge.outputs.{name}.namespace: {p}"
+                         for p in _topic_problems(node.namespace)]
     prefix = out.json.prefix
     if out.json.enabled and out.ros2dds.enabled and not prefix:
         problems.append("bridge.outputs.json.prefix: the json and ros2dds outputs would share "
@@ -260,6 +308,14 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
         problems.append(f"type: unknown ROS 2 message type {m.type!r} (pkg/msg/Name)")
     if not math.isfinite(m.scale) or m.scale == 0.0:
         problems.append(f"scale: must be a finite non-zero number, got {m.scale}")
+    if m.rate_hz is not None and not (math.isfinite(m.rate_hz) and m.rate_hz > 0.0):
+        problems.append(f"rate_hz: must be a number > 0, got {m.rate_hz}")
+    if m.rate_hz is not None and m.direction == "in":
+        problems.append("rate_hz: only outbound topics have a rate")
+    if m.otherwise not in OTHERWISE:
+        problems.append(f"otherwise: expected {', '.join(OTHERWISE)}, got {m.otherwise!r}")
+    if m.joint_names is not None and m.type != JOINT_STATE:
+        problems.append(f"joint_names: only {JOINT_STATE} has joint names")
 
     found = keys.family_of_template(m.key)
     if found is None:
@@ -272,6 +328,8 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
     if unknown:
         problems.append(f"key: unknown placeholder(s) {', '.join(sorted(unknown))}")
     key_item = shape.placeholder if item is not None and item.startswith("{") else None
+    if m.otherwise != "error" and (item is None or key_item is not None):
+        problems.append("otherwise: only for a key that names one component (radio/lander)")
     extra = set(_placeholders(m.topic)) - {"rover"} - ({key_item} if key_item else set())
     if extra:
         problems.append(f"topic: {', '.join('{' + e + '}' for e in sorted(extra))} "
@@ -327,7 +385,7 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
                 problems.append(f"field: {name}.{m.field} is {'not ' if want_bool else ''}"
                                 f"a {'boolean' if want_bool else 'number'}; {m.type} "
                                 f"carries a {'boolean' if want_bool else 'number'}")
-    elif m.type in ARRAY_TYPES:
+    elif m.type in ARRAY_TYPES or m.type == JOINT_STATE:
         if m.field is not None:
             problems.append(f"field: {m.type} carries several values; use fields")
         if not m.fields:
@@ -337,9 +395,14 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
                 problems.append(f"fields: {name} has no field {f!r} (fields: {', '.join(fields)})")
             elif _field_kind(fields[f]) != "number":
                 problems.append(f"fields: {name}.{f} is not a number")
+        if m.joint_names is not None and len(m.joint_names) != len(m.fields or []):
+            problems.append(f"joint_names: {len(m.joint_names)} names for "
+                            f"{len(m.fields or [])} fields")
+        if m.type == JOINT_STATE and m.direction == "in":
+            problems.append(f"direction: {JOINT_STATE} is outbound only")
     elif m.type in store.fielddefs:
         problems.append(f"type: {m.type} needs a converter (convert: ...); plain mappings take "
-                        "std_msgs one-value and MultiArray types")
+                        f"std_msgs one-value and MultiArray types and {JOINT_STATE}")
     integer_type = SCALAR_TYPES.get(m.type, ARRAY_TYPES.get(m.type, "")) in INT_RANGES
     if integer_type and m.integer is False:
         problems.append(f"integer: {m.type} holds integers; the value is always rounded")

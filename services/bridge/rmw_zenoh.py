@@ -7,14 +7,16 @@ entity and the 33-byte attachment every sample carries.
 
 from __future__ import annotations
 
-import hashlib
 import struct
+
+import xxhash
 
 from services.bridge.cdr import typestore
 
 __all__ = [
     "ATTACHMENT_LEN",
     "GID_LEN",
+    "HEARTBEAT_S",
     "attachment",
     "dds_type_name",
     "entity_token",
@@ -28,6 +30,10 @@ __all__ = [
 
 ATTACHMENT_LEN = 33
 GID_LEN = 16
+# rmw_zenoh's SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD (500 ms): a RELIABLE + TRANSIENT_LOCAL
+# publisher sends a sporadic heartbeat, so a subscriber that lost the last sample gets it back
+# from the publisher's cache (rmw_publisher_data.cpp, jazzy 0.2.x and kilted 0.6.x).
+HEARTBEAT_S = 0.5
 
 
 def dds_type_name(typename: str) -> str:
@@ -82,10 +88,11 @@ def entity_token(domain_id: int, zid: str, node_id: int, entity_id: int, kind: s
 
 
 def gid_of(token: str) -> bytes:
-    """A 16-byte GID derived from the entity's liveliness token, as rmw_zenoh derives its own
-    (it uses XXH3-128; any stable 128-bit hash of the token serves: the GID only has to be
-    unique per entity and constant while it lives)."""
-    return hashlib.blake2b(token.encode(), digest_size=GID_LEN).digest()
+    """The 16-byte GID of an entity, as rmw_zenoh computes it (``liveliness_utils.cpp``): the
+    XXH3-128 hash (seed 0) of the entity's whole liveliness token, its low 64 bits then its
+    high 64 bits, each little endian (a ``memcpy`` on a little-endian host): the 128-bit value
+    in little-endian order. It is what ``ros2 topic info -v`` reports as the GID."""
+    return xxhash.xxh3_128_intdigest(token.encode()).to_bytes(GID_LEN, "little")
 
 
 def attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:

@@ -17,20 +17,24 @@ start-up; with a problem the service prints every one and exits with status 2. T
 
 from __future__ import annotations
 
+import heapq
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import msgspec
+import msgspec.inspect
 import zenoh
 
 from common import keys
 from common.config import ConfigError, Rover
 from common.connection import write
+from common.datafile import field_kind, struct_fields
 from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
-from services.bridge.bindings import Binding, expand, rover_names
+from services.bridge.bindings import Binding, domain_of, expand, rover_names, zenoh_key
 from services.bridge.cdr import decode_cdr, encode_cdr
 from services.bridge.convert import (
     battery_state_message,
@@ -42,15 +46,16 @@ from services.bridge.convert import (
     odometry_message,
     out_message,
 )
-from services.bridge.mapping import MappingFile, load_mapping
+from services.bridge.mapping import BridgeOptions, load_mapping
 from services.bridge.rmw_zenoh import (
+    HEARTBEAT_S,
     attachment,
     entity_token,
     gid_of,
     node_token,
     qos_keyexpr,
-    rmw_topic_key,
 )
+from services.bridge.ros2_node import Ros2Graph, Ros2Unavailable, env_domain
 
 __all__ = ["DEFAULT_MAPPING", "resolve_mapping", "serve"]
 
@@ -58,6 +63,7 @@ REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MAPPING = REPO / "config" / "bridge" / "default.yaml"
 PUBLISHER_DEPTH = 1  # the last-value cache: TRANSIENT_LOCAL, KEEP_LAST 1
 SUBSCRIPTION_DEPTH = 10
+RATE_TIMER_S = 0.02  # how often the samples held back by a rate are looked at
 CDR = zenoh.Encoding.APPLICATION_CDR
 JSON = zenoh.Encoding.APPLICATION_JSON
 
@@ -75,37 +81,102 @@ def resolve_mapping(mapping_file: str | None) -> Path:
     return path
 
 
-class _Outlet:
-    """One outbound topic of one binding in every enabled flavour."""
+class _Shared:
+    """What every outlet of one bridge process shares."""
 
-    def __init__(self, rt: Runtime, b: Binding, mf: MappingFile, zid: str, entity_id: int):
-        out = mf.bridge.outputs
-        self.rt, self.binding, self.distro = rt, b, mf.bridge.ros_distro
+    def __init__(self, rt: Runtime, opts: BridgeOptions, zid: str, graph: Ros2Graph | None):
+        self.rt, self.opts, self.zid, self.graph = rt, opts, zid, graph
+        self.ros2_base = (opts.outputs.ros2.domain_id if opts.outputs.ros2.domain_id is not None
+                          else env_domain())
+        self.due: list[tuple[float, int, _Outlet]] = []  # outlets waiting for their rate
+        self.seq = 0
+
+    def rmw_domain(self, b: Binding) -> int:
+        return domain_of(self.opts, self.opts.outputs.rmw_zenoh.domain_id, b.rover, b.place)
+
+    def ros2_domain(self, b: Binding) -> int:
+        return domain_of(self.opts, self.ros2_base, b.rover, b.place)
+
+
+class _Outlet:
+    """One outbound topic of one binding in every enabled flavour: the message is built and
+    CDR-encoded once per published sample, whatever the number of flavours; a flavour that is
+    not enabled costs nothing. The rmw_zenoh publisher (its liveliness token included) and the
+    ROS 2 publisher are declared with the first sample, so a topic that never publishes (a
+    null value without a default) is not advertised."""
+
+    def __init__(self, shared: _Shared, b: Binding, entity_id: int):
+        out = shared.opts.outputs
+        self.shared, self.binding, self.entity_id = shared, b, entity_id
         self.type = b.mapping.type
-        bare = b.topic.strip("/")
-        self.dds_key = bare if out.ros2dds.enabled else None
-        self.json_key = f"{out.json.prefix}/{bare}" if out.json.enabled else None
-        self.rmw_key: str | None = None
-        if out.rmw_zenoh.enabled:
-            r = out.rmw_zenoh
-            self.rmw_key = rmw_topic_key(r.domain_id, b.topic, self.type, self.distro)
-            token = entity_token(r.domain_id, zid, 0, entity_id, "MP", r.namespace, r.node,
-                                 b.topic, self.type, qos_keyexpr(True, PUBLISHER_DEPTH), self.distro)
-            rt.keep(rt.zenoh_session.liveliness().declare_token(token))
-            self.gid = gid_of(token)
-            self.sequence = 0
+        self.dds_key = zenoh_key(b, shared.opts, "ros2dds") if out.ros2dds.enabled else None
+        self.json_key = zenoh_key(b, shared.opts, "json") if out.json.enabled else None
+        self.rmw_key = zenoh_key(b, shared.opts, "rmw_zenoh") if out.rmw_zenoh.enabled else None
+        self.ros2 = out.ros2.enabled
+        self.gid = b""
+        self.sequence = 0
+        self._ros2_publish: Callable[[bytes], None] | None = None
+        rate = b.mapping.rate_hz
+        self.period_s = 1.0 / rate if rate else 0.0
+        self.next_s = 0.0  # monotonic time from which the next sample may go
+        self.discrete: tuple | None = None  # the discrete fields at the last publish
+        self.pending: Any = None  # the latest payload held back by the rate
+        self.scheduled = False
+
+    def _declare_rmw(self) -> None:
+        sh, b = self.shared, self.binding
+        r = sh.opts.outputs.rmw_zenoh
+        token = entity_token(sh.rmw_domain(b), sh.zid, 0, self.entity_id, "MP", r.namespace,
+                             r.node, b.topic, self.type, qos_keyexpr(True, PUBLISHER_DEPTH),
+                             sh.opts.ros_distro)
+        sh.rt.keep(sh.rt.zenoh_session.liveliness().declare_token(token))
+        self.gid = gid_of(token)
 
     def publish(self, msg: dict) -> None:
-        if self.dds_key or self.rmw_key:
-            cdr = encode_cdr(self.type, msg, self.distro)
+        rt, distro = self.shared.rt, self.shared.opts.ros_distro
+        if self.dds_key or self.rmw_key or self.ros2:
+            cdr = encode_cdr(self.type, msg, distro)
             if self.dds_key:
-                self.rt.publish_bytes(self.dds_key, cdr, CDR)
+                rt.publish_bytes(self.dds_key, cdr, CDR)
             if self.rmw_key:
+                if not self.gid:
+                    self._declare_rmw()
                 self.sequence += 1
-                self.rt.publish_bytes(self.rmw_key, cdr, CDR,
-                                      attachment(self.sequence, time.time_ns(), self.gid))
+                rt.publish_bytes(self.rmw_key, cdr, CDR,
+                                 attachment(self.sequence, time.time_ns(), self.gid),
+                                 heartbeat_s=HEARTBEAT_S)
+            if self.ros2:
+                if self._ros2_publish is None:
+                    graph = self.shared.graph
+                    assert graph is not None, "the ros2 flavour has its graph"
+                    self._ros2_publish = graph.publisher(self.shared.ros2_domain(self.binding),
+                                                         self.binding.topic, self.type)
+                self._ros2_publish(cdr)
         if self.json_key:
-            self.rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON)
+            rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON)
+
+    def offer(self, payload: Any, discrete: tuple, now: float,
+              build: Callable[[_Outlet, Any], dict | None]) -> None:
+        """A new twin sample: published at once when the mapping has no rate, when its rate
+        allows, or when a discrete field changed; else held until the rate allows."""
+        if self.period_s == 0.0 or now >= self.next_s or discrete != self.discrete:
+            self.send(payload, discrete, now, build)
+            return
+        self.pending = (payload, discrete)
+        if not self.scheduled:
+            self.scheduled = True
+            sh = self.shared
+            sh.seq += 1
+            heapq.heappush(sh.due, (self.next_s, sh.seq, self))
+
+    def send(self, payload: Any, discrete: tuple, now: float,
+             build: Callable[[_Outlet, Any], dict | None]) -> None:
+        self.pending = None
+        msg = build(self, payload)
+        if msg is not None:
+            self.publish(msg)
+        self.discrete = discrete
+        self.next_s = now + self.period_s
 
 
 def _family(key_template: str) -> keys.Family:
@@ -114,37 +185,63 @@ def _family(key_template: str) -> keys.Family:
     return found[0]
 
 
+def _discrete_fields(payload: type[msgspec.Struct]) -> tuple[str, ...]:
+    """The fields of a payload whose every change is news (flags, states, faults, counts):
+    all but the floating-point values and the time."""
+    out = []
+    for f in struct_fields(payload):
+        kind, _ = field_kind(f.type)
+        if f.name != "t_s" and (kind != "number" or isinstance(f.type, msgspec.inspect.IntType)):
+            out.append(f.name)
+    return tuple(out)
+
+
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
-          mapping_file: str | None = None) -> None:
+          mapping_file: str | None = None, fleet: list[str] | None = None) -> None:
+    """Serve ``rovers``, members of ``fleet`` (the ids of every rover of the deployment, in
+    order, whichever bridge serves each; default: these rovers)."""
     path = resolve_mapping(mapping_file)
     try:
         mf = load_mapping(path)
-        bindings = expand(mf, [rover_names(r) for r in rovers], source=str(path))
+        bindings = expand(mf, [rover_names(r) for r in rovers], source=str(path), fleet=fleet)
     except ConfigError as exc:
         print(exc, file=sys.stderr, flush=True)
         raise SystemExit(2) from None
     opts = mf.bridge
+    graph: Ros2Graph | None = None
+    if opts.outputs.ros2.enabled:
+        try:
+            graph = Ros2Graph(opts.outputs.ros2.node, opts.outputs.ros2.namespace)
+            for b in bindings:  # every message type there, before anything is declared
+                graph.message_class(b.mapping.type)
+        except Ros2Unavailable as exc:
+            print(f"{path}: bridge.outputs.ros2: {exc}", file=sys.stderr, flush=True)
+            raise SystemExit(2) from None
+        rt.on_exit(graph.close)
     rover_cfg = {r.id: r for r in rovers}
-    zid = str(rt.zenoh_session.info.zid())
+    shared = _Shared(rt, opts, str(rt.zenoh_session.info.zid()), graph)
     rmw = opts.outputs.rmw_zenoh
     if rmw.enabled:
-        rt.keep(rt.zenoh_session.liveliness().declare_token(
-            node_token(rmw.domain_id, zid, 0, rmw.namespace, rmw.node)))
+        for domain in sorted({shared.rmw_domain(b) for b in bindings}):
+            rt.keep(rt.zenoh_session.liveliness().declare_token(
+                node_token(domain, shared.zid, 0, rmw.namespace, rmw.node)))
 
     # -- outbound -----------------------------------------------------------------------------
     by_key: dict[str, list[_Outlet]] = {}  # twin key -> its outlets
     payload_type: dict[str, type[msgspec.Struct]] = {}
+    discrete_of: dict[type, tuple[str, ...]] = {}
     diag_outlets: dict[str, list[_Outlet]] = {}  # rover -> DiagnosticArray outlets
     # rmw_zenoh entity ids: the node is 0, each binding its position in the list from 1
     for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction == "in":
             continue
-        outlet = _Outlet(rt, b, mf, zid, entity_id)
+        outlet = _Outlet(shared, b, entity_id)
         if b.mapping.convert == "diagnostics":
             diag_outlets.setdefault(b.rover, []).append(outlet)
         else:
             by_key.setdefault(b.key, []).append(outlet)
-            payload_type[b.key] = _family(b.mapping.key).payload
+            payload_type[b.key] = typ = _family(b.mapping.key).payload
+            discrete_of.setdefault(typ, _discrete_fields(typ))
 
     latest: dict[str, msgspec.Struct] = {}
     dirty: set[str] = set()
@@ -160,7 +257,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
                                          opts.ros_distro)
         if m.convert == "odometry":
             return odometry_message(payload, stamp_ns(payload.t_s), m.frame_id, m.options)
-        return out_message(m, payload)
+        return out_message(m, payload, stamp_ns(payload.t_s))
 
     # -- diagnostics: the faults in effect and each component's last telemetry -----------------
     # rover -> owning service -> its faults in effect (a view of the owners' records)
@@ -204,30 +301,47 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         diag_dirty.add(s.rover)
 
     def flush() -> None:
+        now = time.monotonic()
         for key in sorted(dirty):
             payload = latest[key]
+            discrete = tuple(getattr(payload, f) for f in discrete_of[type(payload)])
             for outlet in by_key[key]:
-                msg = message(outlet, payload)
-                if msg is not None:
-                    outlet.publish(msg)
+                outlet.offer(payload, discrete, now, message)
         dirty.clear()
         for rover in sorted(diag_dirty):
             publish_diagnostics(rover)
         diag_dirty.clear()
 
+    def flush_due() -> None:
+        """The samples held back by a rate, once it allows them."""
+        now = time.monotonic()
+        due = shared.due
+        while due and due[0][0] <= now:
+            _, _, outlet = heapq.heappop(due)
+            outlet.scheduled = False
+            if outlet.pending is not None:
+                payload, discrete = outlet.pending
+                outlet.send(payload, discrete, now, message)
+
     def periodic_diagnostics() -> None:
         for rover in diag_outlets:
             publish_diagnostics(rover)
 
-    # One subscription per family of keys (lunaris/*/rail/*/state ...); samples are told apart
-    # by their exact key above.
-    patterns = {_family(o.binding.mapping.key).pattern() for ol in by_key.values() for o in ol}
-    patterns |= {_family(data_key("{rover}", c)).pattern() for cs in comps.values() for c in cs}
-    for pattern in sorted(patterns):
+    # One subscription per family of keys (lunaris/*/rail/*/state ...), samples told apart by
+    # their exact key above. A bridge that serves part of the fleet (a shard) subscribes for
+    # its own rovers only: the other shards' samples never reach it.
+    fams = {_family(o.binding.mapping.key) for ol in by_key.values() for o in ol}
+    fams |= {_family(data_key("{rover}", c)) for cs in comps.values() for c in cs}
+    fleet_size = len(fleet) if fleet is not None else len(rovers)
+    served = ["*"] if len(rovers) == fleet_size else sorted(rover_cfg)
+    for pattern in sorted({f.pattern(r) for f in fams for r in served}):
         rt.subscribe(pattern, on_twin, history=True)
     if diag_outlets:
-        rt.subscribe(keys.faults_active("*", "*"), on_faults, history=True)
+        for r in served:
+            rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True)
         rt.every(opts.diagnostics_period_s, periodic_diagnostics)
+    if any(o.period_s for ol in by_key.values() for o in ol):
+        rt.every(RATE_TIMER_S, flush_due)
     rt.after_batch(flush)
 
     # -- inbound ------------------------------------------------------------------------------
@@ -258,19 +372,20 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction != "in":
             continue
-        bare = b.topic.strip("/")
         if opts.outputs.ros2dds.enabled:
-            listen(b, "ros2dds", bare)
+            listen(b, "ros2dds", zenoh_key(b, opts, "ros2dds"))
         if opts.outputs.json.enabled:
-            listen(b, "json", f"{opts.outputs.json.prefix}/{bare}")
+            listen(b, "json", zenoh_key(b, opts, "json"))
         if rmw.enabled:
             # Any type hash: a Humble node (TypeHashNotSupported) is heard as well as a Jazzy one.
-            key = rmw_topic_key(rmw.domain_id, b.topic, b.mapping.type, opts.ros_distro)
-            listen(b, "rmw_zenoh", key.rsplit("/", 1)[0] + "/*")
+            listen(b, "rmw_zenoh", zenoh_key(b, opts, "rmw_zenoh").rsplit("/", 1)[0] + "/*")
             rt.keep(rt.zenoh_session.liveliness().declare_token(entity_token(
-                rmw.domain_id, zid, 0, entity_id, "MS", rmw.namespace, rmw.node, b.topic,
-                b.mapping.type, qos_keyexpr(False, SUBSCRIPTION_DEPTH), opts.ros_distro)))
+                shared.rmw_domain(b), shared.zid, 0, entity_id, "MS", rmw.namespace, rmw.node,
+                b.topic, b.mapping.type, qos_keyexpr(False, SUBSCRIPTION_DEPTH), opts.ros_distro)))
+        if graph is not None:
+            def on_ros2(raw: bytes, b: Binding = b) -> None:
+                rt.call_soon(on_inbound, b, "ros2", b.topic, bytes(raw))
+            graph.subscribe(shared.ros2_domain(b), b.topic, b.mapping.type, on_ros2)
 
     for rover in diag_outlets:
         diag_dirty.add(rover)
-

@@ -3,12 +3,15 @@
 Panel power [W] = ``irradiance * area * efficiency * max(0, cos(angle)) *
 (1 - dust) * (1 - degradation)``; a disconnected panel gives nothing. The sun angle is the
 rover's (``input/sun_angle``) unless a panel has its own (``input/solar/<panel>/sun_angle``,
-until it is deleted). The umbilical, when connected, can supply up to its ``power_w``.
+until it is deleted). Dust is the instructor's dust fault and the dashboard's
+``input/solar/<panel>/dust``, two layers: ``1 - (1 - fault) * (1 - input)``. The umbilical,
+when connected, can supply up to its ``power_w``.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from common.config import Rover
 from common.faults import FaultKey, FractionParams, Params
@@ -29,15 +32,16 @@ class SolarModel:
         self.umbilical_cfg = rover.umbilical
         self.sun_angle_deg = rover.solar.sun_angle_deg
         self.panel_angle_deg: dict[str, float] = {}  # panels with their own sun angle
-        self.dust = {p.name: 0.0 for p in rover.solar.panels}
+        self.dust = {p.name: 0.0 for p in rover.solar.panels}  # the dust fault's fraction
+        self.input_dust: dict[str, float] = {}  # dust set as an input (the dashboard's)
         self.disconnected: set[str] = set()
         self.umbilical_plugged = rover.umbilical.connected
         self.umbilical_fault = False
 
-    def state(self) -> dict[str, float | bool | dict[str, float]]:
+    def state(self) -> dict[str, Any]:
         """The inputs that evolve (the panels' faults are re-applied by their owner)."""
         return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged,
-                "panel_angle_deg": dict(self.panel_angle_deg)}
+                "panel_angle_deg": dict(self.panel_angle_deg), "input_dust": dict(self.input_dust)}
 
     def set_state(self, state: dict) -> None:
         self.sun_angle_deg = float(state.get("sun_angle_deg", self.cfg.sun_angle_deg))
@@ -45,6 +49,18 @@ class SolarModel:
         self.panel_angle_deg = {n: float(a) for n, a in (state.get("panel_angle_deg") or {}).items()
                                 if n in names}
         self.umbilical_plugged = bool(state.get("umbilical_plugged", self.umbilical_cfg.connected))
+        self.input_dust = {k: float(v) for k, v in state.get("input_dust", {}).items() if k in names}
+
+    def set_input_dust(self, panel: str, fraction: float | None) -> None:
+        """Dust on a panel as an input (``input/solar/<panel>/dust``, what the dashboard
+        sends); it combines with a dust fault as two layers: ``1 - (1 - a)(1 - b)``. None
+        clears it."""
+        if panel not in self.dust:
+            raise ValueError(f"no panel {panel!r} (panels: {', '.join(self.dust) or 'none'})")
+        if fraction is None:
+            self.input_dust.pop(panel, None)
+        else:
+            self.input_dust[panel] = fraction
 
     def reset(self) -> None:
         """The rover file's sun angle and umbilical."""
@@ -83,8 +99,9 @@ class SolarModel:
         """``(panel, power_w, dust, faults)`` for every panel (its angle: :meth:`angle_of`)."""
         out = []
         for p in self.cfg.panels:
-            dust = self.dust[p.name]
-            faults = (["dust"] if dust > 0.0 else []) + (
+            fault_dust = self.dust[p.name]
+            dust = 1.0 - (1.0 - fault_dust) * (1.0 - self.input_dust.get(p.name, 0.0))
+            faults = (["dust"] if fault_dust > 0.0 else []) + (
                 ["disconnect"] if p.name in self.disconnected else [])
             power = 0.0 if p.name in self.disconnected else panel_power(
                 self.cfg.irradiance_w_per_m2, p.area_m2, p.efficiency, self.angle_of(p.name),

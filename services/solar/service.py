@@ -1,6 +1,7 @@
 """Solar service: panel power and the umbilical; ``input/sun_angle`` moves the sun (for one
-panel ``input/solar/<panel>/sun_angle``, until deleted), ``input/umbilical`` plugs it in.
-Each accepted input is journalled as an ``input`` event."""
+panel ``input/solar/<panel>/sun_angle``, until deleted), ``input/solar/<panel>/dust`` lays dust
+on one (the dashboard's, besides the instructor's dust fault; until deleted),
+``input/umbilical`` plugs it in. Each accepted input is journalled as an ``input`` event."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from common.messages import (
     BARE_FIELD,
     BadInput,
     Clock,
+    DustInput,
     SolarPower,
     SunAngle,
     UmbilicalInput,
@@ -61,6 +63,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         publish(s.rover)
         rt.accepted_input(s.rover, s.key, message)
 
+    def on_panel_dust(s: Sample) -> None:
+        m, panel = models[s.rover], s.parts[2]
+        if panel not in m.panel_names():
+            raise BadInput(f"rover {s.rover} has no panel {panel!r} "
+                           f"(panels: {', '.join(m.panel_names()) or 'none'})")
+        if s.deleted:
+            m.set_input_dust(panel, None)
+            message = f"no dust input on panel {panel}"
+        else:
+            fraction = decode_input(s.payload, DustInput, bare=BARE_FIELD[DustInput]).fraction
+            m.set_input_dust(panel, fraction)
+            message = f"dust {fraction:g} on panel {panel}"
+        publish(s.rover)
+        rt.accepted_input(s.rover, s.key, message)
+
     def on_umbilical(s: Sample) -> None:
         if s.deleted:
             raise BadInput('the umbilical input is a put: {"connected": true|false}')
@@ -78,6 +95,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.input_sun_angle("*"), on_sun)
     rt.subscribe(keys.input_panel_sun_angle("*", "*"), on_panel_sun)
     rt.subscribe(keys.input_umbilical("*"), on_umbilical)
+    rt.subscribe(keys.input_solar_dust("*", "*"), on_panel_dust)
     rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_fault)
     rt.faults.own("umbilical", None, apply_fault)
     rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),

@@ -131,18 +131,30 @@ def test_the_dashboard_sends_its_inbound_topic_and_nothing_else(router: Router) 
     bridge = router.open("lunaris-bridge")
     dashboard = router.open("dashboard")
     inbound = Collector()
-    bridge.declare_subscriber("curr_to_receiving_radio_m", inbound)
+    # The deployment's fleet has two rovers: each dashboard topic carries the rover's
+    # namespace (ros2dds) or ROS 2 domain (rmw_zenoh), the plain name on the dashboard's side.
+    bridge.declare_subscriber("mapp_1/curr_to_receiving_radio_m", inbound)
     bridge.declare_subscriber("json/**", inbound)
+    bridge.declare_subscriber("1/curr_to_receiving_radio_m/std_msgs::msg::dds_::Float64MultiArray_/*",
+                              inbound)
     bridge.declare_subscriber(keys.under(ROVER), inbound)
-    pub = dashboard.declare_publisher("curr_to_receiving_radio_m")
+    pub = dashboard.declare_publisher("mapp_1/curr_to_receiving_radio_m")
     _wait_subscribed(pub, "the dashboard's publisher to see the bridge's subscriber")
+    # the json flavour is off: its inbound key is no topic of the dashboard's, nor is a key
+    # outside the rovers' namespaces and domains, nor an rmw_zenoh key of another type
     for key in (keys.input_sun_angle(ROVER), keys.fault(ROVER, "battery", "heating"),
-                "json/battery_state"):
+                "json/battery_state", "json/curr_to_receiving_radio_m",
+                "json/mapp_1/curr_to_receiving_radio_m", "crew/curr_to_receiving_radio_m",
+                "7/curr_to_receiving_radio_m/std_msgs::msg::dds_::Float64MultiArray_/h",
+                "0/curr_to_receiving_radio_m/std_msgs::msg::dds_::String_/h"):
         dashboard.put(key, b"dashboard-forged")
     _barrier(dashboard)
     pub.put(b"dashboard")
-    wait_for(lambda: _received(inbound), "the dashboard's rover position")
-    assert _received(inbound) == [("SampleKind.PUT", b"dashboard")]
+    dashboard.put("1/curr_to_receiving_radio_m/std_msgs::msg::dds_::Float64MultiArray_/RIHS01_x",
+                  b"rmw_zenoh")
+    wait_for(lambda: len(_received(inbound)) >= 2, "the dashboard's rover positions")
+    assert sorted(_received(inbound)) == [("SampleKind.PUT", b"dashboard"),
+                                          ("SampleKind.PUT", b"rmw_zenoh")]
 
 
 # -- reading ---------------------------------------------------------------------------------
@@ -204,8 +216,8 @@ def test_the_dashboard_reads_the_bridges_topics(router: Router) -> None:
     bridge = router.open("lunaris-bridge")
     dashboard = router.open("dashboard")
     got = Collector()
-    dashboard.declare_subscriber("final_comms_radio_bool", got)
-    pub = bridge.declare_publisher("final_comms_radio_bool")
+    dashboard.declare_subscriber("ltv_1/final_comms_radio_bool", got)
+    pub = bridge.declare_publisher("ltv_1/final_comms_radio_bool")
     wait_for(lambda: pub.matching_status.matching, "the bridge to see the dashboard")
     pub.put(b"\x00\x01\x00\x00\x01")
     wait_for(lambda: _received(got), "the dashboard's sample")

@@ -7,6 +7,7 @@ secrets `lunaris deploy secrets` makes (deploy/secrets/ is never in the reposito
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -102,7 +103,7 @@ def test_nothing_starts_before_the_secrets_are_checked(compose: dict[str, Any], 
     assert pre["command"] == ["deploy", "check", "/etc/lunaris/secrets"]
     assert Path(_mounts(pre)["/etc/lunaris/secrets"]) == SECRETS
     for name, service in compose["services"].items():
-        if name in ("preflight", "zenoh-bridge-ros2dds"):
+        if name == "preflight" or name.startswith("zenoh-bridge-ros2dds"):
             continue
         assert service["depends_on"]["preflight"]["condition"] == "service_completed_successfully", name
     assert check_secrets(made_secrets) == []
@@ -142,16 +143,31 @@ def test_each_service_runs_from_the_one_image(compose: dict[str, Any], name: str
     assert mounts[STATE_DIR] in compose["volumes"], "state is not on a named volume"
 
 
-def test_the_ros2dds_bridge_is_an_optional_profile(compose: dict[str, Any]) -> None:
+def test_the_ros2dds_bridges_are_an_optional_profile_one_per_rover(
+        compose: dict[str, Any], made_secrets: Path) -> None:
     profiled = {n for n, s in compose["services"].items() if s.get("profiles")}
-    assert profiled == {"zenoh-bridge-ros2dds"}
-    bridge = compose["services"]["zenoh-bridge-ros2dds"]
-    assert bridge["profiles"] == ["ros2dds"]
-    assert bridge["image"].startswith("eclipse/zenoh-bridge-ros2dds:")
-    assert "router" in bridge["depends_on"]
-    command = bridge["command"]
-    config = command[command.index("-c") + 1]
-    assert Path(_mounts(bridge)[config]) == SECRETS / "zenoh-bridge-ros2dds.json5"
+    rovers = ["mapp-1", "ltv-1"]  # the fleet of the compose file, in its order
+    assert profiled == {f"zenoh-bridge-ros2dds-{r}" for r in rovers}
+    for domain, rover in enumerate(rovers):
+        bridge = compose["services"][f"zenoh-bridge-ros2dds-{rover}"]
+        assert bridge["profiles"] == ["ros2dds"]
+        assert bridge["image"].startswith("eclipse/zenoh-bridge-ros2dds:")
+        assert "router" in bridge["depends_on"]
+        command = bridge["command"]
+        config = command[command.index("-c") + 1]
+        assert Path(_mounts(bridge)[config]) == SECRETS / f"zenoh-bridge-ros2dds-{rover}.json5"
+        # the rover's namespace and domain: its dashboard sees the plain topic names
+        made = json.loads((made_secrets / f"zenoh-bridge-ros2dds-{rover}.json5").read_text())
+        plugin = made["plugins"]["ros2dds"]
+        assert plugin["namespace"] == "/" + rover.replace("-", "_") and plugin["domain"] == domain
+        assert "/curr_to_receiving_radio_m" in plugin["allow"]["publishers"]
+    # every rover served by exactly one bridge process, each given the whole fleet
+    shards = [s["command"] for n, s in compose["services"].items()
+              if s.get("command", [""])[:2] == ["run", "bridge"]]
+    assert sorted(c[c.index("--shard") + 1] for c in shards) == ["1/2", "2/2"]
+    for c in shards:
+        assert [c[i + 1] for i, a in enumerate(c) if a == "--rover"] == [
+            "config/rovers/mapp.yaml", "config/rovers/ltv.yaml"]
 
 
 def test_every_mounted_host_file_is_in_the_repository(compose: dict[str, Any],

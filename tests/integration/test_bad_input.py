@@ -33,7 +33,7 @@ KEYS: dict[str, list[bytes]] = {
     f"{P}/fault/radio/lander/failure": [b"0"],
     f"{P}/fault/radio/lander/degraded": [b"1.2", b"false"],
     f"{P}/input/sun_angle": [b"1000", b"true", b""],
-    f"{P}/input/radio/lander/position": [b'{"distance_m": -1, "angle_deg": 0}', b"5",
+    f"{P}/input/radio/lander/position": [b'{"distance_m": -2e9, "angle_deg": 0}', b"5",
                                           b'{"distance_m": 10}'],
     f"{P}/input/umbilical": [b"1", b'{"connected": "yes"}'],
     f"{P}/cmd/rail/12V": [b"{}", b'{"on": 1}', b'{"reset": "now"}'],

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import pytest
+import xxhash
 import zenoh
 
 from common import keys
@@ -41,11 +42,24 @@ RMW_KEY = re.compile(
 BOOL, INT32, FLOAT32 = "std_msgs/msg/Bool", "std_msgs/msg/Int32", "std_msgs/msg/Float32"
 BATTERY, DIAGNOSTICS = "sensor_msgs/msg/BatteryState", "diagnostic_msgs/msg/DiagnosticArray"
 MULTI = "std_msgs/msg/Float64MultiArray"
+FLOAT64, JOINTS = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
+DEFAULT_MAPPING = ROOT / "config" / "bridge" / "default.yaml"
+
+
+def every_flavour_mapping(folder: Path) -> Path:
+    """The default mapping with the json flavour on too (the shipped one leaves it off)."""
+    text = DEFAULT_MAPPING.read_text()
+    assert "json: {enabled: false, prefix: json}" in text
+    path = folder / "every-flavour.yaml"
+    path.write_text(text.replace("json: {enabled: false, prefix: json}",
+                                 "json: {enabled: true, prefix: json}"))
+    return path
 
 
 def expected_topics() -> dict[str, str]:
     """Every outbound topic of the default mapping for the MAPP rover -> its message type."""
     out = {"/final_comms_radio_bool": BOOL, "/battery_state": BATTERY, "/diagnostics": DIAGNOSTICS,
+           "/battery_remaining_energy_j": FLOAT64, "/power_summary": JOINTS,
            "/pdm/sys_bus_voltage_mv": INT32, "/pdm/battery_voltage_mv": INT32,
            "/pdm/battery_current_ma": INT32, "/pdm/battery_power_mw": INT32}
     out |= {f"/load_{load}_power_w": FLOAT32 for load in LOADS}
@@ -155,11 +169,13 @@ def close(a: float | None, b: float, rel: float = 2e-6, abs_: float = 1e-5) -> b
 
 
 @pytest.fixture
-def dashboard(probe, twin_factory, mapp_file):
-    """The twin and the bridge, with a tap that was listening before the bridge started."""
+def dashboard(probe, twin_factory, mapp_file, tmp_path):
+    """The twin and the bridge in every flavour, with a tap that was listening before the
+    bridge started."""
     tap = Tap(probe.session)
     probe.watch(f"lunaris/{R}/**")
-    twin = twin_factory([mapp_file], services=SERVICES)
+    twin = twin_factory([mapp_file], services=SERVICES,
+                        extra={"bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path))]})
     probe.wait_services(R, SERVICES)
     return twin, tap
 
@@ -216,6 +232,13 @@ def mismatches(tap: Tap, probe, flavour: str) -> list[str]:
     if tap.key(flavour, "/pdm/rail_SOLAR_current_limit_ma") in tap.keys():
         bad.append("a null current limit was published")
 
+    if (m := msg("/battery_remaining_energy_j")) is not None and not close(m["data"], b["energy_j"]):
+        bad.append(f"battery_remaining_energy_j {m['data']} vs {b['energy_j']}")
+    if (m := msg("/power_summary")) is not None:
+        names = ["load_power_w", "bus_power_w", "generation_w", "net_battery_power_w", "bus_voltage_v"]
+        if list(m["name"]) != names or not all(close(v, s[n]) for n, v in zip(
+                names, m["position"], strict=True)):
+            bad.append(f"power_summary {m['name']} {m['position']} vs {s}")
     if (m := msg("/battery_state")) is not None:
         v_nom = nominal_voltage_v()
         want = {"voltage": b["voltage_v"], "temperature": b["temperature_c"],
@@ -298,18 +321,26 @@ def test_rmw_zenoh_keys_attachments_and_liveliness(dashboard, probe):
         if parts[5] == "MP":
             assert parts[2] == zid and parts[8] == "lunaris_bridge", t
             publishers[parts[9].replace("%", "/")] = (parts[10], parts[11], parts[12])
-    # what `ros2 topic list` shows: every outbound topic with its type and hash (the solar
-    # rail's current limit too: it has a publisher, which never publishes a null limit)
-    assert set(publishers) == set(TOPICS) | {"/pdm/rail_SOLAR_current_limit_ma"}
+    # what `ros2 topic list` shows: every outbound topic with its type and hash; not the solar
+    # rail's current limit, which is null and never published
+    assert set(publishers) == set(TOPICS)
     assert publishers["/final_comms_radio_bool"][:2] == ("std_msgs::msg::dds_::Bool_", BOOL_HASH)
     assert publishers["/battery_state"][0] == "sensor_msgs::msg::dds_::BatteryState_"
     assert publishers["/diagnostics"][0] == "diagnostic_msgs::msg::dds_::DiagnosticArray_"
     for topic, (_, type_hash, qos) in publishers.items():
         assert topic not in TOPICS or type_hash == tap.rmw_key(topic).rsplit("/", 1)[1]
         assert qos == ":1:,1:,:,:,,", qos  # TRANSIENT_LOCAL, KEEP_LAST 1
-    subs = [t.split("/") for t in tokens if "/MS/" in t]
-    assert [(p[9], p[10]) for p in subs] == [
-        ("%curr_to_receiving_radio_m", "std_msgs::msg::dds_::Float64MultiArray_")]
+    subs = sorted((p[9], p[10]) for p in (t.split("/") for t in tokens if "/MS/" in t))
+    assert subs == sorted([("%curr_to_receiving_radio_m", "std_msgs::msg::dds_::Float64MultiArray_")]
+                          + [(f"%solar_{p.name}_{what}", "std_msgs::msg::dds_::Float64_")
+                             for p in MAPP.solar.panels for what in ("dust", "sun_angle_deg")])
+    # each GID is XXH3-128 of its publisher's token, low then high 64 bits (rmw_zenoh's)
+    for t in tokens:
+        parts = t.split("/")
+        if parts[5] == "MP":
+            topic = parts[9].replace("%", "/")
+            want = xxhash.xxh3_128_intdigest(t.encode()).to_bytes(16, "little")
+            assert gids[topic] == want, topic
 
 
 # -- inbound -------------------------------------------------------------------------------------
@@ -326,7 +357,8 @@ def _put_position(probe, tap: Tap, flavour: str, distance_m: float, angle_deg: f
         return
     # As a ROS 2 node on rmw_zenoh would: the key from the advertised type, an attachment.
     token = next(str(r.ok.key_expr) for r in probe.session.liveliness().get("@ros2_lv/0/**")
-                 if r.ok is not None and "/MS/" in str(r.ok.key_expr))
+                 if r.ok is not None and "/MS/" in str(r.ok.key_expr)
+                 and "/%curr_to_receiving_radio_m/" in str(r.ok.key_expr))
     parts = token.split("/")
     key = f"0/curr_to_receiving_radio_m/{parts[10]}/{parts[11]}"
     seq = getattr(tap, "inbound_seq", 0) + 1
@@ -339,13 +371,15 @@ def _put_position(probe, tap: Tap, flavour: str, distance_m: float, angle_deg: f
 def test_the_dashboard_position_moves_the_radio_and_back(dashboard, probe, flavour):
     twin, tap = dashboard
     link = keys.radio_link(R, "lander")
+    # -5 m at 180 deg: a negative distance is the opposite bearing, 5 m at 0 deg
     for distance_m, in_range in ((1000.0, False), (100.0, True), (380.0, True), (0.0, True),
-                                 (300.0, False)):
-        angle_deg = 90.0 if distance_m == 300.0 else 0.0  # along the 250 m minor axis: out
+                                 (300.0, False), (-5.0, True)):
+        angle_deg = {300.0: 90.0, -5.0: 180.0}.get(distance_m, 0.0)  # 300 m north: out
         sent = time.monotonic()
         _put_position(probe, tap, flavour, distance_m, angle_deg)
         probe.wait_value(link, lambda v, d=distance_m, r=in_range: v["in_range"] is r and
-                         math.isclose(math.hypot(v["x_m"], v["y_m"]), d, abs_tol=1e-6))
+                         math.isclose(math.hypot(v["x_m"], v["y_m"]), abs(d), abs_tol=1e-6)
+                         and (d >= 0 or math.isclose(v["x_m"], 5.0, abs_tol=1e-9)))
         settle(lambda w=in_range, t0=sent: [] if (m := tap.message(
             flavour, "/final_comms_radio_bool", after=t0)) is not None and m["data"] == w
             else ["final_comms_radio_bool"], what=f"final_comms_radio_bool {in_range}")
@@ -358,7 +392,7 @@ def test_a_bad_dashboard_message_is_rejected(dashboard, probe):
                      and "not a CDR std_msgs/msg/Float64MultiArray" in e["message"])
     probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [1.0]}))
     probe.wait_event(R, lambda e: e["kind"] == "rejected" and "expected 2 values" in e["message"])
-    probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [-5.0, 0.0]}))
+    probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [-2e9, 0.0]}))
     probe.wait_event(R, lambda e: e["kind"] == "rejected" and e["source"] == "radio"
                      and "distance_m" in e["message"])
 
@@ -489,3 +523,26 @@ def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, route
     # one rail's values together, in the dashboard's order
     i = list(table).index("12V voltage")
     assert list(table)[i:i + 4] == ["12V voltage", "12V current", "12V power", "12V current limit"]
+
+
+def test_rates_hold_continuous_values_and_let_discrete_changes_through(dashboard, probe):
+    twin, tap = dashboard
+    settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
+    t0 = time.monotonic()
+    time.sleep(3.0)  # the twin ticks at 10 Hz: the battery's key ~10/s, the PDM's topics 2/s
+    t1 = time.monotonic()
+
+    def per_s(key: str) -> float:
+        return sum(1 for r in tap.history(key) if t0 <= r.t_mono < t1) / (t1 - t0)
+    assert per_s(keys.battery_state(R)) >= 8.0
+    pdm = per_s("pdm/battery_voltage_mv")
+    assert 1.0 <= pdm <= 2.7, f"{pdm:.2f} PDM samples per second at rate_hz 2"
+    assert 3.0 <= per_s("battery_state") <= 5.7  # rate_hz 5
+    # a discrete change (the rail's state) is not held back by the rate
+    t2 = time.monotonic()
+    probe.put(keys.fault(R, "rail/5V_CH2", "fail"))
+    settle(lambda: [] if _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2,
+                                lambda m: m["data"] == 0) else ["0 mV"], what="0 mV")
+    latency = _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2, lambda m: m["data"] == 0) - t2
+    assert latency < 0.25, f"the failed rail took {latency * 1e3:.0f} ms at rate_hz 2"
+    probe.delete(keys.fault(R, "rail/5V_CH2", "fail"))

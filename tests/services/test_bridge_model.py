@@ -86,22 +86,120 @@ def test_default_mapping_covers_what_the_dashboard_uses():
     assert {b.mapping.unit for b in pdm.values()} == {"mV", "mA", "mW"}
 
 
-def test_a_fleet_gets_prefixed_ros_safe_topics():
+def test_a_fleet_keeps_the_plain_topics_one_ros_domain_per_rover():
     mf = mp.load_mapping(DEFAULT)
+    fleet = [MAPP.id, LTV.id]
     bindings = bd.expand(mf, [bd.rover_names(MAPP), bd.rover_names(LTV)])
-    topics = {b.topic for b in bindings}
-    assert "/mapp_1/final_comms_radio_bool" in topics
-    assert "/ltv_1/pdm/rail_TRACTION_400V_voltage_mv" in topics
-    assert "/final_comms_radio_bool" not in topics
-    assert len(topics) == len(bindings)
+    # the same topic for both rovers, each in its own domain: no renaming
+    radio = {b.rover: b for b in bindings if b.topic == "/final_comms_radio_bool"}
+    assert set(radio) == set(fleet)
+    opts = mf.bridge
+    keys_of = {(b.rover, f): bd.zenoh_key(b, opts, f) for b in radio.values()
+               for f in ("ros2dds", "json", "rmw_zenoh")}
+    assert keys_of[("mapp-1", "ros2dds")] == "mapp_1/final_comms_radio_bool"  # bridge namespace
+    assert keys_of[("ltv-1", "json")] == "json/ltv_1/final_comms_radio_bool"
+    assert keys_of[("mapp-1", "rmw_zenoh")].startswith("0/final_comms_radio_bool/")
+    assert keys_of[("ltv-1", "rmw_zenoh")].startswith("1/final_comms_radio_bool/")
+    # a shard serving only the LTV still knows its place in the fleet
+    shard = bd.expand(mf, [bd.rover_names(LTV)], fleet=fleet)
+    ltv = next(b for b in shard if b.topic == "/final_comms_radio_bool")
+    assert bd.zenoh_key(ltv, opts, "rmw_zenoh").startswith("1/") and ltv.fleet
+    # one rover alone: the plain keys
+    solo = next(b for b in bd.expand(mf, [bd.rover_names(MAPP)]) if b.topic == "/battery_state")
+    assert bd.zenoh_key(solo, opts, "ros2dds") == "battery_state"
+    # rovers told to share a domain collide unless the mapping asks for a prefix
+    shared = mapping(one("bridge:\n  rover_domains: {mapp-1: 3, ltv-1: 3}\n"))
+    with pytest.raises(ConfigError, match="in the same ROS 2 domain"):
+        bd.expand(shared, [bd.rover_names(MAPP), bd.rover_names(LTV)])
+    prefixed = mapping(one("bridge:\n  rover_domains: {mapp-1: 3, ltv-1: 3}\n"
+                           "  fleet_topic_prefix: /{rover}\n"))
+    both = bd.expand(prefixed, [bd.rover_names(MAPP), bd.rover_names(LTV)])
+    assert {b.topic for b in both} == {"/mapp_1/x", "/ltv_1/x"}
+    assert {bd.domain_of(prefixed.bridge, 0, b.rover, b.place) for b in both} == {3}
+    with pytest.raises(ConfigError, match="not in the fleet"):
+        bd.expand(mf, [bd.rover_names(MAPP)], fleet=[LTV.id])
+
+
+def test_the_default_mapping_works_for_a_rover_with_other_names():
+    other = MAPP.model_copy() if hasattr(MAPP, "model_copy") else None
+    assert other is None  # Structs, not pydantic: build the names directly
+    names = bd.RoverNames("base-rover", load=("cam",), rail=("MAIN", "SUN"),
+                          radio=("base_station", "relay"), panel=("wing",))
+    mf = mp.load_mapping(DEFAULT)
+    bindings = {b.topic: b for b in bd.expand(mf, [names])}
+    assert bindings["/final_comms_radio_bool"].key == "lunaris/base-rover/radio/base_station/link"
+    assert bindings["/curr_to_receiving_radio_m"].key == (
+        "lunaris/base-rover/input/radio/base_station/position")
+    assert bindings["/pdm/rail_MAIN_voltage_mv"].key == "lunaris/base-rover/rail/MAIN/state"
+    assert bindings["/solar_wing_dust"].key == "lunaris/base-rover/input/solar/wing/dust"
+    assert bindings["/solar_wing_sun_angle_deg"].key == "lunaris/base-rover/input/solar/wing/sun_angle"
+    # without radios: no radio topic at all
+    bare = bd.expand(mf, [names._replace(radio=())])
+    assert not [b for b in bare if "radio" in b.topic]
+    # otherwise: error (the default) names the missing radio; skip leaves it out
+    strict = mapping(one(topic="/link", type="std_msgs/msg/Bool",
+                         key="lunaris/{rover}/radio/lander/link", field="in_range", scale=None))
+    with pytest.raises(ConfigError, match="rover base-rover has no radio 'lander'"):
+        bd.expand(strict, [names])
+    skip = mapping(one(topic="/link", type="std_msgs/msg/Bool", otherwise="skip",
+                       key="lunaris/{rover}/radio/lander/link", field="in_range", scale=None))
+    assert bd.expand(skip, [names]) == []
+
+
+def test_rates_joint_states_and_their_problems():
+    mf = mapping(one(rate_hz="2"))
+    assert mf.mappings[0].rate_hz == 2.0
+    js = mapping(one(topic="/bus", type="sensor_msgs/msg/JointState", field=None, scale=None,
+                     key="lunaris/{rover}/power/summary",
+                     fields="[bus_voltage_v, generation_w]", joint_names="[bus, sun]"))
+    msg = convert.out_message(js.mappings[0], PowerSummary(
+        t_s=1.0, load_power_w=40.0, bus_power_w=44.0, generation_w=45.0,
+        net_battery_power_w=-1.0, bus_voltage_v=16.5), stamp_ns=2_500_000_000)
+    assert msg["name"] == ["bus", "sun"] and msg["position"] == [16.5, 45.0]
+    assert msg["header"]["stamp"] == {"sec": 2, "nanosec": 500_000_000}
+    back = rosmsg.decode("sensor_msgs/msg/JointState",
+                         cdr.encode_cdr("sensor_msgs/msg/JointState", msg))
+    assert list(back.name) == ["bus", "sun"] and list(back.position) == [16.5, 45.0]
+    for fields, want in (
+        ({"rate_hz": "0"}, "mappings[0].rate_hz: must be a number > 0, got 0"),
+        ({"otherwise": "maybe"}, "mappings[0].otherwise: expected error, first, skip"),
+        ({"otherwise": "first"}, "mappings[0].otherwise: only for a key that names one component"),
+        ({"joint_names": "[a]"}, "mappings[0].joint_names: only sensor_msgs/msg/JointState"),
+        ({"type": "sensor_msgs/msg/JointState", "field": None, "scale": None,
+          "fields": "[voltage_v]", "joint_names": "[a, b]"}, "mappings[0].joint_names: 2 names for 1"),
+        ({"direction": "in", "key": "lunaris/{rover}/input/sun_angle", "field": "angle_deg",
+          "type": "std_msgs/msg/Float64", "scale": None, "rate_hz": "1"},
+         "mappings[0].rate_hz: only outbound topics have a rate"),
+    ):
+        with pytest.raises(ConfigError) as err:
+            mapping(one(**fields))
+        assert any(p.startswith(want) for p in err.value.problems), (want, err.value.problems)
+    with pytest.raises(ConfigError) as err:
+        mapping(one("bridge:\n  rover_domains: {a: 300}\n  outputs: {ros2: {enabled: true, "
+                    "domain_id: -1, node: 1x, namespace: bad}}\n"))
+    text = "\n".join(err.value.problems)
+    for want in ("bridge.rover_domains.a: expected 0..232, got 300",
+                 "bridge.outputs.ros2.domain_id: expected 0..232, got -1",
+                 "bridge.outputs.ros2.node: '1x' is not a ROS 2 node name",
+                 "bridge.outputs.ros2.namespace: 'bad' must start with '/'"):
+        assert want in text, text
+
+
+def test_only_flags_states_counts_and_faults_are_discrete():
+    from services.bridge.service import _discrete_fields
+
+    assert _discrete_fields(RailState) == ("state", "reason")
+    assert _discrete_fields(BatteryState) == ("operational", "fault_code", "faults")
+    assert _discrete_fields(PowerSummary) == ()
+    assert _discrete_fields(LoadPower) == ("rail", "on", "faults")
 
 
 def test_every_problem_of_a_bad_mapping_is_named():
     text = """
 bridge:
   ros_distro: iron
-  fleet_topic_prefix: /fleet
-  outputs: {json: {prefix: ""}}
+  fleet_namespace: /fleet
+  outputs: {json: {enabled: true, prefix: ""}}
 mappings:
   - {topic: no_slash, type: std_msgs/msg/Int32, key: "lunaris/{rover}/battery/state", field: voltage_v}
   - {topic: /a, type: std_msgs/msg/Nope, key: "lunaris/{rover}/battery/state", field: voltage_v}
@@ -132,7 +230,7 @@ mappings:
     problems = err.value.problems
     expected = [
         "bridge.ros_distro: expected jazzy or humble, got 'iron'",
-        "bridge.fleet_topic_prefix: must contain {rover}",
+        "bridge.fleet_namespace: must contain {rover}",
         "bridge.outputs.json.prefix: the json and ros2dds outputs would share",
         "mappings[0].topic: 'no_slash' must start with '/'",
         "mappings[1].type: unknown ROS 2 message type 'std_msgs/msg/Nope'",
@@ -455,6 +553,13 @@ def test_liveliness_tokens_match_the_rmw_zenoh_design_examples():
     assert rmw_zenoh.qos_keyexpr(False, 42) == "::,:,:,:,,"  # every rmw_zenoh default
     assert rmw_zenoh.mangle("/pdm/rail_12V_voltage_mv") == "%pdm%rail_12V_voltage_mv"
     assert rmw_zenoh.mangle("/") == "%"
+
+
+def test_the_gid_is_xxh3_128_of_the_token_low_then_high_64_bits():
+    # XXH3-128 of the empty input (seed 0) is 0x99aa06d3014798d8_6001c324468d497f (the xxHash
+    # test vector): rmw_zenoh copies the low 64 bits, then the high 64 bits, little endian.
+    assert rmw_zenoh.gid_of("") == (bytes.fromhex("6001c324468d497f")[::-1]
+                                    + bytes.fromhex("99aa06d3014798d8")[::-1])
 
 
 def test_attachment_layout():

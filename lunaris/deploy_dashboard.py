@@ -1,0 +1,93 @@
+"""The dashboard's side of a deployment: its keys in the router's rules, and the
+configurations of its bridges (``zenoh-bridge-ros2dds`` per rover, a session for rmw_zenoh).
+
+A deployment serves a *fleet* (the rovers of docker-compose.yml, in order): each rover's
+dashboard has its own ROS 2 domain and sees the plain topic names, so its keys carry the
+rover's namespace (ros2dds, json) or domain (rmw_zenoh).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from common.config import load_rover
+from services.bridge.bindings import Binding, RoverNames, rover_names, zenoh_key
+from services.bridge.mapping import MappingFile, ros_name
+
+__all__ = ["FLEET_FILES", "dashboard_keys", "fleet_names", "inbound_regexes", "ros2dds_config",
+           "rmw_zenoh_config"]
+
+REPO = Path(__file__).resolve().parent.parent
+# The rovers docker-compose.yml serves (in this order: the fleet, so rover i has ROS 2 domain i).
+FLEET_FILES = ("config/rovers/mapp.yaml", "config/rovers/ltv.yaml")
+
+
+def _topic_key(topic: str) -> str:
+    """A mapping topic template as a key chunk sequence: placeholders become ``$*``."""
+    return re.sub(r"\{[a-z_]*\}", "$*", topic.strip("/"))
+
+
+def fleet_names(files: list[str] | tuple[str, ...] = FLEET_FILES) -> list[RoverNames]:
+    return [rover_names(load_rover(REPO / f if not Path(f).is_absolute() else f)) for f in files]
+
+
+def dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> tuple[list[str], list[str]]:
+    """(keys the dashboard reads, keys it writes) in every enabled Zenoh flavour of a mapping,
+    for each rover of the fleet: its own namespace (ros2dds, json) and ROS 2 domain
+    (rmw_zenoh), component names as ``$*``. Exact to the chunk, so the one inbound topic's
+    rule matches no other key (not ``json/curr_to_receiving_radio_m`` when json is off)."""
+    out = mf.bridge.outputs
+    several = len(fleet) > 1
+    prefix = mf.bridge.fleet_topic_prefix if several else mf.bridge.topic_prefix
+    reads: list[str] = []
+    writes: list[str] = []
+    for place, rover in enumerate(fleet):
+        for i, m in enumerate(mf.mappings):
+            topic = "/" + _topic_key((prefix + m.topic).replace("{rover}", ros_name(rover.id)))
+            b = Binding(i, m, rover.id, None, "", topic, place, several)
+            flavours = [f for f in ("ros2dds", "json", "rmw_zenoh") if getattr(out, f).enabled]
+            got = [zenoh_key(b, mf.bridge, f) for f in flavours]
+            if m.direction == "in":  # any type hash: a Humble node's as well as a Jazzy one's
+                writes += [k.rsplit("/", 1)[0] + "/*" if f == "rmw_zenoh" else k
+                           for f, k in zip(flavours, got, strict=True)]
+            else:
+                reads += got
+    return sorted(set(reads)), sorted(set(writes))
+
+
+def ros2dds_config(password: str, ca_pem: bytes | None, rover: str, domain: int,
+                   inbound: list[str]) -> dict[str, Any]:
+    """zenoh-bridge-ros2dds for the dashboard of one rover on DDS (the compose profile
+    ``ros2dds``, one container per rover): the ``dashboard`` identity, host networking, so it
+    reaches the router on the host's port. Its namespace is the rover's (``/mapp_1``): the
+    bridge's ``mapp_1/battery_state`` is ``/battery_state`` in the rover's DDS domain, the
+    dashboard's plain name. Zenoh -> DDS: every topic of the rover; DDS -> Zenoh: only the
+    inbound topics (the router's access control enforces the same limit)."""
+    conf = _client("dashboard", password, ca_pem, "tls/127.0.0.1:7447")
+    conf["plugins"] = {"ros2dds": {
+        "id": f"lunaris-{ros_name(rover)}", "namespace": f"/{ros_name(rover)}", "domain": domain,
+        "allow": {"publishers": inbound, "subscribers": [".*"]}}}
+    return conf
+
+
+def rmw_zenoh_config(password: str, ca_pem: bytes | None, connect: str) -> dict[str, Any]:
+    """The Zenoh session of a dashboard on rmw_zenoh (``ZENOH_SESSION_CONFIG_URI``): a client of
+    the deployment's router as ``dashboard``, timestamping on as rmw_zenoh's own sessions."""
+    conf = _client("dashboard", password, ca_pem, connect)
+    conf["timestamping"] = {"enabled": {"router": True, "peer": True, "client": True}}
+    return conf
+
+
+def inbound_regexes(mf: MappingFile) -> list[str]:
+    return sorted({re.sub(r"\{[a-z_]*\}", "[^/]*", m.topic) for m in mf.mappings
+                   if m.direction == "in"})
+
+
+
+
+def _client(user: str, password: str, ca_pem: bytes | None, connect: str) -> dict[str, Any]:
+    from lunaris.deploy import client_config  # one definition of a client's configuration
+
+    return client_config(user, password, ca_pem, connect)

@@ -1,0 +1,222 @@
+"""The ``ros2`` flavour against real ROS 2 (SPEC §7 second release).
+
+The bridge runs as a ROS 2 node (rclpy, Fast DDS over shared memory only) beside the twin; a
+crew dashboard, a plain rclpy process that knows nothing of Lunaris (tests/ros2/dashboard.py),
+receives ``/battery_state``, ``/final_comms_radio_bool``, ``/diagnostics`` and the PDM values
+and checks them against the twin's own keys, and its ``Float64MultiArray`` on
+``/curr_to_receiving_radio_m`` moves the radio. No process started here opens a UDP socket.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import random
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from common import keys
+from tests.harness import ALL_SERVICES, ROOT, stop_process, wait_for
+
+pytestmark = [
+    pytest.mark.timeout(120),
+    pytest.mark.skipif(sys.platform != "linux" or platform.machine() != "x86_64",
+                       reason="the ROS 2 wheels on PyPI are for Linux x86_64"),
+]
+
+R = "mapp-1"
+SERVICES = (*ALL_SERVICES, "bridge")
+DASHBOARD = ROOT / "tests" / "ros2" / "dashboard.py"
+TOPICS = {
+    "/battery_state": "sensor_msgs/msg/BatteryState",
+    "/final_comms_radio_bool": "std_msgs/msg/Bool",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    "/pdm/battery_voltage_mv": "std_msgs/msg/Int32",
+    "/pdm/sys_bus_voltage_mv": "std_msgs/msg/Int32",
+    "/pdm/rail_5V_CH2_current_ma": "std_msgs/msg/Int32",
+    "/pdm/rail_12V_voltage_mv": "std_msgs/msg/Int32",
+}
+
+
+def ros2_env(domain: int) -> dict[str, str]:
+    """Fast DDS over shared memory only: no UDP socket. ROS_AUTOMATIC_DISCOVERY_RANGE is
+    never set to LOCALHOST here (Fast DDS then binds UDP ports on every interface)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ROS_AUTOMATIC_DISCOVERY")}
+    env.update(FASTDDS_BUILTIN_TRANSPORTS="SHM", ROS_DOMAIN_ID=str(domain),
+               RMW_IMPLEMENTATION="rmw_fastrtps_cpp")
+    return env
+
+
+def udp_sockets(pids: list[int]) -> dict[int, list[str]]:
+    """The UDP sockets (IPv4 and IPv6) each process holds, from /proc."""
+    inodes: dict[str, str] = {}
+    for table in ("udp", "udp6"):
+        path = Path(f"/proc/net/{table}")
+        if path.exists():
+            for line in path.read_text().splitlines()[1:]:
+                cols = line.split()
+                inodes[cols[9]] = f"{table} {cols[1]}"
+    held: dict[int, list[str]] = {}
+    for pid in pids:
+        fd_dir = Path(f"/proc/{pid}/fd")
+        for fd in fd_dir.iterdir() if fd_dir.exists() else []:
+            try:
+                target = os.readlink(fd)
+            except OSError:
+                continue
+            if target.startswith("socket:[") and target[8:-1] in inodes:
+                held.setdefault(pid, []).append(inodes[target[8:-1]])
+    return held
+
+
+class Dashboard:
+    """The rclpy dashboard process: every message it prints, and a way to publish."""
+
+    def __init__(self, env: dict[str, str]):
+        self.proc = subprocess.Popen(
+            [sys.executable, str(DASHBOARD), *(f"{t}={ty}" for t, ty in TOPICS.items())],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env, cwd="/")  # cwd /: it imports nothing of Lunaris
+        self.messages: dict[str, list[tuple[float, dict]]] = {}
+        self.ready = threading.Event()
+        self._lock = threading.Lock()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.strip() == "ready":
+                self.ready.set()
+                continue
+            item = json.loads(line)
+            with self._lock:
+                self.messages.setdefault(item["topic"], []).append((item["t"], item["msg"]))
+
+    def latest(self, topic: str, after: float = 0.0) -> dict | None:
+        with self._lock:
+            got = [m for t, m in self.messages.get(topic, []) if t >= after]
+        return got[-1] if got else None
+
+    def publish(self, topic: str, typename: str, msg: dict) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps({"topic": topic, "type": typename, "msg": msg}) + "\n")
+        self.proc.stdin.flush()
+
+    def stop(self) -> str:
+        if self.proc.stdin:
+            self.proc.stdin.close()
+        stop_process(self.proc)
+        return self.proc.stderr.read() if self.proc.stderr else ""
+
+
+def milli(x: float) -> int:
+    return int(math.copysign(math.floor(abs(x) * 1000 + 0.5), x))
+
+
+@pytest.fixture
+def ros2_twin(probe, twin_factory, mapp_file, tmp_path, monkeypatch):
+    """The twin and the bridge with the ros2 flavour only, and the rclpy dashboard."""
+    domain = random.randint(1, 100)  # apart from any other ROS 2 test on this machine
+    env = ros2_env(domain)
+    for name in ("ROS_DOMAIN_ID", "FASTDDS_BUILTIN_TRANSPORTS", "RMW_IMPLEMENTATION"):
+        monkeypatch.setenv(name, env[name])
+    mapping = tmp_path / "ros2.yaml"
+    text = (ROOT / "config/bridge/default.yaml").read_text()
+    for old, new in (("ros2dds: {enabled: true}", "ros2dds: {enabled: false}"),
+                     ("rmw_zenoh: {enabled: true,", "rmw_zenoh: {enabled: false,"),
+                     ("ros2: {enabled: false,", "ros2: {enabled: true,")):
+        assert old in text
+        text = text.replace(old, new)
+    mapping.write_text(text)
+    probe.watch(f"lunaris/{R}/**")
+    dash = Dashboard(env)
+    twin = twin_factory([mapp_file], services=SERVICES, extra={"bridge": ["--bridge-config", str(mapping)]})
+    try:
+        assert dash.ready.wait(30), "the dashboard did not start"
+        probe.wait_services(R, SERVICES)
+        yield probe, twin, dash
+    finally:
+        err = dash.stop()
+        if err.strip():
+            print(f"--- dashboard stderr ---\n{err[-3000:]}")
+
+
+def _mismatches(probe, dash: Dashboard) -> list[str]:
+    b = probe.value(keys.battery_state(R))
+    s = probe.value(keys.power_summary(R))
+    link = probe.value(keys.radio_link(R, "lander"))
+    rail12, rail5 = probe.value(keys.rail_state(R, "12V")), probe.value(keys.rail_state(R, "5V_CH2"))
+    if None in (b, s, link, rail12, rail5):
+        return ["twin keys not there yet"]
+    bad = []
+    want: dict[str, Any] = {
+        "/final_comms_radio_bool": link["in_range"],
+        "/pdm/battery_voltage_mv": milli(b["voltage_v"]),
+        "/pdm/sys_bus_voltage_mv": milli(s["bus_voltage_v"]),
+        "/pdm/rail_5V_CH2_current_ma": milli(rail5["current_a"]),
+        "/pdm/rail_12V_voltage_mv": milli(rail12["voltage_v"]),
+    }
+    for topic, value in want.items():
+        m = dash.latest(topic)
+        if m is None or m["data"] != value:
+            bad.append(f"{topic}: {m and m['data']} vs {value}")
+    m = dash.latest("/battery_state")
+    if m is None or not (math.isclose(m["voltage"], b["voltage_v"], rel_tol=1e-6)
+                         and math.isclose(m["current"], -b["current_a"], rel_tol=1e-6, abs_tol=1e-9)
+                         and math.isclose(m["percentage"], b["soc"], rel_tol=1e-6)):
+        bad.append(f"/battery_state {m and (m['voltage'], m['current'], m['percentage'])} vs {b}")
+    m = dash.latest("/diagnostics")
+    names = {st["name"]: st["level"] for st in m["status"]} if m else {}
+    if names.get(f"{R}/battery") != 0 or names.get(f"{R}/rail/5V_CH2") != 0:
+        bad.append(f"/diagnostics {names}")
+    return bad
+
+
+def _settle(check, timeout_s: float = 20.0, what: str = "the dashboard to match the twin") -> None:
+    deadline = time.monotonic() + timeout_s
+    while (problems := check()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not problems, f"timed out waiting for {what}: {problems[:10]}"
+
+
+def test_an_rclpy_dashboard_sees_the_twin_and_moves_the_radio(ros2_twin):
+    probe, twin, dash = ros2_twin
+    probe.put(keys.clock_control(R), {"paused": True})
+    probe.wait_value(keys.clock(R), lambda c: c["paused"])
+    _settle(lambda: _mismatches(probe, dash))
+
+    # the dashboard's own Float64MultiArray moves the radio out of range and back
+    for distance_m, in_range in ((1000.0, False), (100.0, True)):
+        sent = time.monotonic()
+        dash.publish("/curr_to_receiving_radio_m", "std_msgs/msg/Float64MultiArray",
+                     {"data": [distance_m, 0.0]})
+        probe.wait_value(keys.radio_link(R, "lander"),
+                         lambda v, r=in_range, d=distance_m: v["in_range"] is r
+                         and math.isclose(v["x_m"], d, abs_tol=1e-6))
+        wait_for(lambda t0=sent, r=in_range: (m := dash.latest("/final_comms_radio_bool", t0))
+                 and m["data"] is r, 10, f"/final_comms_radio_bool {in_range} at the dashboard")
+
+    # a fault reaches the dashboard's /diagnostics and its PDM values
+    t0 = time.monotonic()
+    probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
+
+    def tripped() -> bool:
+        m = dash.latest("/diagnostics", t0)
+        st = {s["name"]: s for s in m["status"]} if m else {}
+        rail = st.get(f"{R}/rail/5V_CH2")
+        return bool(rail and rail["level"] == 2 and "tripped" in [v["key"] for v in rail["values"]])
+    wait_for(tripped, 10, "the tripped rail as ERROR on the dashboard's /diagnostics")
+    wait_for(lambda: (m := dash.latest("/pdm/rail_5V_CH2_current_ma", t0)) and m["data"] == 0, 10,
+             "the tripped rail at 0 mA on the dashboard")
+
+    pids = [dash.proc.pid] + [p.pid for p in twin.procs.values()]
+    assert udp_sockets(pids) == {}, "a process opened a UDP socket"

@@ -1,0 +1,94 @@
+"""A crew dashboard as a plain ROS 2 node (rclpy), knowing nothing of Lunaris.
+
+``python dashboard.py TOPIC=pkg/msg/Type ...`` subscribes to each topic (reliable,
+transient-local, keep-last 1: it gets the last value when it joins) and prints every message
+as one JSON line ``{"topic": ..., "t": <monotonic s>, "msg": {...fields}}``. Each JSON line
+read on stdin, ``{"topic": ..., "type": "pkg/msg/Type", "msg": {...}}``, is published on that
+topic (reliable, volatile). The ROS 2 environment (``ROS_DOMAIN_ID``,
+``FASTDDS_BUILTIN_TRANSPORTS``) is the caller's. Prints ``ready`` once its entities exist.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import sys
+import threading
+import time
+from typing import Any
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+LATCHED = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+COMMAND = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.VOLATILE)
+_out = threading.Lock()
+
+
+def message_class(typename: str) -> Any:
+    pkg, kind, name = typename.split("/")
+    return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+
+
+def as_plain(value: Any) -> Any:
+    if hasattr(value, "get_fields_and_field_types"):
+        return {f: as_plain(getattr(value, f)) for f in value.get_fields_and_field_types()}
+    if isinstance(value, (list, tuple)) or type(value).__name__ in ("array", "ndarray"):
+        return [as_plain(v) for v in value]
+    if isinstance(value, bytes):  # a ROS `byte` (DiagnosticStatus.level) arrives as bytes
+        return value[0] if len(value) == 1 else list(value)
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if hasattr(value, "item"):  # numpy scalars
+        return value.item()
+    return value
+
+
+def fill(msg: Any, fields: dict) -> Any:
+    for name, value in fields.items():
+        current = getattr(msg, name)
+        if isinstance(value, dict):
+            fill(current, value)
+        else:
+            setattr(msg, name, value)
+    return msg
+
+
+def main() -> None:
+    rclpy.init()
+    node = Node("crew_dashboard")
+    for arg in sys.argv[1:]:
+        topic, typename = arg.split("=")
+
+        def show(msg: Any, topic: str = topic) -> None:
+            line = json.dumps({"topic": topic, "t": time.monotonic(), "msg": as_plain(msg)})
+            with _out:
+                print(line, flush=True)
+        node.create_subscription(message_class(typename), topic, show, LATCHED)
+    publishers: dict[str, Any] = {}
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    threading.Thread(target=executor.spin, daemon=True).start()
+    with _out:
+        print("ready", flush=True)
+    for line in sys.stdin:
+        cmd = json.loads(line)
+        cls = message_class(cmd["type"])
+        pub = publishers.get(cmd["topic"])
+        if pub is None:
+            pub = publishers[cmd["topic"]] = node.create_publisher(cls, cmd["topic"], COMMAND)
+            deadline = time.monotonic() + 10.0  # wait until the bridge's subscription is matched
+            while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+                time.sleep(0.02)
+        pub.publish(fill(cls(), cmd["msg"]))
+    executor.shutdown()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()
