@@ -108,6 +108,17 @@ def stop_process(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
             proc.wait()
 
 
+def json_bridge_extra(folder: Path) -> dict[str, list[str]]:
+    """``Twin(extra=...)`` for a bridge with the shipped mapping and its json flavour on too
+    (the shipped mapping leaves it off), so a test can read the dashboard topics as JSON."""
+    text = (ROOT / "config" / "bridge" / "default.yaml").read_text()
+    assert "json: {enabled: false, prefix: json}" in text
+    path = folder / "every-flavour.yaml"
+    path.write_text(text.replace("json: {enabled: false, prefix: json}",
+                                 "json: {enabled: true, prefix: json}"))
+    return {"bridge": ["--bridge-config", str(path)]}
+
+
 class Twin:
     """Services for some rovers as subprocesses on a router at ``endpoint``."""
 

@@ -187,11 +187,15 @@ def _family(key_template: str) -> keys.Family:
 
 def _discrete_fields(payload: type[msgspec.Struct]) -> tuple[str, ...]:
     """The fields of a payload whose every change is news (flags, states, faults, counts):
-    all but the floating-point values and the time."""
+    all but the floating-point values (alone or in lists, such as the battery's polarisation
+    voltages) and the time."""
     out = []
     for f in struct_fields(payload):
-        kind, _ = field_kind(f.type)
-        if f.name != "t_s" and (kind != "number" or isinstance(f.type, msgspec.inspect.IntType)):
+        typ = f.type
+        if isinstance(typ, msgspec.inspect.ListType):
+            typ = typ.item_type
+        kind, _ = field_kind(typ)
+        if f.name != "t_s" and (kind != "number" or isinstance(typ, msgspec.inspect.IntType)):
             out.append(f.name)
     return tuple(out)
 

@@ -4,8 +4,9 @@ Panel power [W] = ``irradiance * area * efficiency * max(0, cos(angle)) *
 (1 - dust) * (1 - degradation)``; a disconnected panel gives nothing. The sun angle is the
 rover's (``input/sun_angle``) unless a panel has its own (``input/solar/<panel>/sun_angle``,
 until it is deleted). Dust is the instructor's dust fault and the dashboard's
-``input/solar/<panel>/dust``, two layers: ``1 - (1 - fault) * (1 - input)``. The umbilical,
-when connected, can supply up to its ``power_w``.
+``input/solar/<panel>/dust``, two layers: ``1 - (1 - fault) * (1 - input)``, computed as
+``fault + input - fault * input`` (exact with one layer). The umbilical, when connected, can
+supply up to its ``power_w``.
 """
 
 from __future__ import annotations
@@ -100,7 +101,8 @@ class SolarModel:
         out = []
         for p in self.cfg.panels:
             fault_dust = self.dust[p.name]
-            dust = 1.0 - (1.0 - fault_dust) * (1.0 - self.input_dust.get(p.name, 0.0))
+            input_dust = self.input_dust.get(p.name, 0.0)
+            dust = fault_dust + input_dust - fault_dust * input_dust  # exact with one layer
             faults = (["dust"] if fault_dust > 0.0 else []) + (
                 ["disconnect"] if p.name in self.disconnected else [])
             power = 0.0 if p.name in self.disconnected else panel_power(

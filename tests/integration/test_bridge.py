@@ -24,7 +24,15 @@ import zenoh
 from common import keys
 from common.config import load_rover
 from tests import rosmsg
-from tests.harness import ALL_SERVICES, ROOT, ROVERS, lunaris_cmd, stop_process, wait_for
+from tests.harness import (
+    ALL_SERVICES,
+    ROOT,
+    ROVERS,
+    json_bridge_extra,
+    lunaris_cmd,
+    stop_process,
+    wait_for,
+)
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -48,12 +56,7 @@ DEFAULT_MAPPING = ROOT / "config" / "bridge" / "default.yaml"
 
 def every_flavour_mapping(folder: Path) -> Path:
     """The default mapping with the json flavour on too (the shipped one leaves it off)."""
-    text = DEFAULT_MAPPING.read_text()
-    assert "json: {enabled: false, prefix: json}" in text
-    path = folder / "every-flavour.yaml"
-    path.write_text(text.replace("json: {enabled: false, prefix: json}",
-                                 "json: {enabled: true, prefix: json}"))
-    return path
+    return Path(json_bridge_extra(folder)["bridge"][1])
 
 
 def expected_topics() -> dict[str, str]:

@@ -27,6 +27,7 @@ from tests.harness import (
     Twin,
     env_without_zenoh_config,
     free_endpoint,
+    json_bridge_extra,
     lunaris_cmd,
     open_router,
     rover_without_drive,
@@ -52,7 +53,8 @@ def twin(tmp_path_factory):
     ltv = rover_without_drive(ROVERS / "ltv.yaml", tmp_path_factory.mktemp("rovers"))
     try:
         with Twin(endpoint, [ROVERS / "mapp.yaml", ltv], tmp_path_factory.mktemp("twin"),
-                  services=SERVICES) as t, Probe(endpoint) as p:
+                  services=SERVICES, extra=json_bridge_extra(tmp_path_factory.mktemp("mapping")),
+                  ) as t, Probe(endpoint) as p:
             p.watch("lunaris/**")
             p.watch("json/**")  # the bridge's json flavour
             p.wait_services(R, SERVICES)

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from tests.harness import ALL_SERVICES, Probe, Twin, static_rover, wait_for
+from tests.harness import ALL_SERVICES, Probe, Twin, json_bridge_extra, static_rover, wait_for
 
 R = "mapp-1"
 MAPP = static_rover("mapp.yaml")  # without its drive: parked, the pack drains
@@ -50,10 +50,11 @@ def restart(twin: Twin, probe: Probe, service: str, rover: str = R) -> subproces
 
 
 @pytest.fixture
-def whole_twin(twin_factory, probe_solo):
-    """(probe, twin): every service of mapp-1, bridge included, the probe watching every key."""
+def whole_twin(twin_factory, probe_solo, tmp_path):
+    """(probe, twin): every service of mapp-1, bridge included (its json flavour on), the probe
+    watching every key."""
     probe_solo.watch("lunaris/**")
-    twin = twin_factory([MAPP], services=WITH_BRIDGE)
+    twin = twin_factory([MAPP], services=WITH_BRIDGE, extra=json_bridge_extra(tmp_path))
     probe_solo.wait_services(R, WITH_BRIDGE)
     probe_solo.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
     return probe_solo, twin

@@ -24,6 +24,7 @@ def writable_keys(rover: Rover) -> list[str]:
              "solar": [p.name for p in rover.solar.panels], "radio": [x.name for x in rover.radios]}
     out = [keys.input_sun_angle(r), keys.input_umbilical(r), keys.clock_control(r)]
     out += [keys.input_radio_position(r, x) for x in names["radio"]]
+    out += [k(r, x) for x in names["solar"] for k in (keys.input_panel_sun_angle, keys.input_solar_dust)]
     out += [keys.cmd_rail(r, x) for x in names["rail"]]
     for component, kinds in CATALOGUE.items():
         targets = [f"{component}/{n}" for n in names[component]] if component in NAMED_COMPONENTS \
@@ -64,8 +65,13 @@ def bad_payloads(key: str, rng: random.Random) -> bytes | None:
             choices.append(lambda: None)
     elif parts[:2] == ["input", "sun_angle"]:
         choices.append(lambda: json.dumps({"angle_deg": rng.choice([361, -1e9, "up"])}).encode())
+    elif parts[:2] == ["input", "solar"] and parts[-1] == "dust":
+        choices.append(lambda: json.dumps({"fraction": rng.choice([1.5, -0.1, "thick"])}).encode())
+        choices.append(lambda: json.dumps(rng.choice([2, -1])).encode())
+    elif parts[:2] == ["input", "solar"]:
+        choices.append(lambda: json.dumps({"angle_deg": rng.choice([361, -1e9, "up"])}).encode())
     elif parts[:2] == ["input", "radio"]:
-        choices.append(lambda: json.dumps({"distance_m": -5 - rng.random(), "angle_deg": 0}).encode())
+        choices.append(lambda: json.dumps({"distance_m": -2e9 - rng.random(), "angle_deg": 0}).encode())
         choices.append(lambda: b'{"distance_m": 10}')
     elif parts[0] == "cmd":
         choices.append(lambda: rng.choice([b"{}", b'{"on": 1}', b'{"reset": "now"}', b"5"]))
