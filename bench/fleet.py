@@ -7,7 +7,10 @@ and reports per second of wall time:
 - clock ticks, battery states and power summaries per rover (10.00 when keeping up), and how
   far the battery's and the PDM's sim time trail the clock (at most one tick: 100 ms);
 - every bridge topic (ros2dds keys ``mapp_NN/<topic>``) per rover against its mapping's
-  ``rate_hz`` (a topic without a rate follows its twin key);
+  ``rate_hz`` (a topic without a rate follows its twin key), for a sample of the rovers spread
+  over the fleet (``--sample``, default 10: subscribing to every rover's ~80 topics would
+  make this process the largest consumer of the two cores);
+- this measuring process's own CPU, beside the services';
 - each service process's CPU and resident memory (RSS), and the total;
 - while the fleet runs, the fault-to-dashboard latency: load shorts on mapp-01's nav_camera,
   each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
@@ -104,6 +107,10 @@ def main() -> None:
     p.add_argument("seconds", nargs="?", type=float, default=20.0)
     p.add_argument("--bridges", type=int, default=2)
     p.add_argument("--faults", type=int, default=200, help="shorts timed while the fleet runs")
+    p.add_argument("--bridge-config", metavar="FILE", default=None,
+                   help="the bridges' mapping (default: the shipped one, ros2dds and rmw_zenoh on)")
+    p.add_argument("--sample", type=int, default=10,
+                   help="rovers whose bridge topics are counted, spread over the fleet")
     args = p.parse_args()
     n, seconds, nb = args.rovers, args.seconds, args.bridges
     ids = [f"mapp-{i:02d}" for i in range(1, n + 1)]
@@ -116,7 +123,8 @@ def main() -> None:
             f = Path(tmp) / f"{rid}.yaml"
             f.write_text(base.replace("id: mapp-1", f"id: {rid}"))
             files.append(f)
-        print(f"fleet: {n} MAPP rovers at 10 Hz, {nb} bridge process(es), {seconds:g} s ({machine()})")
+        print(f"fleet: {n} MAPP rovers at 10 Hz, {nb} bridge process(es) with the mapping "
+              f"{args.bridge_config or 'config/bridge/default.yaml'}, {seconds:g} s ({machine()})")
         counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))
         latest_t: dict[tuple[str, str], float] = {}
         lags: dict[str, list[float]] = defaultdict(list)
@@ -142,25 +150,31 @@ def main() -> None:
             with lock:
                 topic_count[str(s.key_expr)] += 1
 
-        extra = {b: ["--shard", f"{k}/{nb}"] for k, b in enumerate(bridges, start=1)}
+        mapping = ["--bridge-config", str(Path(args.bridge_config).resolve())] if args.bridge_config else []
+        extra = {b: ["--shard", f"{k}/{nb}", *mapping] for k, b in enumerate(bridges, start=1)}
         with running_twin(files, services, extra) as (probe, twin, _):
             for r in (ids[0], ids[-1]):
                 probe.wait_services(r, (*SERVICES, "bridge"), timeout_s=120)
             probe.watch(f"lunaris/{ids[0]}/**")
             subs = [probe.session.declare_subscriber(f"lunaris/*/{k}", on(kind)) for kind, k in
                     (("clock", "clock"), ("battery", "battery/state"), ("power", "power/summary"))]
-            subs.append(probe.session.declare_subscriber("mapp_$*/**", on_bridge))
+            step = max(1, n // max(1, args.sample))
+            sampled = ids[::step][:args.sample]
+            if ids[0] not in sampled:
+                sampled[0] = ids[0]
+            subs += [probe.session.declare_subscriber(f"{rid.replace('-', '_')}/**", on_bridge)
+                     for rid in sampled]
             # Start-up: every bridge declares its publishers with their first samples; measure
             # once every rover's BatteryState flows, and transients have passed.
             t_up = time.monotonic()
             while time.monotonic() - t_up < 120:
                 with lock:
                     flowing = sum(1 for k in topic_count if k.endswith("/battery_state"))
-                if flowing >= n:
+                if flowing >= len(sampled):
                     break
                 time.sleep(0.5)
             print(f"  every rover's dashboard topics flowing {time.monotonic() - t_up:.1f} s after the "
-                  f"services were up ({flowing}/{n} BatteryState)", flush=True)
+                  f"services were up ({flowing}/{len(sampled)} sampled rovers' BatteryState)", flush=True)
             time.sleep(3.0)
             with lock:
                 counts.clear()
@@ -168,9 +182,11 @@ def main() -> None:
                 topic_count.clear()
                 t_clock0 = {r: latest_t.get(("clock", r), 0.0) for r in ids}
             cpu0 = {s: cpu_s(p.pid) for s, p in twin.procs.items()}
+            me0 = time.process_time()
             w0 = time.monotonic()
             time.sleep(seconds)
             wall = time.monotonic() - w0
+            me = (time.process_time() - me0) / wall * 100
             cpu1 = {s: cpu_s(p.pid) for s, p in twin.procs.items()}
             rss = {s: rss_mb(p.pid) for s, p in twin.procs.items()}
             with lock:
@@ -178,14 +194,15 @@ def main() -> None:
                 sim_advance = [latest_t.get(("clock", r), 0.0) - t0 for r, t0 in t_clock0.items()]
                 lag = {k: sorted(v) for k, v in lags.items()}
                 topics = dict(topic_count)
-            report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss)
+            report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, len(sampled))
+            print(f"  this measuring process: cpu {me:5.1f} % (not in the total)", flush=True)
             latencies = fault_latencies(probe, args.faults) if args.faults else []
             del subs
     if latencies:
         print(f"  fault -> {ids[0]} /diagnostics (ros2dds) while the fleet runs: {percentiles(latencies)}")
 
 
-def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss) -> None:
+def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, sampled) -> None:
     n = len(ids)
     verdict: list[str] = []
     for kind in ("clock", "battery", "power"):
@@ -202,7 +219,8 @@ def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss)
                   f"p99 {v[int(0.99 * (len(v) - 1))] * 1e3:.0f} ms  max {v[-1] * 1e3:.0f} ms")
             if v[-1] > 0.1 + 1e-6:
                 verdict.append(f"{kind} up to {v[-1] * 1e3:.0f} ms behind the clock")
-    print("  bridge topics, messages per rover per second (min / mean over rovers and topics):")
+    print(f"  bridge topics of {sampled} rovers, messages per rover per second (min / mean over "
+          "those rovers and topics):")
     for pattern, rate in topic_rates().items():
         per: list[float] = []
         for key, c in topics.items():

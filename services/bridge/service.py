@@ -176,7 +176,12 @@ class _Outlet:
         if msg is not None:
             self.publish(msg)
         self.discrete = discrete
-        self.next_s = now + self.period_s
+        # On a grid: a sample held back and sent late by the timer does not push the next one
+        # later, so a topic keeps its rate on average (after a pause the grid starts again); a
+        # discrete change sent early leaves the grid as it is.
+        if now >= self.next_s:
+            grid = self.next_s + self.period_s
+            self.next_s = grid if now < grid else now + self.period_s
 
 
 def _family(key_template: str) -> keys.Family:
