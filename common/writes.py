@@ -22,8 +22,9 @@ from common.session import parse_control
 
 __all__ = ["DELETABLE", "Write", "check_write"]
 
-# The inputs that take a delete: a panel back to the rover's sun angle, the rover stopped.
-DELETABLE = ("input/solar/*/sun_angle", "input/drive/traverse")
+# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
+# gone, the rover stopped.
+DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
 _ACCEPTED = {"cmd": "command", "clock": "clock", "input": "input"}
 
 

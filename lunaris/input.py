@@ -4,6 +4,8 @@
 
 - ``sun_angle 75``: the sun angle of every panel [deg];
 - ``solar/<panel>/sun_angle 80``: one panel's own angle (``--delete``: back to the rover's);
+- ``solar/<panel>/dust 0.4``: dust laid on one panel, as the dashboard does, besides the
+  instructor's dust fault (``--delete``: none);
 - ``radio/<radio>/position 300 45``: the rover's distance [m] and bearing [deg] to a radio;
 - ``umbilical true|false``: plug the umbilical in, or out;
 - ``drive/traverse FILE`` (a traverse file) or a JSON traverse (``--delete``: stop the rover;
@@ -33,13 +35,14 @@ __all__ = ["add_arguments", "main", "payload"]
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("rover", help="rover id, e.g. mapp-1")
-    p.add_argument("key", help="sun_angle, solar/<panel>/sun_angle, radio/<radio>/position, "
-                               "umbilical or drive/traverse")
+    p.add_argument("key", help="sun_angle, solar/<panel>/sun_angle, solar/<panel>/dust, "
+                               "radio/<radio>/position, umbilical or drive/traverse")
     p.add_argument("value", nargs="*", metavar="VALUE",
                    help="a number, two numbers for a position (distance_m angle_deg), true or "
                         "false, a traverse file, or the JSON object the key takes")
     p.add_argument("--delete", action="store_true",
-                   help="delete the input (a panel's own sun angle, a traverse: the rover stops)")
+                   help="delete the input (a panel's own sun angle or dust, a traverse: the rover "
+                        "stops)")
     add_common_arguments(p)
 
 

@@ -48,33 +48,24 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         publish(s.rover)
         rt.accepted_input(s.rover, s.key, f"sun angle {angle:g} deg", {"angle_deg": angle})
 
-    def on_panel_sun(s: Sample) -> None:
+    def panel_input(s: Sample, what: str) -> None:
+        """``input/solar/<panel>/sun_angle`` or ``/dust``: set for one panel, or deleted."""
         m, panel = models[s.rover], s.parts[2]
         if panel not in m.panel_names():
             raise BadInput(f"rover {s.rover} has no panel {panel!r} "
                            f"(panels: {', '.join(m.panel_names()) or 'none'})")
-        if s.deleted:
-            m.set_panel_angle(panel, None)
-            message = f"panel {panel} back to the rover's sun angle ({m.sun_angle_deg:g} deg)"
-        else:
-            angle = decode_input(s.payload, SunAngle, bare=BARE_FIELD[SunAngle]).angle_deg
+        if what == "sun_angle":
+            angle = None if s.deleted else decode_input(
+                s.payload, SunAngle, bare=BARE_FIELD[SunAngle]).angle_deg
             m.set_panel_angle(panel, angle)
-            message = f"sun angle {angle:g} deg on panel {panel}"
-        publish(s.rover)
-        rt.accepted_input(s.rover, s.key, message)
-
-    def on_panel_dust(s: Sample) -> None:
-        m, panel = models[s.rover], s.parts[2]
-        if panel not in m.panel_names():
-            raise BadInput(f"rover {s.rover} has no panel {panel!r} "
-                           f"(panels: {', '.join(m.panel_names()) or 'none'})")
-        if s.deleted:
-            m.set_input_dust(panel, None)
-            message = f"no dust input on panel {panel}"
+            message = (f"panel {panel} back to the rover's sun angle ({m.sun_angle_deg:g} deg)"
+                       if angle is None else f"sun angle {angle:g} deg on panel {panel}")
         else:
-            fraction = decode_input(s.payload, DustInput, bare=BARE_FIELD[DustInput]).fraction
+            fraction = None if s.deleted else decode_input(
+                s.payload, DustInput, bare=BARE_FIELD[DustInput]).fraction
             m.set_input_dust(panel, fraction)
-            message = f"dust {fraction:g} on panel {panel}"
+            message = (f"no dust input on panel {panel}" if fraction is None
+                       else f"dust {fraction:g} on panel {panel}")
         publish(s.rover)
         rt.accepted_input(s.rover, s.key, message)
 
@@ -93,9 +84,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.input_sun_angle("*"), on_sun)
-    rt.subscribe(keys.input_panel_sun_angle("*", "*"), on_panel_sun)
+    rt.subscribe(keys.input_panel_sun_angle("*", "*"), lambda s: panel_input(s, "sun_angle"))
     rt.subscribe(keys.input_umbilical("*"), on_umbilical)
-    rt.subscribe(keys.input_solar_dust("*", "*"), on_panel_dust)
+    rt.subscribe(keys.input_solar_dust("*", "*"), lambda s: panel_input(s, "dust"))
     rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_fault)
     rt.faults.own("umbilical", None, apply_fault)
     rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),

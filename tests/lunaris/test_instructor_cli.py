@@ -53,6 +53,17 @@ def test_inputs_sun_panel_position_umbilical(live):
     done = run_tool("input", R, "solar/left/sun_angle", "--delete", "--connect", ep)
     assert "back to the rover's sun angle" in done.stdout
     p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 70)
+    # the dashboard's dust on one panel, a layer over the instructor's dust fault
+    done = run_tool("input", R, "solar/left/dust", "0.5", "--connect", ep)
+    assert done.returncode == 0 and "dust 0.5 on panel left" in done.stdout, done.stdout + done.stderr
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5 and s["faults"] == [])
+    p.put(keys.fault(R, "solar/left", "dust"), 0.3)
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == pytest.approx(0.65))
+    p.delete(keys.fault(R, "solar/left", "dust"))
+    done = run_tool("input", R, "solar/left/dust", "--delete", "--connect", ep)
+    assert "no dust input on panel left" in done.stdout, done.stdout + done.stderr
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.0)
+    assert run_tool("input", R, "solar/left/dust", "1.5", "--connect", ep).returncode == 1
     done = run_tool("input", R, "radio/lander/position", "300", "45", "--connect", ep)
     assert done.returncode == 0 and "300 m at 45 deg" in done.stdout, done.stdout + done.stderr
     done = run_tool("input", R, "umbilical", "true", "--connect", ep)

@@ -88,3 +88,21 @@ def test_clock_ticks_scales_and_pauses():
     assert t.dt_s == 0.0 and t.t_s == pytest.approx(2.1) and t.paused
     with pytest.raises(ValueError, match="time_scale must be > 0"):
         c.set_scale(0.0)
+
+
+def test_dust_as_an_input_is_a_second_layer_over_the_dust_fault():
+    m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
+    clean = {name: p for name, p, _, _ in m.panels()}["left"]
+    m.set_input_dust("left", 0.5)
+    (name, power, dust, faults), _ = m.panels()
+    assert (name, dust, faults) == ("left", 0.5, [])  # exact with one layer
+    assert_allclose(power, clean * 0.5)
+    m.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.3}))
+    _, power, dust, faults = m.panels()[0]
+    assert faults == ["dust"] and dust == pytest.approx(1 - 0.7 * 0.5)  # 0.65
+    assert_allclose(power, clean * 0.7 * 0.5)
+    assert m.state()["input_dust"] == {"left": 0.5}  # kept across a restart
+    m.set_input_dust("left", None)
+    assert m.panels()[0][2] == 0.3
+    with pytest.raises(ValueError, match="no panel 'wing'"):
+        m.set_input_dust("wing", 0.1)
