@@ -10,7 +10,11 @@ import bisect
 import math
 from typing import NamedTuple
 
-__all__ = ["Books", "BusPoint", "StepRecord", "Table", "interp", "ocv", "solve_bus", "thermal_step"]
+from common.config import Battery as BatteryConfig
+from common.config import ResistanceCurve
+
+__all__ = ["Books", "BusPoint", "CircuitTables", "StepRecord", "Table", "circuit_tables", "interp",
+           "ocv", "solve_bus", "thermal_step"]
 
 
 class BusPoint(NamedTuple):
@@ -110,3 +114,30 @@ class Books(NamedTuple):
     delivered_j: float
     heat_j: float
     lost_j: float  # removed by a capacity_loss fault
+
+
+def _resistance(r: float | ResistanceCurve) -> float | Table:
+    return Table.of(r.soc, r.ohm) if isinstance(r, ResistanceCurve) else float(r)
+
+
+class CircuitTables(NamedTuple):
+    """A pack design's circuit as the models read it: the pack's OCV [V], R0 and each
+    branch's resistance [ohm] (a number or a table over the state of charge), the branches'
+    capacitances [F] and the pack's cut-off voltage [V] (None: no cut-off)."""
+
+    ocv: Table
+    r0: float | Table
+    rj: list[float | Table]
+    cj: list[float]
+    cutoff_v: float | None
+
+
+def circuit_tables(cfg: BatteryConfig) -> CircuitTables:
+    """The tables of a pack design, shared by one pack and by many (:mod:`.packs`)."""
+    return CircuitTables(
+        Table.of(cfg.ocv_curve.soc, cfg.ocv_curve.volts, cfg.cells_series),
+        _resistance(cfg.series_resistance),
+        [_resistance(p.resistance_curve if p.resistance_curve is not None
+                     else p.resistance_ohm or 0.0) for p in cfg.rc_pairs],
+        [p.capacitance_f for p in cfg.rc_pairs],
+        cfg.cells_series * cfg.cutoff_cell_v if cfg.cutoff_cell_v is not None else None)

@@ -41,10 +41,19 @@ import math
 from typing import NamedTuple
 
 from common.config import Battery as BatteryConfig
-from common.config import ResistanceCurve
 from common.faults import FactorParams, FaultKey, FractionParams, HeatParams, Params
 from common.messages import Severity
-from services.battery.circuit import Books, BusPoint, StepRecord, Table, interp, ocv, solve_bus, thermal_step
+from services.battery.circuit import (
+    Books,
+    BusPoint,
+    StepRecord,
+    Table,
+    circuit_tables,
+    interp,
+    ocv,
+    solve_bus,
+    thermal_step,
+)
 
 __all__ = ["BatteryModel", "BatteryReading", "Books", "BusPoint", "StepRecord", "Table", "interp",
            "ocv", "solve_bus", "thermal_step"]
@@ -71,10 +80,6 @@ class BatteryReading(NamedTuple):
     polarisation_v: list[float]  # the branch voltages v_j
 
 
-def _resistance(r: float | ResistanceCurve) -> float | Table:
-    return Table.of(r.soc, r.ohm) if isinstance(r, ResistanceCurve) else float(r)
-
-
 class BatteryModel:
     """One pack. ``demand_w`` (net, positive = discharge) is held until the next change;
     :meth:`step` integrates it over ``dt``. The pack's injected faults (SPEC §6) are applied
@@ -82,13 +87,7 @@ class BatteryModel:
 
     def __init__(self, cfg: BatteryConfig):
         self.cfg = cfg
-        self._ocv = Table.of(cfg.ocv_curve.soc, cfg.ocv_curve.volts, cfg.cells_series)
-        self._r0 = _resistance(cfg.series_resistance)
-        self._rj = [_resistance(p.resistance_curve if p.resistance_curve is not None
-                                else p.resistance_ohm or 0.0) for p in cfg.rc_pairs]
-        self._cj = [p.capacitance_f for p in cfg.rc_pairs]
-        self._cutoff_v = (cfg.cells_series * cfg.cutoff_cell_v if cfg.cutoff_cell_v is not None
-                          else None)
+        self._ocv, self._r0, self._rj, self._cj, self._cutoff_v = circuit_tables(cfg)
         # hot-path caches: the circuit at a charge, the operating point of a state and demand
         self._at_e = math.nan
         self._at: tuple[float, float, list[float]] = (0.0, 0.0, [])

@@ -15,8 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from common.config import Battery as BatteryConfig
-from common.config import ResistanceCurve
-from services.battery.circuit import Table
+from services.battery.circuit import Table, circuit_tables
 from services.battery.model import BatteryModel
 
 __all__ = ["Packs", "Points"]
@@ -33,10 +32,6 @@ def _interp(x: np.ndarray, t: Table) -> np.ndarray:
     return np.interp(x, t.x, t.y)
 
 
-def _resistance(r: float | ResistanceCurve) -> float | Table:
-    return Table.of(r.soc, r.ohm) if isinstance(r, ResistanceCurve) else float(r)
-
-
 class Packs:
     """``n`` packs of one design, all starting from one pack's state and faults, each with
     its own capacity and resistance factors (1 for the pack as it is)."""
@@ -46,13 +41,7 @@ class Packs:
         cfg: BatteryConfig = pack.cfg
         n = len(capacity_factor)
         self.cfg = cfg
-        self._ocv = Table.of(cfg.ocv_curve.soc, cfg.ocv_curve.volts, cfg.cells_series)
-        self._r0 = _resistance(cfg.series_resistance)
-        self._rj = [_resistance(p.resistance_curve if p.resistance_curve is not None
-                                else p.resistance_ohm or 0.0) for p in cfg.rc_pairs]
-        self._cj = [p.capacitance_f for p in cfg.rc_pairs]
-        self._cutoff_v = (cfg.cells_series * cfg.cutoff_cell_v if cfg.cutoff_cell_v is not None
-                          else None)
+        self._ocv, self._r0, self._rj, self._cj, self._cutoff_v = circuit_tables(cfg)
         # The sample's pack: the same state of charge of a capacity scaled by its factor.
         self.cap = pack.capacity_j * capacity_factor
         self.energy_j = pack.soc * self.cap if np.any(capacity_factor != 1.0) else np.full(
