@@ -5,10 +5,16 @@ A pack integrates the simulated time since it last stepped (not only the tick's 
 so time that passed while no tick could reach it (a restart of this service, a router
 outage) is integrated at the demand it was holding: the stored energy always equals the
 integral of the demand, and no stretch of time is integrated twice.
+
+One ``battery/state`` per tick: while the PDM runs, a tick's state is published when the
+PDM's summary of that tick arrives (the demand its loads set), or after ``HOLD_S``; before,
+each tick gave two samples, the first with the previous tick's demand.
 """
 
 from __future__ import annotations
 
+import math
+import time
 from typing import Any
 
 from common import keys
@@ -22,6 +28,8 @@ from services.battery.query import PredictionQueries
 __all__ = ["serve"]
 
 PERSIST_S = 0.2  # wall time between saves: what a killed battery service can lose
+HOLD_S = 0.04  # the longest a tick's state waits for the PDM's summary [s of wall time]
+PDM_HEARD_S = 1.0  # a summary within this long: the PDM is running [s of wall time]
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
@@ -30,27 +38,50 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     stepped_t: dict[str, float] = dict.fromkeys(packs, 0.0)  # sim time each pack has reached
     generation: dict[str, float] = {}  # the last generation each rover's PDM reported
 
-    def publish(rover: str) -> None:
+    def publish(rover: str, t_s: float | None = None) -> None:
         pack = packs[rover]
         r = pack.reading()
         rt.faults.sync_derived(rover, "battery", pack.derived_faults())
         rt.publish(keys.battery_state(rover), BatteryState(
-            t_s=rt.t_s[rover], fault_code=battery_fault_code(r.faults), **r._asdict()))
+            t_s=rt.t_s[rover] if t_s is None else t_s, fault_code=battery_fault_code(r.faults),
+            **r._asdict()))
+
+    # One sample per tick: while the PDM is heard from, a tick's state waits for the PDM's
+    # summary of that tick (the demand its loads just set), up to HOLD_S; a summary that
+    # changes the demand between ticks (a fault) is published at once.
+    held: dict[str, float] = {}  # rover -> monotonic time its tick's state goes out anyway
+    heard: dict[str, float] = {}  # rover -> monotonic time of its last summary
 
     def on_tick(rover: str, tick: Clock) -> None:
+        if held.pop(rover, None) is not None:  # the last tick's summary never came: its state
+            publish(rover, stepped_t[rover])   # goes out now, with its own time
         dt = tick.t_s - stepped_t[rover]
         if dt > 0.0:
             packs[rover].step(dt)
             stepped_t[rover] = tick.t_s
-        publish(rover)
+        now = time.monotonic()
+        if now - heard.get(rover, -math.inf) < PDM_HEARD_S:
+            held[rover] = now + HOLD_S
+        else:
+            publish(rover)
+
+    def release_held() -> None:
+        now = time.monotonic()
+        for rover in [r for r, due in held.items() if now >= due]:
+            del held[rover]
+            publish(rover)
 
     def on_summary(s: Sample) -> None:
         summary = decode(s.payload, PowerSummary)
         pack = packs[s.rover]
         generation[s.rover] = summary.generation_w
-        if summary.net_battery_power_w != pack.demand_w:
+        heard[s.rover] = time.monotonic()
+        changed = summary.net_battery_power_w != pack.demand_w
+        if changed:
             pack.set_demand(summary.net_battery_power_w)
-            publish(s.rover)  # the bus voltage and current move at once, not at the next tick
+        if changed or s.rover in held:  # the bus voltage and current move at once
+            held.pop(s.rover, None)
+            publish(s.rover)
 
     def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
         packs[rover].apply_fault(fk, params)
@@ -74,6 +105,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.queryable(keys.prediction("*"), queries.on_query)
     rt.on_exit(queries.close)
     rt.on_tick(on_tick)
+    rt.every(HOLD_S / 4, release_held)
     rt.subscribe(keys.power_summary("*"), on_summary)
     rt.faults.own("battery", None, apply_fault)
     rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S)

@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import time
+from collections import Counter
 
 import pytest
 import zenoh
@@ -49,6 +50,31 @@ def test_the_battery_drains_and_every_load_and_rail_reports(twin_factory, probe,
     assert summary["generation_w"] == pytest.approx(2 * 1361 * 0.12 * 0.29 * 0.5 * 0.95)
     assert summary["net_battery_power_w"] == pytest.approx(
         summary["bus_power_w"] - summary["generation_w"])
+
+
+def test_one_battery_state_per_summary_of_the_pdm(twin_factory, probe, mapp_file):
+    """Nothing doubled: the battery used to publish twice a tick, first with the previous
+    tick's demand, then again when the PDM's summary arrived. Now each state answers one
+    summary (once a tick; twice only when the PDM itself re-solved within the tick)."""
+    probe.watch(f"lunaris/{R}/**")
+    twin_factory([mapp_file], services=POWER_CHAIN)
+    start = probe.wait_value(keys.battery_state(R), lambda b: b["t_s"] > 1.0)["t_s"]
+    probe.wait_value(keys.battery_state(R), lambda b: b["t_s"] > start + 3.05)
+    window = start + 0.05, start + 3.05  # 30 ticks
+
+    def series(key: str, field: str) -> list[tuple[float, float]]:
+        return [(round(x["t_s"], 3), x[field]) for x in probe.samples(key)
+                if window[0] <= x["t_s"] <= window[1]]
+    states = series(keys.battery_state(R), "power_w")
+    summaries = series(keys.power_summary(R), "net_battery_power_w")
+    per_tick = Counter(t for t, _ in states)
+    once = [t for t, n in per_tick.items() if n == 1]
+    # every tick has its state; a loaded machine may delay the PDM past the battery's wait
+    # (HOLD_S) now and then, and the PDM re-solves a tick when its loads' burst is split
+    assert len(per_tick) == 30 and len(once) >= 20, f"{len(states)} states over 30 ticks: {per_tick}"
+    demand = dict(summaries)  # the tick's last summary
+    for t in once:
+        assert per_tick[t] == 1 and dict(states)[t] == pytest.approx(demand[t], rel=1e-9)
 
 
 def test_cmd_rail_switches_a_rail_and_its_loads(twin_factory, probe, mapp_file):
