@@ -10,7 +10,8 @@ and reports per second of wall time:
   ``rate_hz`` (a topic without a rate follows its twin key), for a sample of the rovers spread
   over the fleet (``--sample``, default 10: subscribing to every rover's ~80 topics would
   make this process the largest consumer of the two cores);
-- this measuring process's own CPU, beside the services';
+- this measuring process's own CPU, beside the services' (it hosts the embedded router too,
+  so the routing of every sample is in that figure, not in the services' total);
 - each service process's CPU and resident memory (RSS), and the total;
 - while the fleet runs, the fault-to-dashboard latency: load shorts on mapp-01's nav_camera,
   each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
@@ -195,7 +196,8 @@ def main() -> None:
                 lag = {k: sorted(v) for k, v in lags.items()}
                 topics = dict(topic_count)
             report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, len(sampled))
-            print(f"  this measuring process: cpu {me:5.1f} % (not in the total)", flush=True)
+            print(f"  this measuring process, the embedded router included: cpu {me:5.1f} % (not in the "
+                  "total)", flush=True)
             latencies = fault_latencies(probe, args.faults) if args.faults else []
             del subs
     if latencies:
