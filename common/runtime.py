@@ -12,9 +12,10 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
 - :meth:`publish`: JSON on a ``zenoh.ext`` advanced publisher whose cache keeps the last
   sample for late joiners;
 - :meth:`subscribe`: samples are queued and handled one at a time on a single worker
-  thread, so models need no locks. After the queue runs dry the ``after_batch`` hooks run:
-  a burst of inputs is folded into one recomputation, while a single input (a fault) is
-  acted on at once;
+  thread, so models need no locks. After the queue runs dry, or after ``MAX_BATCH_S`` of a
+  steady stream, the ``after_batch`` hooks and then the timers run: a burst of inputs is
+  folded into one recomputation, a single input (a fault) is acted on at once, and a fleet's
+  stream never holds back the hooks and timers;
 - one way to refuse input: a handler raises :class:`~common.messages.BadInput` and the
   runtime publishes a ``rejected`` event naming the key and the reason;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
@@ -48,6 +49,7 @@ from common.state_store import StateStore
 __all__ = ["AlreadyRunning", "Runtime", "Sample"]
 
 EVENT_CACHE = 256  # recent events kept for a late joiner
+MAX_BATCH_S = 0.02  # the longest a batch runs before its hooks and the timers [s]
 
 
 class AlreadyRunning(RuntimeError):
@@ -215,7 +217,9 @@ class Runtime:
     def run(self) -> None:
         """Serve until SIGINT or SIGTERM: handle queued samples and timers on this thread."""
         for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: self.stop())
+            # Only the flag: the handler runs on this thread, which may be holding the queue's
+            # lock (a put would deadlock); the loop sees the flag within a timer's wait.
+            signal.signal(sig, lambda *_: self._stop.set())
         # The tokens go up once every handler is declared: live means listening.
         for rover in sorted(self.rovers):
             self._keep.append(self.zenoh_session.liveliness().declare_token(keys.service(rover, self.name)))
@@ -250,8 +254,11 @@ class Runtime:
             except queue.Empty:
                 continue
             linger_until = time.monotonic() + self.batch_linger_s
+            batch_until = time.monotonic() + MAX_BATCH_S
             while item is not None:
                 self._guard(*item)
+                if self._stop.is_set() or time.monotonic() >= batch_until:
+                    break  # under a steady stream the hooks and timers still run
                 try:
                     item = self._queue.get_nowait()
                 except queue.Empty:

@@ -24,6 +24,13 @@ from tests.reliability.conftest import MAPP, R, alive
 pytestmark = pytest.mark.timeout(120)
 
 
+def command(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()[-120:]
+    except OSError:
+        return "?"
+
+
 def children(pid: int) -> list[int]:
     out = []
     for stat in Path("/proc").glob("[0-9]*/stat"):
@@ -69,7 +76,7 @@ def test_kill_9_of_up_leaves_no_orphan_and_the_next_up_runs_one_of_each(tmp_path
             first.wait(10)
             wait_for(lambda: not any(alive(pid) for pid in services), 10,
                      lambda: f"the services of the killed up to stop: "
-                             f"{[pid for pid in services if alive(pid)]}")
+                             f"{[(pid, command(pid)) for pid in services if alive(pid)]}")
         second = start_up(endpoint, tmp_path / "state")
         with Probe(endpoint) as p:
             p.watch(keys.clock(R))
