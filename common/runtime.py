@@ -81,6 +81,7 @@ class Runtime:
         self._conf = conf
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._stop = threading.Event()
+        self._signalled = False  # set by SIGINT/SIGTERM: a plain flag, no lock
         self._after_batch: list[Callable[[], None]] = []
         self.batch_linger_s = 0.0
         self._exit_hooks: list[Callable[[], None]] = []
@@ -210,6 +211,12 @@ class Runtime:
         self._stop.set()
         self._queue.put(None)
 
+    def _on_signal(self, *_: object) -> None:
+        self._signalled = True
+
+    def _stopping(self) -> bool:
+        return self._signalled or self._stop.is_set()
+
     def on_exit(self, fn: Callable[[], None]) -> None:
         """Run ``fn`` on the worker thread when the service stops (persist state)."""
         self._exit_hooks.append(fn)
@@ -217,9 +224,11 @@ class Runtime:
     def run(self) -> None:
         """Serve until SIGINT or SIGTERM: handle queued samples and timers on this thread."""
         for sig in (signal.SIGINT, signal.SIGTERM):
-            # Only the flag: the handler runs on this thread, which may be holding the queue's
-            # lock (a put would deadlock); the loop sees the flag within a timer's wait.
-            signal.signal(sig, lambda *_: self._stop.set())
+            # Only a plain flag: the handler runs on this thread, which may hold the queue's lock
+            # or, in a handler interrupted by a second signal, the stop Event's lock (either
+            # would deadlock: a faults service hung so after kill -9 of up); the loop sees the
+            # flag within a timer's wait.
+            signal.signal(sig, self._on_signal)
         # The tokens go up once every handler is declared: live means listening.
         for rover in sorted(self.rovers):
             self._keep.append(self.zenoh_session.liveliness().declare_token(keys.service(rover, self.name)))
@@ -247,7 +256,7 @@ class Runtime:
         return self.session
 
     def _loop(self) -> None:
-        while not self._stop.is_set():
+        while not self._stopping():
             timeout = self._run_timers()
             try:
                 item = self._queue.get(timeout=timeout)
@@ -257,7 +266,7 @@ class Runtime:
             batch_until = time.monotonic() + MAX_BATCH_S
             while item is not None:
                 self._guard(*item)
-                if self._stop.is_set() or time.monotonic() >= batch_until:
+                if self._stopping() or time.monotonic() >= batch_until:
                     break  # under a steady stream the hooks and timers still run
                 try:
                     item = self._queue.get_nowait()

@@ -158,3 +158,4 @@ def test_a_service_stops_when_its_supervisor_is_gone(router, tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0 and "supervisor 1 is gone" in out
+
