@@ -53,7 +53,17 @@ def view(driver, name: str) -> None:
 
 
 def click(driver, selector: str) -> None:
-    WebDriverWait(driver, 10).until(ec.element_to_be_clickable((By.CSS_SELECTOR, selector))).click()
+    """Click the element once it is clickable; the click is inside the wait, so an element the
+    page re-draws between being found and being clicked is found again."""
+    clickable = ec.element_to_be_clickable((By.CSS_SELECTOR, selector))
+
+    def clicked(d):
+        element = clickable(d)
+        if not element:
+            return False
+        element.click()
+        return True
+    WebDriverWait(driver, 10).until(clicked, f"{selector} to be clicked")
 
 
 def last_answer(driver, verdict: str, timeout_s: float = 10.0) -> str:
