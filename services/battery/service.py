@@ -71,6 +71,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             del held[rover]
             publish(rover)
 
+    summary_t: dict[str, float] = {}  # rover -> sim time of its last summary
+
     def on_summary(s: Sample) -> None:
         summary = decode(s.payload, PowerSummary)
         pack = packs[s.rover]
@@ -79,7 +81,13 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         changed = summary.net_battery_power_w != pack.demand_w
         if changed:
             pack.set_demand(summary.net_battery_power_w)
-        if changed or s.rover in held:  # the bus voltage and current move at once
+        # The tick's state waits for this (held); a later summary of the same tick is news
+        # between ticks (a fault, a command): the bus voltage and current move at once. The
+        # first summary of a tick arriving after its state went out anyway (a PDM lagging
+        # under load) sets the demand for the next tick: never two states for one tick.
+        again = summary_t.get(s.rover) == summary.t_s
+        summary_t[s.rover] = summary.t_s
+        if s.rover in held or (changed and again):
             held.pop(s.rover, None)
             publish(s.rover)
 
@@ -106,7 +114,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.on_exit(queries.close)
     rt.on_tick(on_tick)
     rt.every(HOLD_S / 4, release_held)
-    rt.subscribe(keys.power_summary("*"), on_summary)
+    rt.subscribe(keys.power_summary("*"), on_summary, telemetry=True)
     rt.faults.own("battery", None, apply_fault)
     rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S)
     rt.faults.restore()

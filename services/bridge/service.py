@@ -35,7 +35,7 @@ from common.datafile import field_kind, struct_fields
 from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
 from services.bridge.bindings import Binding, domain_of, expand, rover_names, zenoh_key
-from services.bridge.cdr import decode_cdr, encode_cdr
+from services.bridge.cdr import decode_cdr, encode_cdr, restamp
 from services.bridge.convert import (
     battery_state_message,
     components,
@@ -113,6 +113,7 @@ class _Outlet:
         self.json_key = zenoh_key(b, shared.opts, "json") if out.json.enabled else None
         self.rmw_key = zenoh_key(b, shared.opts, "rmw_zenoh") if out.rmw_zenoh.enabled else None
         self.ros2 = out.ros2.enabled
+        self.encodes = bool(self.dds_key or self.rmw_key or self.ros2)  # some flavour wants CDR
         self.gid = b""
         self.sequence = 0
         self._ros2_publish: Callable[[bytes], None] | None = None
@@ -122,6 +123,7 @@ class _Outlet:
         self.discrete: tuple | None = None  # the discrete fields at the last publish
         self.pending: Any = None  # the latest payload held back by the rate
         self.scheduled = False
+        self.last: tuple[Any, bytes] | None = None  # what a restamped message repeats
 
     def _declare_rmw(self) -> None:
         sh, b = self.shared, self.binding
@@ -132,10 +134,12 @@ class _Outlet:
         sh.rt.keep(sh.rt.zenoh_session.liveliness().declare_token(token))
         self.gid = gid_of(token)
 
-    def publish(self, msg: dict) -> None:
+    def publish(self, msg: dict, cdr: bytes | None = None) -> None:
+        """Publish a message (``cdr``: already encoded) in every enabled flavour."""
         rt, distro = self.shared.rt, self.shared.opts.ros_distro
-        if self.dds_key or self.rmw_key or self.ros2:
-            cdr = encode_cdr(self.type, msg, distro)
+        if self.encodes:
+            if cdr is None:
+                cdr = encode_cdr(self.type, msg, distro)
             if self.dds_key:
                 rt.publish_bytes(self.dds_key, cdr, CDR)
             if self.rmw_key:
@@ -277,19 +281,29 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     alive_of = {data_key(rid, c): (rid, c) for rid, cs in comps.items() for c in cs}
     diag_dirty: set[str] = set()
 
+    comp_keys = {rid: [(c, data_key(rid, c)) for c in cs] for rid, cs in comps.items()}
+
     def ages(rover: str) -> dict[str, float | None]:
         now = time.monotonic()
-        return {c: now - last_seen.get(data_key(rover, c), started) for c in comps[rover]}
+        return {c: now - last_seen.get(key, started) for c, key in comp_keys[rover]}
 
     def publish_diagnostics(rover: str) -> None:
+        """The rover's DiagnosticArray; statuses unchanged since the last one (the periodic
+        republishing of a quiet rover) are not encoded again, only stamped anew."""
         active = sorted((f for fs in in_effect[rover].values() for f in fs),
                         key=lambda f: (f.since_t_s, f.key))
         statuses = diagnostic_statuses(rover, comps[rover], active, ages(rover), opts.stale_after_s)
-        msg = None
+        t_ns = stamp_ns(rt.t_s.get(rover, 0.0))
         for outlet in diag_outlets[rover]:
-            msg = msg or diagnostic_array_message(statuses, stamp_ns(rt.t_s.get(rover, 0.0)),
-                                                  outlet.binding.mapping.frame_id)
-            outlet.publish(msg)
+            msg = diagnostic_array_message(statuses, t_ns, outlet.binding.mapping.frame_id)
+            cdr = None
+            if outlet.encodes:
+                if outlet.last is not None and outlet.last[0] == statuses:
+                    cdr = restamp(outlet.last[1], t_ns)
+                else:
+                    cdr = encode_cdr(outlet.type, msg, opts.ros_distro)
+                    outlet.last = (statuses, cdr)
+            outlet.publish(msg, cdr)
 
     def on_twin(s: Sample) -> None:
         alive = alive_of.get(s.key)
@@ -344,7 +358,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     fleet_size = len(fleet) if fleet is not None else len(rovers)
     served = ["*"] if len(rovers) == fleet_size else sorted(rover_cfg)
     for pattern in sorted({f.pattern(r) for f in fams for r in served}):
-        rt.subscribe(pattern, on_twin, history=True)
+        rt.subscribe(pattern, on_twin, history=True, telemetry=True)
     if diag_outlets:
         for r in served:
             rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True)

@@ -93,7 +93,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.input_drive_traverse("*"), on_traverse)
     for rover_id, r in configs.items():  # each rover's drive load only, not every load's samples
         assert r.drive is not None
-        rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load)
+        rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load, telemetry=True)
     rt.own_state(get_state, set_state, reset, after=publish)
     for rover in models:
         publish(rover)

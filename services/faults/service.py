@@ -205,7 +205,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     for head in WRITABLE:
         rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
-    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True)
+    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True, telemetry=True)
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
     rt.queryable(keys.snapshots("*"), on_snapshots_query)

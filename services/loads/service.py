@@ -54,8 +54,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         publish(rover, {fk.name} if fk.name else None)
 
     rt.on_tick(on_tick)
-    rt.subscribe(keys.rail_state("*", "*"), on_rail)
-    rt.subscribe(keys.drive_state("*"), on_drive)
+    rt.subscribe(keys.rail_state("*", "*"), on_rail, telemetry=True)
+    rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
     rt.faults.own("load", lambda rover: models[rover].names, apply_fault)
     # No state of its own (rail_on mirrors the PDM, the drive load follows drive/state), but
     # its faults follow resets and snapshots.

@@ -1,6 +1,15 @@
-"""Power service: the PDM. Folds load, battery and solar updates into rail states and totals."""
+"""Power service: the PDM. Folds load, battery and solar updates into rail states and totals.
+
+One recomputation per tick: the loads publish every load of a rover each tick, and the rover's
+rails and summary are published once all of that tick's loads have arrived (or ``HOLD_S``
+after the first, should one be missing), however the burst is split between batches. News
+between ticks (a command, a fault, a load republished when its rail changes) is published at
+once.
+"""
 
 from __future__ import annotations
+
+import time
 
 from common import keys
 from common.config import Rover
@@ -23,12 +32,15 @@ from services.power.model import PowerModel
 
 __all__ = ["serve"]
 
-LINGER_S = 0.002
+HOLD_S = 0.04  # the longest a rover's recomputation waits for the rest of its tick's loads [s]
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     models = {r.id: PowerModel(r) for r in rovers}
     dirty: set[str] = set()
+    due: dict[str, float] = {}  # rover -> monotonic time it is recomputed anyway
+    newest: dict[str, float] = {}  # rover -> sim time of its newest load sample
+    at_newest: dict[str, set[str]] = {r.id: set() for r in rovers}  # the loads of that tick
     last_state: dict[tuple[str, str], str] = {}
 
     def publish(rover: str) -> None:
@@ -45,15 +57,24 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.publish(keys.power_summary(rover), PowerSummary(t_s=t, **summary._asdict()))
 
     def flush() -> None:
-        for rover in sorted(dirty):
+        now = time.monotonic()
+        ready = [r for r in sorted(dirty) if len(at_newest[r]) == len(models[r].load_power_w)
+                 or now >= due.setdefault(r, now + HOLD_S)]
+        for rover in ready:
+            dirty.discard(rover)
+            due.pop(rover, None)
             publish(rover)
-        dirty.clear()
 
     def on_load(s: Sample) -> None:
         m = models[s.rover]
         name = s.parts[1]
         if name in m.load_power_w:  # the loads publish every tick: the PDM follows them
-            m.load_power_w[name] = decode(s.payload, LoadPower).power_w
+            load = decode(s.payload, LoadPower)
+            m.load_power_w[name] = load.power_w
+            if load.t_s != newest.get(s.rover):  # a new tick (or time put back by a reset)
+                newest[s.rover] = load.t_s
+                at_newest[s.rover].clear()
+            at_newest[s.rover].add(name)
             dirty.add(s.rover)
 
     def on_battery(s: Sample) -> None:
@@ -103,16 +124,17 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         models[rover].apply_fault(fk, params)
         publish(rover)
 
-    rt.subscribe(keys.load_power("*", "*"), on_load)
-    rt.subscribe(keys.battery_state("*"), on_battery)
-    rt.subscribe(keys.solar_power("*", "*"), on_solar)
-    rt.subscribe(keys.umbilical_state("*"), on_umbilical)
+    rt.subscribe(keys.load_power("*", "*"), on_load, telemetry=True)
+    rt.subscribe(keys.battery_state("*"), on_battery, telemetry=True)
+    rt.subscribe(keys.solar_power("*", "*"), on_solar, telemetry=True)
+    rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
     rt.subscribe(keys.cmd_rail("*", "*"), on_command)
     rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_fault)
     rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),
                  lambda rover: models[rover].reset(), after=publish)
     rt.faults.restore()
     # The loads of a rover arrive as a burst each tick: fold it into one recomputation.
-    rt.after_batch(flush, linger_s=LINGER_S)
+    rt.after_batch(flush)
+    rt.every(HOLD_S / 4, flush)
     for rover in models:
         publish(rover)

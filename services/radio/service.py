@@ -103,7 +103,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             publish(rover, name, force=True)
 
     rt.subscribe(keys.input_radio_position("*", "*"), on_position)
-    rt.subscribe(keys.drive_state("*"), on_drive)
+    rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
     rt.faults.own("radio", lambda rover: radios[rover], apply_fault)
     for rover in starts:
         follow(rover, *starts[rover])
