@@ -96,7 +96,12 @@ def fault_latencies(probe, n: int) -> list[float]:
         probe.wait_event(rover, lambda ev: ev["kind"] == "fault_cleared" and ev["key"] == short)
         probe.history.clear()
         probe.put(keys.cmd_rail(rover, "5V_CH2"), {"reset": True})
-        probe.wait_value(rail, lambda v: v["state"] == "on")
+        try:
+            probe.wait_value(rail, lambda v: v["state"] == "on", timeout_s=20)
+        except AssertionError:  # a fleet this far behind: say so, keep what was timed
+            print(f"  fault {i}: the rail was not back on 20 s after its reset; "
+                  "no more shorts timed", flush=True)
+            break
         time.sleep(0.05)
     del sub
     return out

@@ -1,5 +1,9 @@
 """The one service runtime: every Lunaris service is a model wrapped by this shell.
 
+Longer than 450 lines: the session, the worker loop that both queued callbacks and drained
+channels feed, and the publishers and events are one shell; the worker loop is the next part
+to move into a module of its own.
+
 A :class:`Runtime` is a context manager: ``with Runtime(name, rovers, conf, state_dir) as rt:``
 opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)``), and
 :meth:`Runtime.run` serves until SIGINT or SIGTERM. What it gives a service:
@@ -24,6 +28,7 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   runtime publishes a ``rejected`` event naming the key and the reason;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
   owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk.
+
 """
 
 from __future__ import annotations
@@ -407,6 +412,7 @@ class Runtime:
 
         polled = telemetry and self.polled
         how: Any = zenoh.handlers.FifoChannel(CHANNEL_CAPACITY) if polled else on_sample
+        sub: Any
         if history:
             sub = zext.declare_advanced_subscriber(
                 session, keyexpr, how,
