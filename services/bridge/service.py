@@ -320,8 +320,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         if s.rover not in in_effect or s.deleted:
             return
         answer = decode(s.payload, ActiveFaults)
-        in_effect[s.rover][answer.service] = answer.faults
-        diag_dirty.add(s.rover)
+        if in_effect[s.rover].get(answer.service) != answer.faults:
+            in_effect[s.rover][answer.service] = answer.faults
+            # at once, not after the batch: the telemetry a fault sets off (a rail tripping,
+            # the PDM re-solving) arrives in the same moment and must not go first
+            diag_dirty.discard(s.rover)
+            publish_diagnostics(s.rover)
 
     def flush() -> None:
         now = time.monotonic()
