@@ -62,7 +62,8 @@ MAX_BATCH_S = 0.02  # the longest a batch runs before its hooks and the timers [
 # A fleet's telemetry is drained from channels: from this many rovers the samples of a tick
 # (hundreds to thousands a second per service) cost less polled than called back one by one.
 POLL_FROM_ROVERS = 20
-POLL_S = 0.002  # how often the worker drains the telemetry channels [s]
+POLL_S = 0.002  # how often the worker drains the telemetry channels while they bring samples [s]
+POLL_MAX_S = 0.016  # ... backing off to this while they are empty (between a fleet's ticks) [s]
 CHANNEL_CAPACITY = 65536  # samples a telemetry channel holds before Zenoh waits on it
 
 
@@ -112,6 +113,7 @@ class Runtime:
         # (channel, on_sample) of each telemetry subscription drained by the worker
         self._channels: list[tuple[Any, Callable[[zenoh.Sample], Sample | None], Handler]] = []
         self.polled = len(self.rovers) >= POLL_FROM_ROVERS
+        self._poll_s = POLL_S
         self.session: zenoh.Session | None = None
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -279,7 +281,7 @@ class Runtime:
         while not self._stopping():
             timeout = self._run_timers()
             if self._channels:
-                timeout = min(timeout, POLL_S)
+                timeout = min(timeout, self._poll_s)
             try:
                 item = self._queue.get(timeout=timeout)
             except queue.Empty:
@@ -288,6 +290,8 @@ class Runtime:
             linger_until = start + self.batch_linger_s
             batch_until = start + MAX_BATCH_S
             handled = self._drain(batch_until)
+            # drained every 2 ms while samples come, backing off to 16 ms between bursts
+            self._poll_s = POLL_S if handled else min(2 * self._poll_s, POLL_MAX_S)
             if item is None and not handled:
                 continue
             while True:
@@ -392,15 +396,23 @@ class Runtime:
         ``telemetry``: a tick-rate stream, drained from a channel when the service serves a
         fleet (:attr:`polled`)."""
         session = self.zenoh_session
+        split_keys: dict[str, tuple[str, list[str]]] = {}  # the served rovers' keys, split
 
         def convert(s: zenoh.Sample) -> Sample | None:
             key = str(s.key_expr)
-            try:
-                rover, parts = keys.split(key)
-            except ValueError:
-                return None
-            if not any_rover and rover not in self.rovers:
-                return None
+            known = split_keys.get(key)
+            if known is not None:
+                rover, parts = known
+            else:
+                try:
+                    rover, parts = keys.split(key)
+                except ValueError:
+                    return None
+                # a served rover's keys, as many as a rover has: forged names cannot grow it
+                if rover in self.rovers and len(split_keys) < 100 * len(self.rovers):
+                    split_keys[key] = rover, parts
+                elif not any_rover:
+                    return None
             att = s.attachment.to_bytes() if s.attachment is not None else None
             return Sample(key, rover, parts, s.payload.to_bytes(),
                           s.kind == zenoh.SampleKind.DELETE, att)
