@@ -35,7 +35,7 @@ import msgspec
 from benchlib import ROOT, machine, percentiles, running_twin
 
 from common import keys
-from common.messages import BatteryState, Clock, PowerSummary
+from common.messages import BatteryState, Clock, PowerSummary, RadioLink
 from services.bridge.mapping import load_mapping
 from tests import rosmsg
 from tests.harness import static_rover
@@ -137,7 +137,8 @@ def main() -> None:
         lock = threading.Lock()
         decoders = {"clock": msgspec.json.Decoder(Clock),
                     "battery": msgspec.json.Decoder(BatteryState),
-                    "power": msgspec.json.Decoder(PowerSummary)}
+                    "power": msgspec.json.Decoder(PowerSummary),
+                    "radio": msgspec.json.Decoder(RadioLink)}
 
         def on(kind: str):
             def cb(s) -> None:
@@ -146,7 +147,7 @@ def main() -> None:
                 with lock:
                     counts[kind][rover] += 1
                     latest_t[(kind, rover)] = t
-                    if kind != "clock":
+                    if kind in ("battery", "power"):
                         lags[kind].append(latest_t.get(("clock", rover), t) - t)
             return cb
 
@@ -163,7 +164,8 @@ def main() -> None:
                 probe.wait_services(r, (*SERVICES, "bridge"), timeout_s=120)
             probe.watch(f"lunaris/{ids[0]}/**")
             subs = [probe.session.declare_subscriber(f"lunaris/*/{k}", on(kind)) for kind, k in
-                    (("clock", "clock"), ("battery", "battery/state"), ("power", "power/summary"))]
+                    (("clock", "clock"), ("battery", "battery/state"), ("power", "power/summary"),
+                     ("radio", "radio/lander/link"))]
             step = max(1, n // max(1, args.sample))
             sampled = ids[::step][:args.sample]
             if ids[0] not in sampled:
@@ -218,6 +220,11 @@ def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss,
               f"mean {sum(per) / n:.2f}  (>= 10.00 when keeping up)")
         if min(per) < 9.95:
             verdict.append(f"{kind} at {min(per):.2f}/s for its slowest rover")
+    # the radio publishes its link on a change and at least once a second (what the bridge's
+    # /final_comms_radio_bool and the diagnostics' staleness follow)
+    per = [snap.get("radio", {}).get(r, 0) / wall for r in ids]
+    print(f"  radio    link samples per rover per second: min {min(per):.2f}  mean {sum(per) / n:.2f}"
+          "  (about 1 when keeping up)")
     print(f"  sim time advanced per wall second: min {min(sim_advance) / wall:.3f}  "
           f"max {max(sim_advance) / wall:.3f}")
     for kind, v in lag.items():

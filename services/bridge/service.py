@@ -64,6 +64,7 @@ DEFAULT_MAPPING = REPO / "config" / "bridge" / "default.yaml"
 PUBLISHER_DEPTH = 1  # the last-value cache: TRANSIENT_LOCAL, KEEP_LAST 1
 SUBSCRIPTION_DEPTH = 10
 RATE_TIMER_S = 0.02  # how often the samples held back by a rate are looked at
+DIAG_SLOT_S = 0.02  # the shortest step of the periodic diagnostics spread over a period
 CDR = zenoh.Encoding.APPLICATION_CDR
 JSON = zenoh.Encoding.APPLICATION_JSON
 
@@ -350,9 +351,17 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
                 payload, discrete = outlet.pending
                 outlet.send(payload, discrete, now, message)
 
+    # The periodic DiagnosticArrays are spread over the period (a fleet's rovers one after the
+    # other, a timer every 20 ms or more), not sent all at once: no burst every second.
+    diag_rovers = list(diag_outlets)
+    diag_slots = max(1, min(len(diag_rovers), int(opts.diagnostics_period_s / DIAG_SLOT_S)))
+    per_slot = -(-len(diag_rovers) // diag_slots)
+    diag_next = [0]
+
     def periodic_diagnostics() -> None:
-        for rover in diag_outlets:
-            publish_diagnostics(rover)
+        for _ in range(per_slot):
+            publish_diagnostics(diag_rovers[diag_next[0] % len(diag_rovers)])
+            diag_next[0] += 1
 
     # One subscription per family of keys (lunaris/*/rail/*/state ...), samples told apart by
     # their exact key above. A bridge that serves part of the fleet (a shard) subscribes for
@@ -366,7 +375,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     if diag_outlets:
         for r in served:
             rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True)
-        rt.every(opts.diagnostics_period_s, periodic_diagnostics)
+        rt.every(opts.diagnostics_period_s / diag_slots, periodic_diagnostics)
     if any(o.period_s for ol in by_key.values() for o in ol):
         rt.every(RATE_TIMER_S, flush_due)
     rt.after_batch(flush)

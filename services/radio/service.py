@@ -1,5 +1,9 @@
 """Radio service: link in range or not, published on change and at least once a second.
 
+A link sample is sent reliably (it waits rather than being dropped under congestion): it is
+rare, a lost change of ``in_range`` would stand for a second, and a dashboard marks a radio
+whose samples stop as stale.
+
 The rover's position relative to a radio comes from ``input/radio/<radio>/position``, except
 for a radio with a ``site`` on a rover with a ``drive`` section: that radio follows the
 rover, with the distance and bearing from its site to the position ``drive/state`` reports
@@ -48,7 +52,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if force or prev is None or prev[0] != link.in_range or now - prev[1] >= HEARTBEAT_S:
             last[(rover, name)] = (link.in_range, now)
             rt.publish(keys.radio_link(rover, name), RadioLink(
-                t_s=rt.t_s[rover], faults=m.faults(), **link._asdict()))
+                t_s=rt.t_s[rover], faults=m.faults(), **link._asdict()), reliable=True)
 
     def heartbeat() -> None:
         for rover, named in radios.items():
