@@ -166,8 +166,9 @@ def main() -> None:
             subs = [probe.session.declare_subscriber(f"lunaris/*/{k}", on(kind)) for kind, k in
                     (("clock", "clock"), ("battery", "battery/state"), ("power", "power/summary"),
                      ("radio", "radio/lander/link"))]
-            step = max(1, n // max(1, args.sample))
-            sampled = ids[::step][:args.sample]
+            # spread over the fleet and over the shards (a shard serves every nb-th rover)
+            k = max(1, min(args.sample, n))
+            sampled = list(dict.fromkeys(ids[min(n - 1, (i * n) // k + i % nb)] for i in range(k)))
             if ids[0] not in sampled:
                 sampled[0] = ids[0]
             subs += [probe.session.declare_subscriber(f"{rid.replace('-', '_')}/**", on_bridge)
