@@ -70,13 +70,24 @@ class FaultBook:
 
     def _inject(self, rover: str, key: str, fk: FaultKey, params: Params) -> None:
         active = self.injected[rover]
-        self._appliers[fk.component](rover, fk, params)
         previous = active.get(fk.path)
         # Injecting again replaces the parameters; the fault has been active since the first.
         since = previous[0].since_t_s if previous else self.rt.t_s[rover]
         as_dict = msgspec.structs.asdict(params)
+        # The record goes out before the effect: whoever sees the effect (a load shorted, the
+        # rail it trips) finds the fault listed, and the dashboard hears of the fault first.
         active[fk.path] = (ActiveFault(key, as_dict, since, "injected"), params)
-        self._changed(rover)
+        self._publish(rover)
+        try:
+            self._appliers[fk.component](rover, fk, params)
+        except BaseException:
+            if previous is None:
+                del active[fk.path]
+            else:
+                active[fk.path] = previous
+            self._publish(rover)
+            raise
+        self._save()
         verb = "replaced" if previous else "injected"
         self.rt.event(rover, "warning", "fault_injected", key,
                       f"{verb} {fk.path} {json.dumps(as_dict)}", as_dict)
@@ -154,10 +165,13 @@ class FaultBook:
         return sorted(faults, key=lambda f: (f.since_t_s, f.key))
 
     def _changed(self, rover: str) -> None:
+        self._save()
+        self._publish(rover)
+
+    def _save(self) -> None:
         self.rt.store.save("faults", {
             r: {p: msgspec.structs.asdict(f) for p, (f, _) in fs.items()}
             for r, fs in self.injected.items()})
-        self._publish(rover)
 
     def publish(self, rover: str) -> None:
         self._publish(rover)

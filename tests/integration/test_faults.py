@@ -378,3 +378,42 @@ def test_get_faults_lists_a_fault_as_soon_as_its_effect_shows(probe):
             probe.delete(fkey)
             watchers[key].wait(f"the clearing of {fkey}")
             assert fkey not in listed(probe), f"{fkey} was cleared but is still listed"
+
+
+@pytest.mark.timeout(120)
+def test_the_faults_in_effect_go_out_before_the_effect(probe):
+    """A dashboard hears of a fault before it sees what the fault does: the owner publishes
+    its faults in effect, then the effect (for each of the 5 owners, 5 rounds). Samples of
+    one publisher session reach a subscriber in the order they were put; one subscription
+    (one dispatch thread) sees both."""
+    order: list[str] = []
+    lock = threading.Lock()
+    watch: dict = {}  # key -> (tag, holds), the round's
+
+    def on_sample(s) -> None:
+        k = str(s.key_expr)
+        for prefix, (tag, holds) in list(watch.items()):
+            if k.startswith(prefix) and holds(json.loads(s.payload.to_bytes())):
+                with lock:
+                    order.append(tag)
+
+    sub = probe.session.declare_subscriber(f"lunaris/{R}/**", on_sample)
+    try:
+        for component, kind, payload, key, effect in EFFECTS:
+            fkey = fault_key(component, kind)
+            watch.clear()
+            watch[key] = ("effect", effect)
+            watch[keys.faults_active(R, "")] = ("listed", lambda v, k=fkey: any(
+                f["key"] == k for f in v["faults"]))
+            for _ in range(5):
+                with lock:
+                    order.clear()
+                probe.put(fkey, payload)
+                wait_for(lambda: "effect" in order and "listed" in order, 5,
+                         f"the effect and the listing of {fkey}")
+                with lock:
+                    assert order.index("listed") < order.index("effect"), (fkey, order)
+                probe.delete(fkey)
+                probe.wait_value(key, lambda v, effect=effect: not effect(v))
+    finally:
+        sub.undeclare()
