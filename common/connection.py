@@ -97,14 +97,20 @@ def _refuse_demo_password(conf: zenoh.Config, path: Path) -> None:
             "`lunaris deploy secrets DIR` and use its client configurations")
 
 
+# What must never wait behind telemetry: instructor writes, events, the faults in effect.
+# Zenoh queues each priority apart on a link and sends the higher first.
+PRIORITY = zenoh.Priority.DATA_HIGH
+
+
 def write(session: zenoh.Session, key: str, payload: bytes | str | None) -> None:
     """An input, command or fault: a put (``payload``) or a delete (None), never dropped.
 
     Zenoh drops a put under congestion unless it is sent with ``CongestionControl.BLOCK``;
     a burst of instructor actions must arrive whole, so every Lunaris tool writes this way.
+    It goes at ``PRIORITY``, ahead of a fleet's telemetry queued on the same links.
     """
     if payload is None:
-        session.delete(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        session.delete(key, congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY)
     else:
         session.put(key, payload, encoding=zenoh.Encoding.APPLICATION_JSON,
-                    congestion_control=zenoh.CongestionControl.BLOCK)
+                    congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY)

@@ -49,6 +49,7 @@ import zenoh
 import zenoh.ext as zext
 
 from common import keys
+from common.connection import PRIORITY
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
@@ -468,6 +469,8 @@ class Runtime:
             encoding=encoding,
             congestion_control=(zenoh.CongestionControl.BLOCK if reliable
                                 else zenoh.CongestionControl.DROP),
+            # what must never be lost must not wait behind a fleet's telemetry either
+            priority=PRIORITY if reliable else zenoh.Priority.DATA,
             cache=zext.CacheConfig(max_samples=cache),
             sample_miss_detection=(None if heartbeat_s is None
                                    else zext.MissDetectionConfig(heartbeat=None,
@@ -491,7 +494,8 @@ class Runtime:
                    seq=self._event_seq)
         if rover not in self.rovers:
             self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
-                                   congestion_control=zenoh.CongestionControl.BLOCK)
+                                   congestion_control=zenoh.CongestionControl.BLOCK,
+                                   priority=PRIORITY)
             return
         if ekey not in self._publishers:
             self._declare_publisher(ekey, EVENT_CACHE, reliable=True)

@@ -115,6 +115,8 @@ class _Outlet:
         self.rmw_key = zenoh_key(b, shared.opts, "rmw_zenoh") if out.rmw_zenoh.enabled else None
         self.ros2 = out.ros2.enabled
         self.encodes = bool(self.dds_key or self.rmw_key or self.ros2)  # some flavour wants CDR
+        # /diagnostics carries the faults: never dropped, ahead of a fleet's telemetry
+        self.urgent = b.mapping.convert == "diagnostics"
         self.gid = b""
         self.sequence = 0
         self._ros2_publish: Callable[[bytes], None] | None = None
@@ -142,14 +144,14 @@ class _Outlet:
             if cdr is None:
                 cdr = encode_cdr(self.type, msg, distro)
             if self.dds_key:
-                rt.publish_bytes(self.dds_key, cdr, CDR)
+                rt.publish_bytes(self.dds_key, cdr, CDR, reliable=self.urgent)
             if self.rmw_key:
                 if not self.gid:
                     self._declare_rmw()
                 self.sequence += 1
                 rt.publish_bytes(self.rmw_key, cdr, CDR,
                                  attachment(self.sequence, time.time_ns(), self.gid),
-                                 heartbeat_s=HEARTBEAT_S)
+                                 reliable=self.urgent, heartbeat_s=HEARTBEAT_S)
             if self.ros2:
                 if self._ros2_publish is None:
                     graph = self.shared.graph
@@ -158,7 +160,7 @@ class _Outlet:
                                                          self.binding.topic, self.type)
                 self._ros2_publish(cdr)
         if self.json_key:
-            rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON)
+            rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON, reliable=self.urgent)
 
     def offer(self, payload: Any, discrete: tuple, now: float,
               build: Callable[[_Outlet, Any], dict | None]) -> None:
