@@ -5,11 +5,13 @@ Messages are plain dicts of their ROS 2 fields (what the ``json`` flavour publis
 :func:`decode_cdr` reads one back. The tables say which ``std_msgs`` types carry one value
 or an array, and the ranges of the integer types.
 
-Two short cuts, each checked byte for byte against rosbags by the tests: a ``std_msgs``
-scalar (one primitive at offset 0, never padded) is packed with :mod:`struct` (a fleet's
-bridge sends thousands a second; through rosbags each costs several microseconds), and
-:func:`restamp` writes a new ``header.stamp`` into an encoded message that starts with a
-``std_msgs/Header`` (the DiagnosticArray republished unchanged every second).
+Short cuts, each checked byte for byte against rosbags by the tests: a ``std_msgs`` scalar
+(one primitive at offset 0, never padded) is packed with :mod:`struct` (a fleet's bridge
+sends thousands a second; through rosbags each costs several microseconds); the
+DiagnosticArray (strings and sequences only) is written directly, a tenth of rosbags' time
+for the message a fault sends; and :func:`restamp` writes a new ``header.stamp`` into an
+encoded message that starts with a ``std_msgs/Header`` (the DiagnosticArray republished
+unchanged every second).
 """
 
 from __future__ import annotations
@@ -135,8 +137,46 @@ def encode_cdr(typename: str, msg: dict, distro: str = "jazzy") -> bytes:
             return pack.pack(CDR_LE, value)
         except (struct.error, OverflowError):
             pass  # out of the type's range: rosbags says how
+    direct = _DIRECT.get(typename)
+    if direct is not None:
+        return direct(msg)
     store = typestore(distro)
     return bytes(store.serialize_cdr(_to_ros(store, typename, msg), typename))
+
+
+def _cdr_string(out: bytearray, text: str) -> None:
+    """A CDR string: aligned to 4 from the start of the data, uint32 length with the NUL."""
+    out += b"\x00" * (-(len(out) - 4) % 4)
+    raw = text.encode()
+    out += struct.pack("<I", len(raw) + 1) + raw + b"\x00"
+
+
+def _diagnostic_array(msg: dict) -> bytes:
+    """``diagnostic_msgs/msg/DiagnosticArray`` written directly (rosbags takes ~260 µs for a
+    rover's 21 statuses; this ~20 µs). The layout: Header (stamp int32 sec, uint32 nanosec,
+    string frame_id), then sequence<DiagnosticStatus{byte level, string name, message,
+    hardware_id, sequence<KeyValue{string key, value}> values}>; the tests check it byte for
+    byte against rosbags."""
+    head = msg.get("header") or {}
+    stamp = head.get("stamp") or {}
+    out = bytearray(CDR_LE)
+    out += _STAMP.pack(int(stamp.get("sec", 0)), int(stamp.get("nanosec", 0)))
+    _cdr_string(out, str(head.get("frame_id") or ""))
+    statuses = msg.get("status") or []
+    out += b"\x00" * (-(len(out) - 4) % 4) + struct.pack("<I", len(statuses))
+    for st in statuses:
+        out += struct.pack("<B", int(st.get("level") or 0) & 0xFF)
+        for name in ("name", "message", "hardware_id"):
+            _cdr_string(out, str(st.get(name) or ""))
+        values = st.get("values") or []
+        out += b"\x00" * (-(len(out) - 4) % 4) + struct.pack("<I", len(values))
+        for kv in values:
+            _cdr_string(out, str(kv.get("key") or ""))
+            _cdr_string(out, str(kv.get("value") or ""))
+    return bytes(out)
+
+
+_DIRECT = {"diagnostic_msgs/msg/DiagnosticArray": _diagnostic_array}
 
 
 def restamp(cdr: bytes, stamp_ns: int) -> bytes:

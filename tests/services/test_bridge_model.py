@@ -542,6 +542,22 @@ def test_a_scalar_packed_directly_is_what_rosbags_makes(typename, value):
     assert got == expected
 
 
+_TEXT = st.text(max_size=12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(sec=st.integers(-(2**31), 2**31 - 1), nanosec=st.integers(0, 2**32 - 1), frame=_TEXT,
+       statuses=st.lists(st.fixed_dictionaries({
+           "level": st.integers(0, 127), "name": _TEXT, "message": _TEXT, "hardware_id": _TEXT,
+           "values": st.lists(st.fixed_dictionaries({"key": _TEXT, "value": _TEXT}), max_size=3),
+       }), max_size=6))
+def test_a_diagnostic_array_written_directly_is_what_rosbags_makes(sec, nanosec, frame, statuses):
+    typename = "diagnostic_msgs/msg/DiagnosticArray"
+    msg = {"header": {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": frame},
+           "status": statuses}
+    assert cdr.encode_cdr(typename, msg) == _through_rosbags(typename, msg)
+
+
 def test_a_restamped_diagnostic_array_is_the_one_encoded_with_that_stamp():
     statuses = convert.diagnostic_statuses(
         "mapp-1", ["battery", "load/cam"],
