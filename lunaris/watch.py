@@ -41,7 +41,7 @@ from common.messages import (
     Event,
     decode,
 )
-from lunaris.tooling import ToolError, describe_endpoint, ignored, open_session
+from lunaris.tooling import ToolError, close_session, describe_endpoint, ignored, open_session
 from lunaris.watch_view import Connection, Snapshot, render
 
 __all__ = ["Connection", "Snapshot", "Store", "add_arguments", "main", "render"]
@@ -160,14 +160,18 @@ class _Watcher:
         except ToolError as exc:
             self.error = str(exc)
             return
+        self.session = session  # from here, close() closes it, declared or not
         rover = self.args.rover or "*"
         history = zext.HistoryConfig(detect_late_publishers=True)
-        for family in keys.families("out"):
-            self._keep.append(zext.declare_advanced_subscriber(
-                session, family.pattern(rover), self.store.on_sample, history=history))
-        self._keep.append(session.liveliness().declare_subscriber(
-            keys.service(rover, "*"), self.store.on_token, history=True))
-        self.session = session
+        try:
+            for family in keys.families("out"):
+                self._keep.append(zext.declare_advanced_subscriber(
+                    session, family.pattern(rover), self.store.on_sample, history=history))
+            self._keep.append(session.liveliness().declare_subscriber(
+                keys.service(rover, "*"), self.store.on_token, history=True))
+        except zenoh.ZError:
+            if not self.stop.is_set():  # else: closed while declaring, on the way out
+                raise
 
     def refresh_connection(self) -> None:
         session = self.session
@@ -183,7 +187,7 @@ class _Watcher:
         self.stop.set()
         self._keep.clear()
         if self.session is not None:
-            self.session.close()
+            close_session(self.session)
 
 
 def main(args: argparse.Namespace) -> int:

@@ -13,6 +13,7 @@ import struct
 import subprocess
 import termios
 import threading
+import time
 
 import pytest
 from rich.console import Console
@@ -193,8 +194,15 @@ class Terminal:
                 self.proc.kill()
                 self.proc.wait()
         self._reader.join(5)
-        os.close(self.master)
+        if self.master >= 0:
+            os.close(self.master)
+            self.master = -1
         return self.proc.returncode
+
+    def tail(self, n: int = 2000) -> str:
+        """The last of what the process wrote (a panic's message, for a failure)."""
+        with self._lock:
+            return _CSI.sub("", bytes(self._buf[-n:]).decode("utf-8", "replace"))
 
 
 def _sim_t(screen: str) -> float:
@@ -237,7 +245,7 @@ def test_watch_shows_the_rover_live_through_a_fault_and_a_router_restart(tmp_pat
             assert "DISCONNECTED" not in screen and "load/nav_camera/short" in screen
             p.delete(keys.fault(R, "load/nav_camera", "short"))
             term.wait_screen(lambda s: "fault_cleared" in s, 15, "the clearing, after the reconnection")
-            assert term.close() == 0
+            assert term.close() == 0, term.tail()
             term = None
 
             once = run_tool("watch", "--once", "--connect", endpoint, "--width", "160")  # fleet, piped
@@ -273,3 +281,24 @@ def test_piped_once_is_as_wide_as_the_reader_s_terminal_or_160(monkeypatch):
     monkeypatch.setattr(watch.sys, "stderr", Pipe())
     monkeypatch.setattr(watch.sys, "stdin", Pipe())
     assert watch._piped_width() == watch.PIPED_WIDTH == 160
+
+
+def test_closing_a_session_waits_for_zenohs_callback_threads():
+    """A callback thread zenoh started from a daemon thread (watch declares from its opener)
+    is a daemon too; left running at exit, it woke during the interpreter's shutdown and the
+    process aborted (exit -6, 'FATAL: exception not rethrown'). close_session waits for it."""
+    from lunaris.tooling import close_session
+
+    closed = threading.Event()
+
+    class Session:
+        def close(self) -> None:
+            closed.set()
+
+    def callbacks() -> None:  # ends a moment after the session closes, as zenoh's do
+        closed.wait(5)
+        time.sleep(0.3)
+    thread = threading.Thread(target=callbacks, name="Thread-9 (pyo3-closure)", daemon=True)
+    thread.start()
+    close_session(Session())
+    assert not thread.is_alive()
