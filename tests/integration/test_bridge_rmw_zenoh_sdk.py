@@ -61,8 +61,11 @@ class Client:
 def test_an_independent_rmw_zenoh_client_reads_every_topic_and_drives_the_radio(
         probe, twin_factory, mapp_file, router, tmp_path):
     probe.watch(f"lunaris/{R}/**")
+    probe.watch("final_comms_radio_bool")
     twin_factory([mapp_file], services=SERVICES)
     probe.wait_services(R, SERVICES)
+    # a topic is advertised with its first message; the radio's comes within its 1 s heartbeat
+    wait_for(lambda: probe.value("final_comms_radio_bool") is not None, 10, "the radio's first topic")
     config = tmp_path / "session.json5"
     # a client of the test's router: no scouting (multicast or gossip), nothing to listen on
     config.write_text(json.dumps({"mode": "client", "connect": {"endpoints": [router]},
