@@ -151,8 +151,8 @@ class _Watcher:
         self.stop = threading.Event()
         self._keep: list[Any] = []
         self._opener = threading.Thread(target=self._open, name="watch-open", daemon=True)
-        # Asking Zenoh for the routers can block (its transports are locked while a link is
-        # being set up): never on the main thread, which must always see Ctrl-C.
+        # Asking Zenoh for the routers is a call into native code: not on the main thread,
+        # which must always see Ctrl-C.
         self._link = threading.Thread(target=self._watch_link, name="watch-link", daemon=True)
 
     def start(self) -> None:
@@ -210,6 +210,9 @@ def main(args: argparse.Namespace) -> int:
     watcher = _Watcher(args, store)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # Ctrl-C quits even when started with SIGINT ignored (from a script's background job,
+    # as `make test &` is; its children inherit the ignoring): like the other tools' handlers
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     watcher.start()
     tty = sys.stdout.isatty() and not args.once
     console = Console(width=args.width or _piped_width()) if args.width or not sys.stdout.isatty() \
