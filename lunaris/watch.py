@@ -20,7 +20,6 @@ second (Ctrl-C quits); narrower than 110 columns it draws a compact layout that 
 from __future__ import annotations
 
 import argparse
-import faulthandler
 import os
 import signal
 import sys
@@ -151,17 +150,9 @@ class _Watcher:
         self.stop = threading.Event()
         self._keep: list[Any] = []
         self._opener = threading.Thread(target=self._open, name="watch-open", daemon=True)
-        # Asking Zenoh for the routers is a call into native code: not on the main thread,
-        # which must always see Ctrl-C.
-        self._link = threading.Thread(target=self._watch_link, name="watch-link", daemon=True)
 
     def start(self) -> None:
         self._opener.start()
-        self._link.start()
-
-    def _watch_link(self) -> None:
-        while not self.stop.wait(LINK_CHECK_S):
-            self.refresh_connection()
 
     def _open(self) -> None:
         try:
@@ -182,10 +173,10 @@ class _Watcher:
             if not self.stop.is_set():  # else: closed while declaring, on the way out
                 raise
 
-    def in_native_code(self) -> bool:
-        """A thread of ours still in a Zenoh call (opening, or asking for the routers): left
-        to the interpreter's shutdown, its return would abort the process."""
-        return self._opener.is_alive() or self._link.is_alive()
+    def still_opening(self) -> bool:
+        """The opener still in a Zenoh call (no router yet): left to the interpreter's
+        shutdown, its return would abort the process."""
+        return self._opener.is_alive()
 
     def refresh_connection(self) -> None:
         session = self.session
@@ -199,7 +190,6 @@ class _Watcher:
 
     def close(self) -> None:
         self.stop.set()
-        self._link.join(2 * LINK_CHECK_S)
         self._keep.clear()
         if self.session is not None:
             close_session(self.session)
@@ -219,6 +209,7 @@ def main(args: argparse.Namespace) -> int:
         else Console()
 
     def frame() -> RenderableType:
+        watcher.refresh_connection()
         return render(store.snapshot(), watcher.conn, args.rover, args.events,
                       width=console.size.width, height=console.size.height)
 
@@ -251,14 +242,12 @@ def main(args: argparse.Namespace) -> int:
 
 def _close(watcher: _Watcher, code: int) -> None:
     """Close the session, within ``CLOSE_DEADLINE_S``: Ctrl-C always ends the tool. Should
-    the closing hang, or a thread of ours still be in a Zenoh call, the process leaves at once
-    (a viewer holds no state); should the interpreter's shutdown hang, the stacks go to stderr
-    and it exits 1."""
-    faulthandler.dump_traceback_later(EXIT_DEADLINE_S, exit=True)
+    the closing hang, or the opener still be in a Zenoh call, the process leaves at once (a
+    viewer holds no state)."""
     closer = threading.Thread(target=watcher.close, name="watch-close", daemon=True)
     closer.start()
     closer.join(CLOSE_DEADLINE_S)
-    if closer.is_alive() or watcher.in_native_code():
+    if closer.is_alive() or watcher.still_opening():
         if closer.is_alive():
             print(f"lunaris watch: the Zenoh session did not close within {CLOSE_DEADLINE_S:g} s; "
                   "leaving it", file=sys.stderr, flush=True)
@@ -266,9 +255,7 @@ def _close(watcher: _Watcher, code: int) -> None:
         os._exit(code)
 
 
-LINK_CHECK_S = 0.2  # how often the link to the router is checked [s]
 CLOSE_DEADLINE_S = 3.0  # the longest the session's closing is waited for [s]
-EXIT_DEADLINE_S = 6.0  # the longest watch takes to end once it is asked to [s]
 PIPED_WIDTH = 160  # a log or a file: wide enough for the whole layout
 
 
