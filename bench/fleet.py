@@ -163,6 +163,11 @@ def main() -> None:
             for r in (ids[0], ids[-1]):
                 probe.wait_services(r, (*SERVICES, "bridge"), timeout_s=120)
             probe.watch(f"lunaris/{ids[0]}/**")
+            # the keys this process hears, declared: Zenoh then looks a sample's key up
+            # instead of matching it against every key expression the session knows
+            heard = [probe.session.declare_keyexpr(key) for r in ids for key in
+                     (keys.clock(r), keys.battery_state(r), keys.power_summary(r),
+                      keys.radio_link(r, "lander"))]
             subs = [probe.session.declare_subscriber(f"lunaris/*/{k}", on(kind)) for kind, k in
                     (("clock", "clock"), ("battery", "battery/state"), ("power", "power/summary"),
                      ("radio", "radio/lander/link"))]
@@ -207,7 +212,7 @@ def main() -> None:
             print(f"  this measuring process, the embedded router included: cpu {me:5.1f} % (not in the "
                   "total)", flush=True)
             latencies = fault_latencies(probe, args.faults) if args.faults else []
-            del subs
+            del subs, heard
     if latencies:
         print(f"  fault -> {ids[0]} /diagnostics (ros2dds) while the fleet runs: {percentiles(latencies)}")
 

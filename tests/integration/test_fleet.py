@@ -100,3 +100,39 @@ def test_a_fleet_drains_its_telemetry_and_loses_or_doubles_nothing(fleet, probe)
     probe.put(keys.cmd_rail(victim, "5V_CH2"), {"reset": True})
     probe.wait_value(keys.rail_state(victim, "5V_CH2"), lambda v: v["state"] == "on")
     sub.undeclare()
+
+
+def test_a_fleet_service_declares_each_key_it_hears_once_and_no_forged_ones_past_a_bound(
+        router, probe, tmp_path):
+    """Zenoh matches the key of a sample it does not know against every key expression the
+    session declared (a fleet service's ~1,000 publishers: most of its receive thread's CPU);
+    a declared key is looked up. So a fleet's service declares each telemetry key it hears,
+    once, and a flood of forged names for a served rover stops at the runtime's bound."""
+    from common.connection import make_config
+    from common.runtime import Runtime
+
+    rovers = [f"r-{i:02d}" for i in range(1, POLL_FROM_ROVERS + 1)]
+    heard: list[str] = []
+    with Runtime("probe-service", rovers, make_config(connect=[router]), tmp_path) as rt:
+        assert rt.polled
+        rt.subscribe(keys.load_power("*", "*"), lambda s: heard.append(s.key), telemetry=True)
+        real = [keys.load_power(r, load) for r in rovers for load in ("heater", "camera")]
+
+        def every_key_heard() -> bool:  # each round sends every key again
+            for key in real:
+                probe.session.put(key, b'{"power_w": 1.0}')
+            rt._drain(time.monotonic() + 0.5)
+            return set(heard) == set(real)
+        wait_for(every_key_heard, 10, "every served rover's keys")
+        assert set(rt._heard) == set(real)  # each key once, whatever the number of samples
+        heard.clear()
+        for i in range(150 * len(rovers)):
+            probe.session.put(keys.load_power("r-01", f"ghost-{i}"), b'{"power_w": 1.0}')
+        probe.session.put(real[-1], b'{"power_w": 1.0}')  # after the flood, on the same path
+
+        def flood_drained() -> bool:
+            rt._drain(time.monotonic() + 0.5)
+            return real[-1] in heard
+        wait_for(flood_drained, 20, "the forged samples and the one after them")
+        assert len(rt._heard) == 100 * len(rovers)  # the bound, reached
+        assert set(real) <= set(rt._heard)
