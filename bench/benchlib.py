@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import platform
+import subprocess
 import sys
 import tempfile
 from contextlib import contextmanager
@@ -13,7 +14,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router  # noqa: E402
+from tests.harness import (  # noqa: E402
+    ALL_SERVICES,
+    Probe,
+    Twin,
+    free_endpoint,
+    lunaris_cmd,
+    open_router,
+    stop_process,
+    wait_for,
+)
 
 __all__ = ["ROOT", "machine", "percentiles", "running_twin"]
 
@@ -40,14 +50,28 @@ def percentiles(samples_ms: list[float]) -> str:
 
 
 @contextmanager
-def running_twin(rover_files: list[str | Path], services=ALL_SERVICES, extra=None):
-    """A router, the services as processes, and a probe: (probe, twin, endpoint)."""
+def running_twin(rover_files: list[str | Path], services=ALL_SERVICES, extra=None,
+                 router_process: bool = False):
+    """A router, the services as processes, and a probe: (probe, twin, endpoint). The router
+    is embedded in this process, or with ``router_process`` is ``lunaris router`` in a process
+    of its own (``twin.router``), so its CPU and memory can be told from the measuring's."""
     endpoint = free_endpoint()
-    router = open_router(endpoint)
+    router = None if router_process else open_router(endpoint)
+    proc = None
     try:
-        with tempfile.TemporaryDirectory(prefix="lunaris-bench-") as tmp, \
-                Twin(endpoint, list(rover_files), Path(tmp), services=tuple(services),
-                     extra=extra) as twin, Probe(endpoint) as probe:
-            yield probe, twin, endpoint
+        with tempfile.TemporaryDirectory(prefix="lunaris-bench-") as tmp:
+            if router_process:
+                log = Path(tmp) / "router.log"
+                with log.open("wb") as out:
+                    proc = subprocess.Popen(lunaris_cmd("router", "--listen", endpoint), cwd=ROOT,
+                                            stdout=out, stderr=subprocess.STDOUT)
+                wait_for(lambda: b"listening" in log.read_bytes(), 30, "the router")
+            with Twin(endpoint, list(rover_files), Path(tmp), services=tuple(services),
+                      extra=extra) as twin, Probe(endpoint) as probe:
+                twin.router = proc
+                yield probe, twin, endpoint
     finally:
-        router.close()
+        if proc is not None:
+            stop_process(proc)
+        if router is not None:
+            router.close()

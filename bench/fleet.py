@@ -10,9 +10,9 @@ and reports per second of wall time:
   ``rate_hz`` (a topic without a rate follows its twin key), for a sample of the rovers spread
   over the fleet (``--sample``, default 10: subscribing to every rover's ~80 topics would
   make this process the largest consumer of the two cores);
-- this measuring process's own CPU, beside the services' (it hosts the embedded router too,
-  so the routing of every sample is in that figure, not in the services' total);
-- each service process's CPU and resident memory (RSS), and the total;
+- each service process's CPU and resident memory (RSS), and the total; the router's (``lunaris
+  router``, a process of its own as in a deployment, where it is zenohd) beside them, and this
+  measuring process's own (neither in the services' total);
 - while the fleet runs, the fault-to-dashboard latency: load shorts on mapp-01's nav_camera,
   each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
   50 ms), cleared and the rail reset between shorts.
@@ -160,7 +160,7 @@ def main() -> None:
 
         mapping = ["--bridge-config", str(Path(args.bridge_config).resolve())] if args.bridge_config else []
         extra = {b: ["--shard", f"{k}/{nb}", *mapping] for k, b in enumerate(bridges, start=1)}
-        with running_twin(files, services, extra) as (probe, twin, _):
+        with running_twin(files, services, extra, router_process=True) as (probe, twin, _):
             for r in (ids[0], ids[-1]):
                 probe.wait_services(r, (*SERVICES, "bridge"), timeout_s=120)
             probe.watch(f"lunaris/{ids[0]}/**")
@@ -196,22 +196,22 @@ def main() -> None:
                 lags.clear()
                 topic_count.clear()
                 t_clock0 = {r: latest_t.get(("clock", r), 0.0) for r in ids}
-            cpu0 = {s: cpu_s(p.pid) for s, p in twin.procs.items()}
+            procs = {**twin.procs, "router": twin.router}
+            cpu0 = {s: cpu_s(p.pid) for s, p in procs.items()}
             me0 = time.process_time()
             w0 = time.monotonic()
             time.sleep(seconds)
             wall = time.monotonic() - w0
             me = (time.process_time() - me0) / wall * 100
-            cpu1 = {s: cpu_s(p.pid) for s, p in twin.procs.items()}
-            rss = {s: rss_mb(p.pid) for s, p in twin.procs.items()}
+            cpu1 = {s: cpu_s(p.pid) for s, p in procs.items()}
+            rss = {s: rss_mb(p.pid) for s, p in procs.items()}
             with lock:
                 snap = {k: dict(v) for k, v in counts.items()}
                 sim_advance = [latest_t.get(("clock", r), 0.0) - t0 for r, t0 in t_clock0.items()]
                 lag = {k: sorted(v) for k, v in lags.items()}
                 topics = dict(topic_count)
             report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, len(sampled))
-            print(f"  this measuring process, the embedded router included: cpu {me:5.1f} % (not in the "
-                  "total)", flush=True)
+            print(f"  this measuring process: cpu {me:5.1f} % (not in the total)", flush=True)
             latencies = fault_latencies(probe, args.faults) if args.faults else []
             del subs, heard
     if latencies:
@@ -260,7 +260,10 @@ def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss,
         total += used
         print(f"  {s:<9} cpu {used:5.1f} %   rss {rss[s]:6.1f} MB")
     print(f"  cpu total    {total:5.1f} % of one core ({total / (os.cpu_count() or 1):.1f} % of the "
-          f"machine); rss total {sum(rss.values()):.0f} MB", flush=True)
+          f"machine); rss total {sum(rss[s] for s in services):.0f} MB", flush=True)
+    routed = (cpu1["router"] - cpu0["router"]) / wall * 100
+    print(f"  router    cpu {routed:5.1f} %   rss {rss['router']:6.1f} MB   (not in the total; "
+          f"with it {total + routed:.1f} % of one core)", flush=True)
     if total >= 160.0:
         verdict.append(f"total CPU {total:.0f} % of one core (target < 160 %)")
     saturated = [s for s in services if (cpu1[s] - cpu0[s]) / wall > 0.9]

@@ -132,6 +132,7 @@ class Twin:
         self.seed = seed
         self.extra = extra or {}
         self.procs: dict[str, subprocess.Popen] = {}
+        self.router: subprocess.Popen | None = None  # a benchmark's router, run as a process
         self.logs: dict[str, Path] = {}
 
     def start(self, service: str) -> subprocess.Popen:
