@@ -15,7 +15,9 @@ and reports per second of wall time:
   measuring process's own (neither in the services' total);
 - while the fleet runs, the fault-to-dashboard latency: load shorts on mapp-01's nav_camera,
   each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
-  50 ms), cleared and the rail reset between shorts.
+  50 ms), cleared and the rail reset between shorts; each written as the instructor's tools
+  write (``common.connection.write``: never dropped, at the instructor's priority, ahead of
+  the fleet's telemetry on the router's links).
 
 Run: ``.venv/bin/python bench/fleet.py [ROVERS] [SECONDS] [--bridges B] [--faults N]``.
 """
@@ -35,6 +37,7 @@ import msgspec
 from benchlib import ROOT, machine, percentiles, running_twin
 
 from common import keys
+from common.connection import write
 from common.messages import BatteryState, Clock, PowerSummary, RadioLink
 from services.bridge.mapping import load_mapping
 from tests import rosmsg
@@ -88,16 +91,16 @@ def fault_latencies(probe, n: int) -> list[float]:
     for i in range(n):
         done.clear()
         armed[:] = [time.perf_counter()]
-        probe.session.put(short, b"")
+        write(probe.session, short, b"")
         if not done.wait(5.0):
             print(f"  fault {i}: no short on {diag} within 5 s", flush=True)
             armed.clear()
-        probe.session.delete(short)
+        write(probe.session, short, None)
         try:
             probe.wait_event(rover, lambda ev: ev["kind"] == "fault_cleared" and ev["key"] == short,
                              timeout_s=20)
             probe.history.clear()
-            probe.put(keys.cmd_rail(rover, "5V_CH2"), {"reset": True})
+            write(probe.session, keys.cmd_rail(rover, "5V_CH2"), msgspec.json.encode({"reset": True}))
             probe.wait_value(rail, lambda v: v["state"] == "on", timeout_s=20)
         except AssertionError:  # a fleet this far behind: say so, keep what was timed
             print(f"  fault {i}: the short not cleared or the rail not back on within 20 s; "
