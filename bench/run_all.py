@@ -9,8 +9,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 for script in ("sim_8h.py", "battery.py", "drive.py", "fleet.py", "declared_keys.py", "fault_latency.py",
-               "reliability.py",
-               "console_latency.py"):
+               "reliability.py", "console_latency.py"):
     print(f"$ python bench/{script}", flush=True)
     subprocess.run([sys.executable, str(HERE / script)], cwd=HERE, check=True)
     print(flush=True)
