@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import fcntl
 import gc
+import math
 import os
 import queue
 import signal
@@ -109,7 +110,7 @@ class Runtime:
         self._after_batch: list[Callable[[], None]] = []
         self.batch_linger_s = 0.0
         self._exit_hooks: list[Callable[[], None]] = []
-        self._timers: list[list] = []  # [period_s (None: once), due, fn]
+        self._timers: list[list] = []  # [period_s (math.inf: once), due, fn]
         self._publishers: dict[str, Any] = {}
         self._tick_handlers: list[TickHandler] = []
         self._keep: list[Any] = []  # subscribers, tokens, queryables
@@ -267,8 +268,8 @@ class Runtime:
         # What the service has set up lives as long as it does: out of the collector's way
         # (now, and again once the publishers declared with their first samples exist).
         gc.freeze()
-        for delay_s in FREEZE_AGAIN_S:
-            self._timers.append([None, time.monotonic() + delay_s, gc.freeze])
+        for delay_s in FREEZE_AGAIN_S:  # once each: an endless period
+            self._timers.append([math.inf, time.monotonic() + delay_s, gc.freeze])
         try:
             self._loop()
         finally:
@@ -280,6 +281,7 @@ class Runtime:
             self._lock_file.close()
             self._lock_file = None
         self._keep.clear()
+        self._heard.clear()
         self._publishers.clear()
         if self.session is not None:
             self.session.close()
@@ -350,13 +352,9 @@ class Runtime:
     def _run_timers(self) -> float:
         now = time.monotonic()
         wait = 0.25
-        for timer in list(self._timers):
+        for timer in self._timers:
             period, due, fn = timer
             if now >= due:
-                if period is None:  # once
-                    self._timers.remove(timer)
-                    self._guard(fn)
-                    continue
                 timer[1] = max(due + period, now)
                 self._guard(fn)
             wait = min(wait, max(0.0, timer[1] - now))
