@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import platform
-import subprocess
 import sys
 import tempfile
 from contextlib import contextmanager
@@ -19,10 +18,9 @@ from tests.harness import (  # noqa: E402
     Probe,
     Twin,
     free_endpoint,
-    lunaris_cmd,
     open_router,
+    start_router_process,
     stop_process,
-    wait_for,
 )
 
 __all__ = ["ROOT", "machine", "percentiles", "running_twin"]
@@ -61,11 +59,7 @@ def running_twin(rover_files: list[str | Path], services=ALL_SERVICES, extra=Non
     try:
         with tempfile.TemporaryDirectory(prefix="lunaris-bench-") as tmp:
             if router_process:
-                log = Path(tmp) / "router.log"
-                with log.open("wb") as out:
-                    proc = subprocess.Popen(lunaris_cmd("router", "--listen", endpoint), cwd=ROOT,
-                                            stdout=out, stderr=subprocess.STDOUT)
-                wait_for(lambda: b"listening" in log.read_bytes(), 30, "the router")
+                proc = start_router_process(endpoint, Path(tmp) / "router.log")
             with Twin(endpoint, list(rover_files), Path(tmp), services=tuple(services),
                       extra=extra) as twin, Probe(endpoint) as probe:
                 twin.router = proc

@@ -108,6 +108,20 @@ def stop_process(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
             proc.wait()
 
 
+def start_router_process(endpoint: str, log: Path) -> subprocess.Popen:
+    """``lunaris router`` on ``endpoint`` in a process of its own, its output in ``log``;
+    returned once it listens (and stopped again if it never does)."""
+    with log.open("wb") as out:
+        proc = subprocess.Popen(lunaris_cmd("router", "--listen", endpoint), cwd=ROOT,
+                                stdout=out, stderr=subprocess.STDOUT)
+    try:
+        wait_for(lambda: b"listening" in log.read_bytes(), 30, "the router")
+    except BaseException:
+        stop_process(proc)
+        raise
+    return proc
+
+
 def json_bridge_extra(folder: Path) -> dict[str, list[str]]:
     """``Twin(extra=...)`` for a bridge with the shipped mapping and its json flavour on too
     (the shipped mapping leaves it off), so a test can read the dashboard topics as JSON."""

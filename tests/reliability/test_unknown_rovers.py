@@ -8,13 +8,11 @@ rejection for a rover a service does not serve is a plain put.
 
 from __future__ import annotations
 
-import subprocess
-
 import pytest
 
 from common import keys
 from common.connection import write
-from tests.harness import ROOT, Probe, Twin, free_endpoint, lunaris_cmd, stop_process, wait_for
+from tests.harness import Probe, Twin, free_endpoint, start_router_process, stop_process, wait_for
 from tests.reliability.conftest import MAPP, WITH_BRIDGE, R, rss_kib
 
 pytestmark = pytest.mark.timeout(180)
@@ -43,12 +41,8 @@ def flood(p: Probe, prefix: str, n: int) -> None:
 
 def test_memory_is_flat_under_3000_unknown_rover_ids(tmp_path):
     endpoint = free_endpoint()
-    log = tmp_path / "router.log"
-    with log.open("wb") as out:
-        router = subprocess.Popen(lunaris_cmd("router", "--listen", endpoint), cwd=ROOT,
-                                  stdout=out, stderr=subprocess.STDOUT)
+    router = start_router_process(endpoint, tmp_path / "router.log")
     try:
-        wait_for(lambda: b"listening" in log.read_bytes(), 30, "the router")
         with Twin(endpoint, [MAPP], tmp_path / "state", services=WITH_BRIDGE) as twin, \
                 Probe(endpoint) as p:
             p.wait_services(R, WITH_BRIDGE)
