@@ -66,7 +66,7 @@ class FaultBook:
                 self._inject(s.rover, s.key, fk, parse_params(fk, s.payload))
 
         # The owner answers for every key of its component, well formed or not.
-        self.rt.subscribe(keys.fault_prefix("*", component), on_fault)
+        self.rt.subscribe(keys.fault_prefix("*", component), on_fault, urgent=True)
 
     def _inject(self, rover: str, key: str, fk: FaultKey, params: Params) -> None:
         active = self.injected[rover]

@@ -44,6 +44,7 @@ import sys
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple
 
@@ -75,6 +76,7 @@ CHANNEL_CAPACITY = 65536  # samples a telemetry channel holds before Zenoh waits
 # again after these delays (the publishers declared with the first samples), is frozen: kept
 # out of the collections (still freed when no longer referenced).
 FREEZE_AGAIN_S = (5.0, 30.0)
+_WAKE = ("wake",)  # queued for an urgent input, which waits in its own line
 
 
 class AlreadyRunning(RuntimeError):
@@ -105,6 +107,7 @@ class Runtime:
         self.store = StateStore(state_dir, name)
         self._conf = conf
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._urgent: deque[tuple] = deque()  # (handler, sample) ahead of the queue, each with a _WAKE
         self._stop = threading.Event()
         self._signalled = False  # set by SIGINT/SIGTERM: a plain flag, no lock
         self._after_batch: list[Callable[[], None]] = []
@@ -299,40 +302,75 @@ class Runtime:
             timeout = self._run_timers()
             if self._channels:
                 timeout = min(timeout, self._poll_s)
-            try:
-                item = self._queue.get(timeout=timeout)
+            try:  # at once while urgent inputs wait (their wake-up taken by a batch)
+                item = self._queue.get(timeout=0.0 if self._urgent else timeout)
             except queue.Empty:
                 item = None
-            start = time.monotonic()
-            linger_until = start + self.batch_linger_s
-            batch_until = start + MAX_BATCH_S
-            handled = self._drain(batch_until)
-            # drained every 2 ms while samples come, backing off to 16 ms between bursts
-            self._poll_s = POLL_S if handled else min(2 * self._poll_s, POLL_MAX_S)
-            if item is None and not handled:
-                continue
-            while True:
-                if item is not None:
-                    self._guard(*item)
-                if self._stopping() or time.monotonic() >= batch_until:
-                    break  # under a steady stream the hooks and timers still run
-                try:
-                    item = self._queue.get_nowait()
-                    continue
-                except queue.Empty:
+            if self._batch(None if item is _WAKE else item):
+                for hook in self._after_batch:
+                    self._guard(hook)
+
+    def _batch(self, item: tuple | None) -> bool:
+        """Handle what has come, in the order it came, the urgent inputs (the faults) first;
+        whether anything had. A queued input goes after the telemetry waiting in the
+        channels (a rail reset judged on the loads heard before it), an urgent one ahead
+        of it: draining breaks off for it. Runs until the queue and the channels are dry
+        (lingering ``batch_linger_s`` for the rest of a burst) or for ``MAX_BATCH_S``."""
+        start = time.monotonic()
+        linger_until = start + self.batch_linger_s
+        batch_until = start + MAX_BATCH_S
+        handled = 0
+        first = True
+        while True:
+            handled += self._handle_urgent()
+            drained = self._drain(batch_until)
+            handled += drained
+            if first:  # drained every 2 ms while samples come, backing off to 16 ms between bursts
+                self._poll_s = POLL_S if drained else min(2 * self._poll_s, POLL_MAX_S)
+                first = False
+            if self._urgent and time.monotonic() < batch_until:
+                continue  # an urgent input came while draining
+            if item is not None:
+                self._guard(*item)
+                handled += 1
+            if not handled or self._stopping() or time.monotonic() >= batch_until:
+                break  # nothing came (a poll of empty channels); under a steady stream the
+                # hooks and timers still run
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                item = None
+            else:
+                if item is _WAKE:
                     item = None
-                if self._drain(batch_until):
-                    continue
-                wait = linger_until - time.monotonic() if self._after_batch else 0.0
-                if wait <= 0:
+                continue
+            if drained or self._urgent:
+                continue
+            wait = linger_until - time.monotonic() if self._after_batch else 0.0
+            if wait <= 0:
+                break
+            try:  # the rest of a burst: a queued sample at once, a channel's within POLL_S
+                item = self._queue.get(timeout=min(wait, POLL_S) if self._channels else wait)
+            except queue.Empty:
+                if not self._channels:
                     break
-                try:  # the rest of a burst: a queued sample at once, a channel's within POLL_S
-                    item = self._queue.get(timeout=min(wait, POLL_S) if self._channels else wait)
-                except queue.Empty:
-                    if not self._channels:
-                        break
-            for hook in self._after_batch:
-                self._guard(hook)
+            if item is _WAKE:
+                item = None
+        return handled > 0
+
+    def urgent_first(self) -> None:
+        """Handle the urgent inputs waiting (a fault) now. For a hook or timer that works
+        through a fleet (a bridge's tick of ~6,000 samples: ~25 ms), between one part and the
+        next: a fault must not wait for the rest. On the worker thread only."""
+        if self._urgent:
+            self._handle_urgent()
+
+    def _handle_urgent(self) -> int:
+        n = 0
+        while self._urgent:
+            self._guard(*self._urgent.popleft())
+            n += 1
+        return n
 
     def _drain(self, until: float) -> int:
         """Handle what the telemetry channels hold (until ``until``); how many samples."""
@@ -344,7 +382,7 @@ class Runtime:
                 if sample is not None:
                     self._guard(handler, sample)
                 n += 1
-                if time.monotonic() >= until:
+                if self._urgent or time.monotonic() >= until:
                     return n
                 zsample = channel.try_recv()
         return n
@@ -406,12 +444,13 @@ class Runtime:
         self._keep.append(entity)
 
     def subscribe(self, keyexpr: str, handler: Handler, *, any_rover: bool = False,
-                  history: bool = False, telemetry: bool = False) -> None:
+                  history: bool = False, telemetry: bool = False, urgent: bool = False) -> None:
         """Queue every sample on ``keyexpr`` for ``handler``; samples for rovers this service
         does not serve are dropped unless ``any_rover``. With ``history`` the publishers'
         caches are replayed first (an advanced subscriber), for a service that joins late.
         ``telemetry``: a tick-rate stream, drained from a channel when the service serves a
-        fleet (:attr:`polled`)."""
+        fleet (:attr:`polled`). ``urgent``: handled ahead of everything waiting, the worker
+        breaking off a burst of telemetry for it (a fault: what the crew is trained on)."""
         session = self.zenoh_session
         split_keys: dict[str, tuple[str, list[str]]] = {}  # the served rovers' keys, split
         polled = telemetry and self.polled
@@ -439,7 +478,12 @@ class Runtime:
 
         def on_sample(s: zenoh.Sample) -> None:
             sample = convert(s)
-            if sample is not None:
+            if sample is None:
+                return
+            if urgent:
+                self._urgent.append((handler, sample))
+                self._queue.put(_WAKE)
+            else:
                 self._queue.put((handler, sample))
 
         how: Any = zenoh.handlers.FifoChannel(CHANNEL_CAPACITY) if polled else on_sample

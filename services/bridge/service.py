@@ -333,6 +333,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     def flush() -> None:
         now = time.monotonic()
         for key in sorted(dirty):
+            rt.urgent_first()  # a fleet's tick is thousands of samples
             payload = latest[key]
             discrete = tuple(getattr(payload, f) for f in discrete_of[type(payload)])
             for outlet in by_key[key]:
@@ -347,6 +348,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         now = time.monotonic()
         due = shared.due
         while due and due[0][0] <= now:
+            rt.urgent_first()
             _, _, outlet = heapq.heappop(due)
             outlet.scheduled = False
             if outlet.pending is not None:
@@ -362,6 +364,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
 
     def periodic_diagnostics() -> None:
         for _ in range(per_slot):
+            rt.urgent_first()
             publish_diagnostics(diag_rovers[diag_next[0] % len(diag_rovers)])
             diag_next[0] += 1
 
@@ -380,7 +383,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         rt.subscribe(pattern, on_twin, telemetry=True)
     if diag_outlets:
         for r in served:
-            rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True)
+            rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True, urgent=True)
         rt.every(opts.diagnostics_period_s / diag_slots, periodic_diagnostics)
     if any(o.period_s for ol in by_key.values() for o in ol):
         rt.every(RATE_TIMER_S, flush_due)

@@ -61,6 +61,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         ready = [r for r in sorted(dirty) if len(at_newest[r]) == len(models[r].load_power_w)
                  or now >= due.setdefault(r, now + HOLD_S)]
         for rover in ready:
+            rt.urgent_first()  # a fleet's PDMs: a fault must not wait for the rest
             dirty.discard(rover)
             due.pop(rover, None)
             publish(rover)

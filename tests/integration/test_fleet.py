@@ -139,3 +139,45 @@ def test_a_fleet_service_declares_each_key_it_hears_once_and_no_forged_ones_past
         # the forged names were declared up to the bound, not past it
         assert len(real) < len(rt._heard) <= 100 * len(rovers)
         assert set(real) <= set(rt._heard)
+
+
+def test_a_fault_goes_ahead_of_a_fleets_telemetry_and_a_command_after_what_came_before_it(
+        router, probe, tmp_path):
+    """A fault is what the crew is trained on: the worker handles it ahead of the telemetry
+    waiting in its channels, breaking off a burst for it. A command (a rail reset) is judged
+    on the telemetry heard before it: that goes first."""
+    from common.connection import make_config
+    from common.runtime import Runtime
+
+    rovers = [f"r-{i:02d}" for i in range(1, POLL_FROM_ROVERS + 1)]
+    order: list[str] = []
+    fault, command = keys.fault("r-01", "load/heater", "short"), keys.cmd_rail("r-01", "5V")
+    second_fault = keys.fault("r-02", "load/heater", "short")
+
+    def on_telemetry(s) -> None:
+        order.append(s.key)
+        if len(order) == 11:  # a fault comes in the middle of a burst
+            probe.session.put(second_fault, b"")
+            wait_for(lambda: rt._urgent, 5, "the second fault queued")
+
+    with Runtime("probe-service", rovers, make_config(connect=[router]), tmp_path) as rt:
+        rt.subscribe(keys.load_power("*", "*"), on_telemetry, telemetry=True)
+        rt.subscribe(keys.cmd_rail("*", "*"), lambda s: order.append(s.key))
+        rt.subscribe(keys.fault_prefix("*", "load"), lambda s: order.append(s.key), urgent=True)
+        burst = [keys.load_power(r, "heater") for r in rovers] * 2
+        for key in burst:  # the same link, in this order: the burst, the command, the fault
+            probe.session.put(key, b'{"power_w": 1.0}')
+        probe.session.put(command, b'{"reset": true}')
+        probe.session.put(fault, b"")
+        wait_for(lambda: rt._urgent and not rt._queue.empty(), 10, "the command and the fault queued")
+        worker = threading.Thread(target=rt._loop, daemon=True)
+        worker.start()
+        try:
+            wait_for(lambda: len(order) == len(burst) + 3, 10, lambda: f"all handled: {order}")
+        finally:
+            rt.stop()
+            worker.join(5)
+    assert order[0] == fault  # ahead of the burst waiting when it came
+    assert order[11] == second_fault  # the burst broken off for it
+    assert order[-1] == command  # after the whole burst that came before it
+    assert sorted(o for o in order if o in burst) == sorted(burst)  # nothing lost or doubled
