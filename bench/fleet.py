@@ -17,7 +17,8 @@ and reports per second of wall time:
   each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
   50 ms), cleared and the rail reset between shorts; each written as the instructor's tools
   write (``common.connection.write``: never dropped, at the instructor's priority, ahead of
-  the fleet's telemetry on the router's links).
+  the fleet's telemetry on the router's links). This process's garbage collector is off
+  while it times them: it stands in for the dashboard, and its own pauses are not the twin's.
 
 Run: ``.venv/bin/python bench/fleet.py [ROVERS] [SECONDS] [--bridges B] [--faults N]``.
 """
@@ -25,6 +26,7 @@ Run: ``.venv/bin/python bench/fleet.py [ROVERS] [SECONDS] [--bridges B] [--fault
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import re
 import tempfile
@@ -215,7 +217,14 @@ def main() -> None:
                 topics = dict(topic_count)
             report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, len(sampled))
             print(f"  this measuring process: cpu {me:5.1f} % (not in the total)", flush=True)
-            latencies = fault_latencies(probe, args.faults) if args.faults else []
+            # This process stands in for the dashboard: a collection of its own heap (the
+            # counts above; 51 ms seen) would be timed as the twin's latency. Kept out of it.
+            gc.freeze()
+            gc.disable()
+            try:
+                latencies = fault_latencies(probe, args.faults) if args.faults else []
+            finally:
+                gc.enable()
             del subs, heard
     if latencies:
         print(f"  fault -> {ids[0]} /diagnostics (ros2dds) while the fleet runs: {percentiles(latencies)}")
@@ -228,7 +237,8 @@ def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss,
         per = [snap.get(kind, {}).get(r, 0) / wall for r in ids]
         print(f"  {kind:<8} samples per rover per second: min {min(per):.2f}  "
               f"mean {sum(per) / n:.2f}  (>= 10.00 when keeping up)")
-        if min(per) < 9.95:
+        # a service one tick behind (allowed) may have the window's last tick still to send
+        if min(snap.get(kind, {}).get(r, 0) for r in ids) < round(10.0 * wall) - 1:
             verdict.append(f"{kind} at {min(per):.2f}/s for its slowest rover")
     # the radio publishes its link on a change and at least once a second (what the bridge's
     # /final_comms_radio_bool and the diagnostics' staleness follow)
