@@ -1,8 +1,7 @@
 """The one service runtime: every Lunaris service is a model wrapped by this shell.
 
-Longer than 450 lines: the session, the worker loop that both queued callbacks and drained
-channels feed, and the publishers and events are one shell; the worker loop is the next part
-to move into a module of its own.
+Longer than 450 lines: the session, the subscriptions that feed the worker
+(:mod:`common.worker`), and the publishers and events are one shell.
 
 A :class:`Runtime` is a context manager: ``with Runtime(name, rovers, conf, state_dir) as rt:``
 opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)``), and
@@ -15,16 +14,15 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   thread, so every payload a handler publishes carries the time of its own tick;
 - :meth:`publish`: JSON on a ``zenoh.ext`` advanced publisher whose cache keeps the last
   sample for late joiners;
-- :meth:`subscribe`: samples are queued and handled one at a time on a single worker
-  thread, so models need no locks. After the queue runs dry, or after ``MAX_BATCH_S`` of a
-  steady stream, the ``after_batch`` hooks and then the timers run: a burst of inputs is
-  folded into one recomputation, a single input (a fault) is acted on at once, and a fleet's
-  stream never holds back the hooks and timers. A service of a fleet (``POLL_FROM_ROVERS``
-  rovers or more) takes its tick-rate telemetry (``telemetry=True``, the clock included)
-  from Zenoh channels the worker drains every ``POLL_S``, not through a Python callback per
-  sample (which costs about twice the CPU: a thread hand-off and the GIL for each sample),
-  and declares each key it hears from there in its session (see :meth:`subscribe`);
-  inputs, commands, faults and queries stay callbacks, acted on at once;
+- :meth:`subscribe`: samples are handled one at a time on the service's worker thread
+  (:mod:`common.worker`: the order of faults, telemetry, inputs, hooks and timers), so
+  models need no locks; a burst of inputs is folded into one recomputation, a fault is
+  acted on at once (``urgent``), and a fleet's stream never holds back the hooks and
+  timers. A service of a fleet (``POLL_FROM_ROVERS`` rovers or more) takes its tick-rate
+  telemetry (``telemetry=True``, the clock included) from Zenoh channels the worker drains,
+  not through a Python callback per sample (which costs about twice the CPU: a thread
+  hand-off and the GIL for each sample), and declares each key it hears from there in its
+  session (see :meth:`subscribe`); inputs, commands, faults and queries stay callbacks;
 - one way to refuse input: a handler raises :class:`~common.messages.BadInput` and the
   runtime publishes a ``rejected`` event naming the key and the reason;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
@@ -36,15 +34,12 @@ from __future__ import annotations
 
 import fcntl
 import gc
-import math
 import os
-import queue
 import signal
 import sys
 import threading
 import time
 import traceback
-from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple
 
@@ -59,16 +54,14 @@ from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
 from common.session import SessionKeeper, StateGet, StateReset, StateSet
 from common.state_store import StateStore
+from common.worker import POLL_S, Worker
 
 __all__ = ["AlreadyRunning", "Runtime", "Sample"]
 
 EVENT_CACHE = 256  # recent events kept for a late joiner
-MAX_BATCH_S = 0.02  # the longest a batch runs before its hooks and the timers [s]
 # A fleet's telemetry is drained from channels: from this many rovers the samples of a tick
 # (hundreds to thousands a second per service) cost less polled than called back one by one.
 POLL_FROM_ROVERS = 20
-POLL_S = 0.002  # how often the worker drains the telemetry channels while they bring samples [s]
-POLL_MAX_S = 0.016  # ... backing off to this while they are empty (between a fleet's ticks) [s]
 CHANNEL_CAPACITY = 65536  # samples a telemetry channel holds before Zenoh waits on it
 # Python's cyclic garbage collector walks every object the process holds, in a full
 # collection: at 100 rovers a bridge shard's (its ~5,000 outlets and publishers) took 115-312 ms
@@ -76,7 +69,6 @@ CHANNEL_CAPACITY = 65536  # samples a telemetry channel holds before Zenoh waits
 # again after these delays (the publishers declared with the first samples), is frozen: kept
 # out of the collections (still freed when no longer referenced).
 FREEZE_AGAIN_S = (5.0, 30.0)
-_WAKE = ("wake",)  # queued for an urgent input, which waits in its own line
 
 
 class AlreadyRunning(RuntimeError):
@@ -106,14 +98,8 @@ class Runtime:
         self.t_s: dict[str, float] = dict.fromkeys(self.rovers, 0.0)  # sim time per rover
         self.store = StateStore(state_dir, name)
         self._conf = conf
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._urgent: deque[tuple] = deque()  # (handler, sample) ahead of the queue, each with a _WAKE
-        self._stop = threading.Event()
-        self._signalled = False  # set by SIGINT/SIGTERM: a plain flag, no lock
-        self._after_batch: list[Callable[[], None]] = []
-        self.batch_linger_s = 0.0
+        self.worker = Worker(self._guard)
         self._exit_hooks: list[Callable[[], None]] = []
-        self._timers: list[list] = []  # [period_s (math.inf: once), due, fn]
         self._publishers: dict[str, Any] = {}
         self._tick_handlers: list[TickHandler] = []
         self._keep: list[Any] = []  # subscribers, tokens, queryables
@@ -123,11 +109,8 @@ class Runtime:
         self._lock_file: Any = None
         self._event_seq = 0
         self._inputs: InputLog | None = None
-        # (channel, on_sample) of each telemetry subscription drained by the worker
-        self._channels: list[tuple[Any, Callable[[zenoh.Sample], Sample | None], Handler]] = []
         self._heard: dict[str, Any] = {}  # telemetry key -> its declared key expression
         self.polled = len(self.rovers) >= POLL_FROM_ROVERS
-        self._poll_s = POLL_S
         self.session: zenoh.Session | None = None
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -241,14 +224,10 @@ class Runtime:
             fn(s.rover, tick)
 
     def stop(self) -> None:
-        self._stop.set()
-        self._queue.put(None)
+        self.worker.stop()
 
     def _on_signal(self, *_: object) -> None:
-        self._signalled = True
-
-    def _stopping(self) -> bool:
-        return self._signalled or self._stop.is_set()
+        self.worker.signalled = True
 
     def on_exit(self, fn: Callable[[], None]) -> None:
         """Run ``fn`` on the worker thread when the service stops (persist state)."""
@@ -265,16 +244,16 @@ class Runtime:
         # The tokens go up once every handler is declared: live means listening.
         for rover in sorted(self.rovers):
             self._keep.append(self.zenoh_session.liveliness().declare_token(keys.service(rover, self.name)))
-        if self._channels:
-            print(f"{self.name}: {len(self.rovers)} rovers: {len(self._channels)} telemetry "
+        if self.worker.channels:
+            print(f"{self.name}: {len(self.rovers)} rovers: {self.worker.channels} telemetry "
                   f"subscriptions drained every {POLL_S * 1000:g} ms", file=sys.stderr, flush=True)
         # What the service has set up lives as long as it does: out of the collector's way
         # (now, and again once the publishers declared with their first samples exist).
         gc.freeze()
-        for delay_s in FREEZE_AGAIN_S:  # once each: an endless period
-            self._timers.append([math.inf, time.monotonic() + delay_s, gc.freeze])
+        for delay_s in FREEZE_AGAIN_S:
+            self.worker.once(delay_s, gc.freeze)
         try:
-            self._loop()
+            self.worker.run()
         finally:
             for hook in self._exit_hooks:
                 self._guard(hook)
@@ -296,107 +275,6 @@ class Runtime:
         if self.session is None:
             raise RuntimeError(f"{self.name}: the runtime is not open (use it as a context manager)")
         return self.session
-
-    def _loop(self) -> None:
-        while not self._stopping():
-            timeout = self._run_timers()
-            if self._channels:
-                timeout = min(timeout, self._poll_s)
-            try:  # at once while urgent inputs wait (their wake-up taken by a batch)
-                item = self._queue.get(timeout=0.0 if self._urgent else timeout)
-            except queue.Empty:
-                item = None
-            if self._batch(None if item is _WAKE else item):
-                for hook in self._after_batch:
-                    self._guard(hook)
-
-    def _batch(self, item: tuple | None) -> bool:
-        """Handle what has come, in the order it came, the urgent inputs (the faults) first;
-        whether anything had. A queued input goes after the telemetry waiting in the
-        channels (a rail reset judged on the loads heard before it), an urgent one ahead
-        of it: draining breaks off for it. Runs until the queue and the channels are dry
-        (lingering ``batch_linger_s`` for the rest of a burst) or for ``MAX_BATCH_S``."""
-        start = time.monotonic()
-        linger_until = start + self.batch_linger_s
-        batch_until = start + MAX_BATCH_S
-        handled = 0
-        first = True
-        while True:
-            handled += self._handle_urgent()
-            drained = self._drain(batch_until)
-            handled += drained
-            if first:  # drained every 2 ms while samples come, backing off to 16 ms between bursts
-                self._poll_s = POLL_S if drained else min(2 * self._poll_s, POLL_MAX_S)
-                first = False
-            if self._urgent and time.monotonic() < batch_until:
-                continue  # an urgent input came while draining
-            if item is not None:
-                self._guard(*item)
-                handled += 1
-            if not handled or self._stopping() or time.monotonic() >= batch_until:
-                break  # nothing came (a poll of empty channels); under a steady stream the
-                # hooks and timers still run
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                item = None
-            else:
-                if item is _WAKE:
-                    item = None
-                continue
-            if drained or self._urgent:
-                continue
-            wait = linger_until - time.monotonic() if self._after_batch else 0.0
-            if wait <= 0:
-                break
-            try:  # the rest of a burst: a queued sample at once, a channel's within POLL_S
-                item = self._queue.get(timeout=min(wait, POLL_S) if self._channels else wait)
-            except queue.Empty:
-                if not self._channels:
-                    break
-            if item is _WAKE:
-                item = None
-        return handled > 0
-
-    def urgent_first(self) -> None:
-        """Handle the urgent inputs waiting (a fault) now. For a hook or timer that works
-        through a fleet (a bridge's tick of ~6,000 samples: ~25 ms), between one part and the
-        next: a fault must not wait for the rest. On the worker thread only."""
-        if self._urgent:
-            self._handle_urgent()
-
-    def _handle_urgent(self) -> int:
-        n = 0
-        while self._urgent:
-            self._guard(*self._urgent.popleft())
-            n += 1
-        return n
-
-    def _drain(self, until: float) -> int:
-        """Handle what the telemetry channels hold (until ``until``); how many samples."""
-        n = 0
-        for channel, convert, handler in self._channels:
-            zsample = channel.try_recv()
-            while zsample is not None:
-                sample = convert(zsample)
-                if sample is not None:
-                    self._guard(handler, sample)
-                n += 1
-                if self._urgent or time.monotonic() >= until:
-                    return n
-                zsample = channel.try_recv()
-        return n
-
-    def _run_timers(self) -> float:
-        now = time.monotonic()
-        wait = 0.25
-        for timer in self._timers:
-            period, due, fn = timer
-            if now >= due:
-                timer[1] = max(due + period, now)
-                self._guard(fn)
-            wait = min(wait, max(0.0, timer[1] - now))
-        return wait
 
     def _guard(self, fn: Callable, *args: Any) -> None:
         """Run a handler; input errors become rejection events, bugs are reported, never fatal."""
@@ -423,19 +301,21 @@ class Runtime:
     # -- scheduling -------------------------------------------------------------------------
 
     def after_batch(self, fn: Callable[[], None], linger_s: float = 0.0) -> None:
-        """Call ``fn`` once the queue has run dry, having waited up to ``linger_s`` after the
-        first sample of a batch for more to arrive (a burst of samples that each tick sends
-        over a millisecond or so is then folded into one call)."""
-        self._after_batch.append(fn)
-        self.batch_linger_s = max(self.batch_linger_s, linger_s)
+        """Call ``fn`` on the worker thread after each batch (see :mod:`common.worker`)."""
+        self.worker.after_batch(fn, linger_s)
 
     def every(self, period_s: float, fn: Callable[[], None]) -> None:
         """Call ``fn`` on the worker thread every ``period_s`` of wall time. A timer that
         falls behind skips ahead instead of firing a burst of late calls."""
-        self._timers.append([period_s, time.monotonic() + period_s, fn])
+        self.worker.every(period_s, fn)
 
     def call_soon(self, fn: Callable, *args: Any) -> None:
-        self._queue.put((fn, *args))
+        self.worker.call_soon(fn, *args)
+
+    def urgent_first(self) -> None:
+        """Handle the faults waiting, now: for a hook or timer that works through a fleet,
+        between one part and the next (see :meth:`common.worker.Worker.urgent_first`)."""
+        self.worker.urgent_first()
 
     # -- Zenoh ------------------------------------------------------------------------------
 
@@ -478,13 +358,8 @@ class Runtime:
 
         def on_sample(s: zenoh.Sample) -> None:
             sample = convert(s)
-            if sample is None:
-                return
-            if urgent:
-                self._urgent.append((handler, sample))
-                self._queue.put(_WAKE)
-            else:
-                self._queue.put((handler, sample))
+            if sample is not None:
+                self.worker.put(handler, sample, urgent=urgent)
 
         how: Any = zenoh.handlers.FifoChannel(CHANNEL_CAPACITY) if polled else on_sample
         sub: Any
@@ -497,7 +372,7 @@ class Runtime:
             sub = session.declare_subscriber(keyexpr, how)
         self._keep.append(sub)
         if polled:
-            self._channels.append((sub, convert, handler))
+            self.worker.add_channel(sub, convert, handler)
 
     def _declare_heard(self, key: str) -> None:
         """Declare a key this service receives a stream on. Zenoh resolves a sample's key
@@ -512,7 +387,7 @@ class Runtime:
     def queryable(self, keyexpr: str, handler: Callable[[zenoh.Query], None]) -> None:
         """Answer queries on the worker thread (the model state is only read there)."""
         self._keep.append(
-            self.zenoh_session.declare_queryable(keyexpr, lambda q: self._queue.put((handler, q)))
+            self.zenoh_session.declare_queryable(keyexpr, lambda q: self.worker.call_soon(handler, q))
         )
 
     def publish(self, key: str, msg: msgspec.Struct, *, reliable: bool = False) -> None:

@@ -122,7 +122,7 @@ def test_a_fleet_service_declares_each_key_it_hears_once_and_no_forged_ones_past
         def every_key_heard() -> bool:  # each round sends every key again
             for key in real:
                 probe.session.put(key, b'{"power_w": 1.0}')
-            rt._drain(time.monotonic() + 0.5)
+            rt.worker.drain(time.monotonic() + 0.5)
             return set(heard) == set(real)
         wait_for(every_key_heard, 10, "every served rover's keys")
         assert set(rt._heard) == set(real)  # each key once, whatever the number of samples
@@ -133,7 +133,7 @@ def test_a_fleet_service_declares_each_key_it_hears_once_and_no_forged_ones_past
         probe.session.put(real[-1], b'{"power_w": 1.0}')  # after the flood, on the same path
 
         def flood_drained() -> bool:
-            rt._drain(time.monotonic() + 0.5)
+            rt.worker.drain(time.monotonic() + 0.5)
             return real[-1] in heard
         wait_for(flood_drained, 20, "the forged samples and the one after them")
         # the forged names were declared up to the bound, not past it
@@ -158,7 +158,7 @@ def test_a_fault_goes_ahead_of_a_fleets_telemetry_and_a_command_after_what_came_
         order.append(s.key)
         if len(order) == 11:  # a fault comes in the middle of a burst
             probe.session.put(second_fault, b"")
-            wait_for(lambda: rt._urgent, 5, "the second fault queued")
+            wait_for(lambda: rt.worker._urgent, 5, "the second fault queued")
 
     with Runtime("probe-service", rovers, make_config(connect=[router]), tmp_path) as rt:
         rt.subscribe(keys.load_power("*", "*"), on_telemetry, telemetry=True)
@@ -169,8 +169,9 @@ def test_a_fault_goes_ahead_of_a_fleets_telemetry_and_a_command_after_what_came_
             probe.session.put(key, b'{"power_w": 1.0}')
         probe.session.put(command, b'{"reset": true}')
         probe.session.put(fault, b"")
-        wait_for(lambda: rt._urgent and not rt._queue.empty(), 10, "the command and the fault queued")
-        worker = threading.Thread(target=rt._loop, daemon=True)
+        wait_for(lambda: rt.worker._urgent and not rt.worker._queue.empty(), 10,
+                 "the command and the fault queued")
+        worker = threading.Thread(target=rt.worker.run, daemon=True)
         worker.start()
         try:
             wait_for(lambda: len(order) == len(burst) + 3, 10, lambda: f"all handled: {order}")
