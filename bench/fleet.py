@@ -17,8 +17,13 @@ and reports per second of wall time:
   each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
   50 ms), cleared and the rail reset between shorts; each written as the instructor's tools
   write (``common.connection.write``: never dropped, at the instructor's priority, ahead of
-  the fleet's telemetry on the router's links). This process's garbage collector is off
-  while it times them: it stands in for the dashboard, and its own pauses are not the twin's.
+  the fleet's telemetry on the router's links), at a random moment of the tick period (an
+  instructor's fault does not wait for a tick; written a fixed time after the rail came back
+  on, the shorts had fallen mostly in the first 40 ms after a tick, when the fleet's services
+  are all at work), and the figures split by when in the period each was written. This
+  process stands in for the dashboard while it times them: its counting subscriptions
+  undeclared (its load is not the fleet's), its garbage collector off (its pauses are not
+  the twin's).
 
 Run: ``.venv/bin/python bench/fleet.py [ROVERS] [SECONDS] [--bridges B] [--faults N]``.
 """
@@ -28,11 +33,13 @@ from __future__ import annotations
 import argparse
 import gc
 import os
+import random
 import re
 import tempfile
 import threading
 import time
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 import msgspec
@@ -70,14 +77,18 @@ def topic_rates() -> dict[str, float | None]:
     return out
 
 
-def fault_latencies(probe, n: int) -> list[float]:
-    """Shorts on mapp-01's nav_camera, each timed to its /diagnostics (ros2dds) on the dashboard."""
+def fault_latencies(probe, n: int, last_tick: Callable[[], float]) -> list[tuple[float, float]]:
+    """Shorts on mapp-01's nav_camera, each timed to its /diagnostics (ros2dds) on the
+    dashboard: (latency, how long after mapp-01's last tick it was written) [ms]. Each is
+    written at a random moment of the tick period, as an instructor's would be."""
     rover, diag = "mapp-01", "mapp_01/diagnostics"
+    rng = random.Random(1)
     short = keys.fault(rover, "load/nav_camera", "short")
     rail = keys.rail_state(rover, "5V_CH2")
     done = threading.Event()
     armed: list[float] = []
-    out: list[float] = []
+    out: list[tuple[float, float]] = []
+    phase = [0.0]
 
     def on_diag(s) -> None:
         if not armed:
@@ -85,14 +96,16 @@ def fault_latencies(probe, n: int) -> list[float]:
         msg = rosmsg.decode("diagnostic_msgs/msg/DiagnosticArray", s.payload.to_bytes())
         if any(st.name == f"{rover}/load/nav_camera" and "short" in [v.key for v in st.values]
                for st in msg.status):
-            out.append((time.perf_counter() - armed.pop()) * 1e3)
+            out.append(((time.perf_counter() - armed.pop()) * 1e3, phase[0]))
             done.set()
 
     sub = probe.session.declare_subscriber(diag, on_diag)
     probe.wait_value(rail, lambda v: v["state"] == "on", timeout_s=30)
     for i in range(n):
         done.clear()
-        armed[:] = [time.perf_counter()]
+        now = time.perf_counter()
+        phase[0] = (now - last_tick()) * 1e3
+        armed[:] = [now]
         write(probe.session, short, b"")
         if not done.wait(5.0):
             print(f"  fault {i}: no short on {diag} within 5 s", flush=True)
@@ -108,7 +121,7 @@ def fault_latencies(probe, n: int) -> list[float]:
             print(f"  fault {i}: the short not cleared or the rail not back on within 20 s; "
                   "no more shorts timed", flush=True)
             break
-        time.sleep(0.05)
+        time.sleep(0.05 + rng.uniform(0.0, 0.1))  # the next one at a random phase of the tick
     del sub
     return out
 
@@ -168,7 +181,9 @@ def main() -> None:
         with running_twin(files, services, extra, router_process=True) as (probe, twin, _):
             for r in (ids[0], ids[-1]):
                 probe.wait_services(r, (*SERVICES, "bridge"), timeout_s=120)
-            probe.watch(f"lunaris/{ids[0]}/**")
+            # what the fault timing waits on (not all of the rover's keys: each a Python call)
+            probe.watch(keys.event(ids[0]))
+            probe.watch(keys.rail_state(ids[0], "5V_CH2"))
             # the keys this process hears, declared: Zenoh then looks a sample's key up
             # instead of matching it against every key expression the session knows
             heard = [probe.session.declare_keyexpr(key) for r in ids for key in
@@ -217,17 +232,31 @@ def main() -> None:
                 topics = dict(topic_count)
             report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, len(sampled))
             print(f"  this measuring process: cpu {me:5.1f} % (not in the total)", flush=True)
-            # This process stands in for the dashboard: a collection of its own heap (the
-            # counts above; 51 ms seen) would be timed as the twin's latency. Kept out of it.
+            # This process stands in for the dashboard: its counting is done (a Python call
+            # for each of ~4,000 samples a second), and a collection of its own heap (51 ms
+            # seen) would be timed as the twin's latency. Both kept out of the fault timing.
+            for sub in subs:
+                sub.undeclare()
+            del heard
+            tick_at = [0.0]  # when the first rover's last tick came (perf_counter)
+            ticks = probe.session.declare_subscriber(
+                keys.clock(ids[0]), lambda _: tick_at.__setitem__(0, time.perf_counter()))
             gc.freeze()
             gc.disable()
             try:
-                latencies = fault_latencies(probe, args.faults) if args.faults else []
+                latencies = fault_latencies(probe, args.faults, lambda: tick_at[0]) if args.faults else []
             finally:
                 gc.enable()
-            del subs, heard
+                ticks.undeclare()
     if latencies:
-        print(f"  fault -> {ids[0]} /diagnostics (ros2dds) while the fleet runs: {percentiles(latencies)}")
+        print(f"  fault -> {ids[0]} /diagnostics (ros2dds) while the fleet runs: "
+              f"{percentiles([ms for ms, _ in latencies])}")
+        # the fleet's services work through a tick in its first tens of ms: a fault then waits
+        # for a core more often than one in the quiet rest of the period
+        for name, sel in (("< 50 ms", lambda ph: ph < 50.0), (">= 50 ms", lambda ph: ph >= 50.0)):
+            part = [ms for ms, ph in latencies if sel(ph)]
+            if part:
+                print(f"    written {name} after {ids[0]}'s tick: {percentiles(part)}")
 
 
 def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, sampled) -> None:
