@@ -142,12 +142,16 @@ def test_a_fleet_service_declares_each_key_it_hears_once_and_no_forged_ones_past
 
 
 def test_a_fault_goes_ahead_of_a_fleets_telemetry_and_a_command_after_what_came_before_it(
-        router, probe, tmp_path):
+        router, probe, tmp_path, monkeypatch):
     """A fault is what the crew is trained on: the worker handles it ahead of the telemetry
     waiting in its channels, breaking off a burst for it. A command (a rail reset) is judged
     on the telemetry heard before it: that goes first."""
     from common.connection import make_config
     from common.runtime import Runtime
+
+    # The order within one batch; a batch ends after 20 ms of work (the hooks and timers then
+    # run), which a loaded machine could reach here while the second fault is on its way.
+    monkeypatch.setattr("common.worker.MAX_BATCH_S", 10.0)
 
     rovers = [f"r-{i:02d}" for i in range(1, POLL_FROM_ROVERS + 1)]
     order: list[str] = []
@@ -165,10 +169,17 @@ def test_a_fault_goes_ahead_of_a_fleets_telemetry_and_a_command_after_what_came_
         rt.subscribe(keys.cmd_rail("*", "*"), lambda s: order.append(s.key))
         rt.subscribe(keys.fault_prefix("*", "load"), lambda s: order.append(s.key), urgent=True)
         burst = [keys.load_power(r, "heater") for r in rovers] * 2
-        for key in burst:  # the same link, in this order: the burst, the command, the fault
-            probe.session.put(key, b'{"power_w": 1.0}')
-        probe.session.put(command, b'{"reset": true}')
-        probe.session.put(fault, b"")
+        # one session's publishers, one link, in this order: the burst, the command, the fault;
+        # each written once the router has this runtime's subscriber for it (else it is lost)
+        pubs = {key: probe.session.declare_publisher(
+                    key, congestion_control=zenoh.CongestionControl.BLOCK)
+                for key in (*dict.fromkeys(burst), command, fault)}
+        wait_for(lambda: all(p.matching_status.matching for p in pubs.values()), 10,
+                 "the runtime's subscribers known to the router")
+        for key in burst:
+            pubs[key].put(b'{"power_w": 1.0}')
+        pubs[command].put(b'{"reset": true}')
+        pubs[fault].put(b"")
         wait_for(lambda: rt.worker._urgent and not rt.worker._queue.empty(), 10,
                  "the command and the fault queued")
         worker = threading.Thread(target=rt.worker.run, daemon=True)
