@@ -257,6 +257,10 @@ def main() -> None:
             part = [ms for ms, ph in latencies if sel(ph)]
             if part:
                 print(f"    written {name} after {ids[0]}'s tick: {percentiles(part)}")
+        ms = sorted(ms for ms, _ in latencies)
+        p99 = ms[min(len(ms) - 1, round(0.99 * (len(ms) - 1)))]
+        print(f"  fault latency p99 < 50 ms: {'met' if p99 < 50.0 else 'NOT met'} ({p99:.1f} ms, "
+              f"{len(ms)} shorts{'' if len(ms) >= 100 else '; fewer than 100 say little of a p99'})")
 
 
 def report(ids, wall, snap, sim_advance, lag, topics, services, cpu0, cpu1, rss, sampled) -> None:
