@@ -17,7 +17,7 @@ import numpy as np
 from common.config import Rover
 from services.battery.model import BatteryModel, BatteryReading
 from services.drive.model import DriveModel, motors_powered
-from services.loads.model import LoadsModel
+from services.loads.model import LoadsModel, sample_power
 from services.power.model import PowerModel, Summary
 from services.solar.model import SolarModel
 
@@ -71,8 +71,7 @@ class ComposedTwin:
 
     def _draw_block(self) -> None:
         m = self.loads
-        self._samples = np.clip(
-            m.rng.normal(m.nominal_w, m.std_w, size=(_BLOCK, len(m.names))), 0.0, m.max_w)
+        self._samples = sample_power(m.rng, m.nominal_w, m.std_w, m.max_w, ticks=_BLOCK)
         # per rail, the loads added in load order from 0.0, as PowerModel.compute adds them
         sums = np.zeros((_BLOCK, len(self._rail_names)))
         for j, members in enumerate(self._rail_loads):

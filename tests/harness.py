@@ -30,9 +30,11 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import zenoh
 
 from common import keys
+from common.config import Rover
 from common.connection import make_config
 from common.datafile import load_yaml
 
@@ -70,6 +72,13 @@ def _static_folder() -> Path:
 def static_rover(name: str) -> Path:
     """``config/rovers/<name>`` without its drive section, written once per test process."""
     return rover_without_drive(ROVERS / name, _static_folder())
+
+
+def copies_of(rover: Rover, n: int, **load_changes: Any) -> list[Rover]:
+    """``n`` copies of a rover (ids r0, r1, ...), each of its loads changed as given."""
+    loads = [msgspec.structs.replace(ld, **load_changes) for ld in rover.loads]
+    return [msgspec.structs.replace(rover, rover=msgspec.structs.replace(rover.rover, id=f"r{i}"),
+                                    loads=loads) for i in range(n)]
 
 
 def free_endpoint() -> str:

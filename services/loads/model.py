@@ -7,6 +7,9 @@ draws ``V_rail^2 / R``, ``open`` nothing, ``stuck`` a constant power.
 The drive load of a rover with a ``drive`` section draws what the drive sets
 (:meth:`LoadsModel.set_driven`, from ``drive/state``; ``idle_w`` until it says otherwise)
 instead of samples; its faults still win.
+
+A service serving a fleet holds its rovers' models in a :class:`LoadsFleet`, which draws the
+samples of every load of every rover together, ``BLOCK_TICKS`` ticks at a time.
 """
 
 from __future__ import annotations
@@ -16,13 +19,17 @@ import numpy as np
 from common.config import Rover
 from common.faults import FaultKey, Params, ShortParams, StuckParams
 
-__all__ = ["LoadsModel", "sample_power"]
+__all__ = ["BLOCK_TICKS", "LoadsFleet", "LoadsModel", "sample_power"]
+
+BLOCK_TICKS = 16  # the ticks of a fleet's loads drawn at once
 
 
 def sample_power(rng: np.random.Generator, nominal_w: np.ndarray, std_w: np.ndarray,
-                 max_w: np.ndarray) -> np.ndarray:
-    """One draw per load [W]: normal around ``nominal_w`` with ``std_w``, clipped to [0, max_w]."""
-    return np.clip(rng.normal(nominal_w, std_w), 0.0, max_w)
+                 max_w: np.ndarray, ticks: int | None = None) -> np.ndarray:
+    """One draw per load [W]: normal around ``nominal_w`` with ``std_w``, clipped to [0, max_w];
+    with ``ticks``, that many rows of them (one per tick)."""
+    size = None if ticks is None else (ticks, len(nominal_w))
+    return np.clip(rng.normal(nominal_w, std_w, size=size), 0.0, max_w)
 
 
 class LoadsModel:
@@ -109,9 +116,59 @@ class LoadsModel:
         return sorted(self.faults.get(name, {}))
 
     def powers(self) -> list[tuple[str, float, str, bool]]:
-        """``(load, power_w, rail, on)`` for every load."""
+        """``(load, power_w, rail, on)`` for every load: :meth:`power` of each, in one pass."""
         out = []
-        for name, rail in zip(self.names, self.rails, strict=True):
-            power_w, on = self.power(name)
-            out.append((name, power_w, rail, on))
+        rail_on, faults, driven_w = self.rail_on, self.faults, self.driven_w
+        for name, rail, sampled_w in zip(self.names, self.rails, self.sampled_w.tolist(),
+                                         strict=True):
+            if not rail_on.get(rail, False):
+                out.append((name, 0.0, rail, False))
+                continue
+            held = self.fault_power(name) if faults.get(name) else None
+            if held is None:
+                held = driven_w.get(name, sampled_w)
+            out.append((name, held, rail, True))
         return out
+
+
+class LoadsFleet:
+    """The loads of many rovers in one process: a :class:`LoadsModel` per rover (``models``),
+    their samples drawn together.
+
+    A draw of one rover's dozen loads costs what numpy's calls cost, not what the numbers
+    do; so the fleet draws every load of every rover for ``block_ticks`` ticks at once, and
+    a rover's tick (:meth:`sample`) only moves it to its next row of that block (its model's
+    ``sampled_w`` is a view of it). A rover that runs out of rows has a new block drawn for
+    all; the rows the others had left are dropped (independent draws: none is the worse for
+    it). With a seed, the samples repeat for the same order of ticks across the fleet.
+    """
+
+    def __init__(self, rovers: list[Rover], seed: int | None = None,
+                 block_ticks: int = BLOCK_TICKS):
+        self.models = {r.id: LoadsModel(r) for r in rovers}
+        self._slices: dict[str, slice] = {}
+        start = 0
+        for rover, m in self.models.items():
+            self._slices[rover] = slice(start, start + len(m.names))
+            start += len(m.names)
+        ms = list(self.models.values())
+        self.nominal_w = np.concatenate([m.nominal_w for m in ms] + [np.zeros(0)])
+        self.std_w = np.concatenate([m.std_w for m in ms] + [np.zeros(0)])
+        self.max_w = np.concatenate([m.max_w for m in ms] + [np.zeros(0)])
+        self.rng = np.random.default_rng(seed)
+        self.block_ticks = block_ticks
+        self.draws = 0  # how many blocks have been drawn
+        self._block = np.empty((0, start))
+        self._row = dict.fromkeys(self.models, 0)  # each rover's next row of the block
+
+    def sample(self, rover: str) -> None:
+        """One tick of one rover: a new noisy sample for each of its loads."""
+        row = self._row[rover]
+        if row >= len(self._block):
+            self._block = sample_power(self.rng, self.nominal_w, self.std_w, self.max_w,
+                                       ticks=self.block_ticks)
+            self.draws += 1
+            self._row = dict.fromkeys(self._row, 0)
+            row = 0
+        self._row[rover] = row + 1
+        self.models[rover].sampled_w = self._block[row, self._slices[rover]]

@@ -1,7 +1,8 @@
 """Loads service: samples every load on the clock and publishes each one's power.
 
 The drive load of a rover that drives takes its power from ``drive/state`` instead, and is
-republished as soon as that changes.
+republished as soon as that changes. The fleet's samples are drawn together
+(:class:`~services.loads.model.LoadsFleet`): a rover's tick costs its publications, little more.
 """
 
 from __future__ import annotations
@@ -11,25 +12,27 @@ from common.config import Rover
 from common.faults import FaultKey, Params
 from common.messages import Clock, DriveState, LoadPower, RailState, decode
 from common.runtime import Runtime, Sample
-from services.loads.model import LoadsModel
+from services.loads.model import LoadsFleet
 
 __all__ = ["serve"]
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    models = {r.id: LoadsModel(r, seed) for r in rovers}
+    fleet = LoadsFleet(rovers, seed)
+    models = fleet.models
+    load_keys = {r.id: [keys.load_power(r.id, ld.name) for ld in r.loads] for r in rovers}
 
     def publish(rover: str, only: set[str] | None = None) -> None:
         m = models[rover]
-        for name, power_w, rail, on in m.powers():
+        t_s = rt.t_s[rover]
+        for key, (name, power_w, rail, on) in zip(load_keys[rover], m.powers(), strict=True):
             if only is None or name in only:
-                rt.publish(keys.load_power(rover, name), LoadPower(
-                    t_s=rt.t_s[rover], power_w=power_w, rail=rail, on=on,
-                    faults=m.fault_names(name)))
+                rt.publish(key, LoadPower(t_s=t_s, power_w=power_w, rail=rail, on=on,
+                                          faults=m.fault_names(name)))
 
     def on_tick(rover: str, tick: Clock) -> None:
         if tick.dt_s > 0.0:  # a paused clock holds every load where it is
-            models[rover].sample()
+            fleet.sample(rover)
         publish(rover)
 
     def on_rail(s: Sample) -> None:

@@ -1,4 +1,5 @@
-"""Loads: noisy samples within bounds with the configured mean and spread; faults."""
+"""Loads: noisy samples within bounds with the configured mean and spread; faults; a fleet's
+loads drawn together."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ from numpy.testing import assert_allclose
 
 from common.config import load_rover
 from common.faults import fault_of
-from services.loads.model import LoadsModel, sample_power
-from tests.harness import ROVERS
+from services.loads.model import LoadsFleet, LoadsModel, sample_power
+from tests.harness import ROVERS, copies_of
 
 
 @pytest.fixture
@@ -77,3 +78,91 @@ def test_the_drive_load_draws_what_the_drive_sets_and_its_faults_still_win(mapp)
     assert m.power("drive_motors") == (0.0, False)
     m.reset_driven()
     assert m.driven_w == {"drive_motors": 3.0}
+
+
+def test_a_fleet_draws_every_load_of_every_rover_in_one_block(mapp):
+    fleet = LoadsFleet(copies_of(mapp, 3), seed=5, block_ticks=4)
+    for _ in range(4):  # 3 rovers x 4 ticks: the rows of one block
+        for rover in ("r0", "r1", "r2"):
+            fleet.sample(rover)
+    assert fleet.draws == 1
+    fleet.sample("r1")  # r1 has used its rows: a new block for all
+    assert fleet.draws == 2
+    for _ in range(3):
+        fleet.sample("r0")
+    assert fleet.draws == 2  # r0 starts afresh in the new block: 4 rows of it
+    fleet.sample("r0")
+    fleet.sample("r0")
+    assert fleet.draws == 3
+
+
+def test_a_fleets_samples_are_the_block_drawn_for_all_its_loads(mapp):
+    # The same numbers as sample_power draws for the 3 x 10 loads side by side, 2 ticks at once.
+    fleet = LoadsFleet(copies_of(mapp, 3), seed=5, block_ticks=2)
+    n = len(mapp.loads)
+    expected = sample_power(np.random.default_rng(5), np.tile(fleet.models["r0"].nominal_w, 3),
+                            np.tile(fleet.models["r0"].std_w, 3),
+                            np.tile(fleet.models["r0"].max_w, 3), ticks=2)
+    for row in range(2):
+        for k, rover in enumerate(("r0", "r1", "r2")):
+            fleet.sample(rover)
+            assert_allclose(fleet.models[rover].sampled_w, expected[row, k * n:(k + 1) * n],
+                            rtol=0, atol=0)
+    # ... so two copies of one rover do not draw the same noise (one generator per rover
+    # seeded alike would)
+    assert (fleet.models["r0"].sampled_w != fleet.models["r1"].sampled_w).any()
+
+
+def test_a_fleets_loads_have_their_nominal_power_without_spread(mapp):
+    # std_w 0: each sample is nominal_w (the drive's motors at 40 W; every load under its max).
+    fleet = LoadsFleet(copies_of(mapp, 2, std_w=0.0), seed=1)
+    for _ in range(40):  # across blocks of 16
+        fleet.sample("r0")
+    assert fleet.draws == 3
+    assert fleet.models["r0"].sampled_w.tolist() == [ld.nominal_w for ld in mapp.loads]
+    # one over its max is clipped to it: 7 W at most 5 W
+    clipped = copies_of(mapp, 1, std_w=0.0, nominal_w=7.0, max_w=5.0)
+    one = LoadsFleet(clipped, seed=1)
+    one.sample("r0")
+    assert one.models["r0"].sampled_w.tolist() == [5.0] * len(mapp.loads)
+
+
+def test_a_fleets_samples_have_the_configured_mean_and_spread(mapp):
+    # As for one load above: 30 W +- 8 W within [0, 80] for every load of 4 rovers, 2,500
+    # ticks each (interleaved): 10,000 samples per load position, standard error 0.08 W.
+    fleet = LoadsFleet(copies_of(mapp, 4, nominal_w=30.0, std_w=8.0, max_w=80.0), seed=2)
+    draws = []
+    for _ in range(2500):
+        for rover in ("r0", "r1", "r2", "r3"):
+            fleet.sample(rover)
+            draws.append(fleet.models[rover].sampled_w.copy())
+    d = np.array(draws)
+    assert_allclose(d.mean(axis=0), 30.0, atol=0.35)
+    assert_allclose(d.std(axis=0), 8.0, rtol=0.04)
+
+
+def test_a_fleets_rovers_keep_their_own_rails_faults_and_drive(mapp):
+    fleet = LoadsFleet(copies_of(mapp, 2, std_w=0.0), seed=1)
+    a, b = fleet.models["r0"], fleet.models["r1"]
+    fleet.sample("r0")
+    fleet.sample("r1")
+    b.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+    b.set_rail("3V3_CH1", False)
+    b.set_driven("drive_motors", 9.5)
+    assert_allclose(b.power("nav_camera")[0], 5.0**2 / 0.05)  # 500 W
+    assert a.power("nav_camera") == (3.5, True)
+    assert b.power("imu") == (0.0, False) and a.power("imu") == (1.0, True)
+    assert b.power("drive_motors") == (9.5, True) and a.power("drive_motors") == (3.0, True)
+
+
+def test_powers_is_power_of_each_load(mapp):
+    m = LoadsModel(mapp, seed=4)
+    m.sample()
+    m.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+    m.apply_fault(*fault_of("load/imu/open", {}))
+    m.apply_fault(*fault_of("load/uhf_radio/stuck", {"power_w": 7.0}))
+    m.set_rail("3V3_CH2", False)
+    m.set_driven("drive_motors", 12.5)
+    assert m.powers() == [(name, *m.power(name)[:1], rail, m.power(name)[1])
+                          for name, rail in zip(m.names, m.rails, strict=True)]
+    assert dict((n, p) for n, p, _, _ in m.powers())["uhf_radio"] == 7.0
