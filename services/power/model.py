@@ -84,7 +84,9 @@ class PowerModel:
         self._sheddable = [(sw, sw.cfg.shed_below_soc, sw.restore_soc) for sw in self._switch_list
                            if sw.cfg.shed_below_soc is not None and sw.restore_soc is not None]
         self.load_rail = {ld.name: ld.rail for ld in rover.loads}
-        self.load_power_w = {ld.name: 0.0 for ld in rover.loads}
+        self.load_power_w = {ld.name: 0.0 for ld in rover.loads}  # its keys never change
+        rail_index = {name: i for i, name in enumerate(self.switches)}
+        self._load_rail_index = [rail_index[ld.rail] for ld in rover.loads]
         self.panel_power_w = {p.name: 0.0 for p in rover.solar.panels}
         self.umbilical_w = 0.0
         self.solar_failed = False
@@ -151,12 +153,12 @@ class PowerModel:
 
     def compute(self) -> tuple[list[RailReading], Summary]:
         """Rail readings and bus totals; trips any rail over its limit (latched)."""
-        per_rail = dict.fromkeys(self.switches, 0.0)
-        for load, power_w in self.load_power_w.items():
-            per_rail[self.load_rail[load]] += power_w
-        states, summary = self.resolve(list(per_rail.values()))
+        per_rail = [0.0] * len(self._switch_list)
+        for i, power_w in zip(self._load_rail_index, self.load_power_w.values(), strict=True):
+            per_rail[i] += power_w  # in load order, from 0.0 (the composed twin's sums too)
+        states, summary = self.resolve(per_rail)
         readings: list[RailReading] = []
-        for (name, sw), power_w, (state, reason) in zip(self.switches.items(), per_rail.values(),
+        for (name, sw), power_w, (state, reason) in zip(self.switches.items(), per_rail,
                                                         states, strict=True):
             cfg = sw.cfg
             if state == "on":

@@ -43,18 +43,19 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     at_newest: dict[str, set[str]] = {r.id: set() for r in rovers}  # the loads of that tick
     last_state: dict[tuple[str, str], str] = {}
 
+    rail_keys = {rover: [keys.rail_state(rover, name) for name in m.rail_names()]
+                 for rover, m in models.items()}
+
     def publish(rover: str) -> None:
         m = models[rover]
         readings, summary = m.compute()
         t = rt.t_s[rover]
-        for r in readings:
-            fields = r._asdict()
-            name = fields.pop("name")
-            rt.publish(keys.rail_state(rover, name), RailState(t_s=t, **fields))
-            if last_state.get((rover, name)) != r.state:
-                last_state[(rover, name)] = r.state
-                rt.faults.sync_derived(rover, f"rail/{name}", m.derived_faults(name))
-        rt.publish(keys.power_summary(rover), PowerSummary(t_s=t, **summary._asdict()))
+        for key, r in zip(rail_keys[rover], readings, strict=True):
+            rt.publish(key, RailState(t, *r[1:]))  # the reading's fields but its name, in order
+            if last_state.get((rover, r.name)) != r.state:
+                last_state[(rover, r.name)] = r.state
+                rt.faults.sync_derived(rover, f"rail/{r.name}", m.derived_faults(r.name))
+        rt.publish(keys.power_summary(rover), PowerSummary(t, *summary))
 
     def flush() -> None:
         now = time.monotonic()

@@ -11,7 +11,8 @@ from numpy.testing import assert_allclose
 
 from common.config import load_rover
 from common.faults import fault_of
-from services.power.model import PowerModel
+from common.messages import PowerSummary, RailState
+from services.power.model import PowerModel, RailReading, Summary
 from tests.harness import ROVERS
 
 
@@ -133,3 +134,10 @@ def test_a_rail_returning_power_feeds_the_bus_through_its_converter(pdm):
     assert r["12V"].state == "on" and r["12V"].power_w == -8.0
     assert_allclose(r["12V"].current_a, -8.0 / 12.0)
     assert_allclose(s.bus_power_w, -8.0 * 0.93)
+
+
+def test_a_reading_is_its_messages_fields_in_order():
+    # The service builds RailState(t_s, *reading[1:]) and PowerSummary(t_s, *summary): a field
+    # added or moved in one but not the other must fail here, not mislabel a dashboard.
+    assert RailState.__struct_fields__ == ("t_s", *RailReading._fields[1:])
+    assert PowerSummary.__struct_fields__ == ("t_s", *Summary._fields)
