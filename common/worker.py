@@ -9,7 +9,8 @@ What comes in, and in what order it is handled:
 - the telemetry of a fleet, drained from Zenoh channels (:meth:`Worker.add_channel`) every
   ``POLL_S`` while samples come, backing off to ``POLL_MAX_S`` between a fleet's ticks;
 - queued inputs (commands, controls, queries), each after the telemetry already waiting in
-  the channels: a rail reset is judged on the loads heard before it;
+  the channels: a rail command is judged on the loads heard before it (a reset, on the
+  next tick's: see :mod:`services.power.service`);
 - once the queue and the channels run dry (lingering ``batch_linger_s`` for the rest of a
   burst), or after ``MAX_BATCH_S`` of a steady stream, the ``after_batch`` hooks: a burst
   of inputs is folded into one recomputation, and a fleet's stream never holds them back;

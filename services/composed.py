@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from common.config import Rover
+from common.messages import RailStateName
 from services.battery.model import BatteryModel, BatteryReading
 from services.drive.model import DriveModel, motors_powered
 from services.loads.model import LoadsModel, sample_power
@@ -54,7 +55,7 @@ class ComposedTwin:
         self._rail_loads = [[k for k, r in enumerate(self.loads.rails) if r == name]
                             for name in self._rail_names]
         self._solar_seen: tuple | None = None  # what the panels were last computed for
-        self._states: list[tuple[str, str]] = []
+        self._states: list[tuple[RailStateName, str]] = []
         self._fast = False  # the present tick's loads are a row of the block's rail sums
         # -- the drive (one self-contained block): it sets its load's power ---------------------
         # Its load is left out of the block's sums; its power is added to its rail each tick.

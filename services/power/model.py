@@ -16,12 +16,12 @@ from typing import NamedTuple
 
 from common.config import Rail, Rover, SolarRail
 from common.faults import FaultKey, Params
-from common.messages import Severity
+from common.messages import RailStateName, Severity
 
 __all__ = ["COMMANDED_OFF", "PowerModel", "RailReading", "RailSwitch", "Summary"]
 
 COMMANDED_OFF = "commanded off"  # the reason of a rail switched off by command
-_ON = ("on", "")
+_ON: tuple[RailStateName, str] = ("on", "")
 
 
 class RailReading(NamedTuple):
@@ -30,7 +30,7 @@ class RailReading(NamedTuple):
     current_a: float
     power_w: float
     current_limit_a: float | None
-    state: str  # on, off, tripped, shed, failed
+    state: RailStateName
     reason: str
 
 
@@ -60,7 +60,7 @@ class RailSwitch:
             return None
         return c.restore_above_soc if c.restore_above_soc is not None else c.shed_below_soc + 0.05
 
-    def state(self, battery_ok: bool) -> tuple[str, str]:
+    def state(self, battery_ok: bool) -> tuple[RailStateName, str]:
         if self.failed:
             return "failed", "converter failed"
         if self.tripped:
@@ -175,13 +175,13 @@ class PowerModel:
         ))
         return readings, summary
 
-    def resolve(self, rail_w: list[float]) -> tuple[list[tuple[str, str]], Summary]:
+    def resolve(self, rail_w: list[float]) -> tuple[list[tuple[RailStateName, str]], Summary]:
         """Each rail's ``(state, reason)`` and the bus totals, given the power its loads
         draw when it is on [W, in rail order]; trips any rail over its limit (latched).
         :meth:`compute` is this with the loads summed per rail; the composed twin, which
         sums them for many ticks at once, calls it directly."""
         ok = self.battery_ok
-        states: list[tuple[str, str]] = []
+        states: list[tuple[RailStateName, str]] = []
         load_total = bus_total = 0.0
         for sw, power_w in zip(self._switch_list, rail_w, strict=True):
             # RailSwitch.state's precedence, without the call for a rail that is simply on

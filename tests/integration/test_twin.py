@@ -14,6 +14,7 @@ import zenoh
 import zenoh.ext as zext
 
 from common import keys
+from common.config import load_rover
 from common.connection import make_config
 from tests.harness import ROOT, Probe, free_endpoint, lunaris_cmd, stop_process, wait_for
 
@@ -83,6 +84,46 @@ def test_one_battery_state_per_summary_of_the_pdm(twin_factory, probe, mapp_file
     for t in set(once) - set(answered):
         held = [w for s, w in summaries if s < t][-1:] + [w for s, w in summaries if s == t]
         assert any(state[t] == pytest.approx(w, rel=1e-9) for w in held), f"tick {t}: {state[t]} W"
+
+
+def test_a_rail_reset_is_judged_on_the_next_ticks_loads_not_a_sample_they_replaced(
+        twin_factory, probe, mapp_file):
+    # This test is the loads: it holds what the PDM last heard. A short trips 5V_CH2; the
+    # short is cleared and the rail reset at once, the loads' news (nav_camera back to 0 W
+    # on a rail that is off) still on its way behind the instructor's command. Judged on the
+    # 500 W it last heard, the reset tripped the rail again (1 in ~400 shorts in a fleet).
+    rover = load_rover(mapp_file)
+    rails = {ld.name: ld.rail for ld in rover.loads}
+    probe.watch(f"lunaris/{R}/**")
+    twin_factory([mapp_file], services=("clock", "power"))
+    probe.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "on")
+
+    def tick(t_s: float, nav_w: float, on: bool) -> None:
+        for name, rail in rails.items():
+            off = not on and rail == "5V_CH2"
+            power_w = 0.0 if off else nav_w if name == "nav_camera" else 1.0
+            probe.put(keys.load_power(R, name), {"t_s": t_s, "power_w": power_w, "rail": rail,
+                                                 "on": not off, "faults": []})
+
+    tick(1000.0, 500.0, True)  # the short: 5 V^2 / 0.05 ohm
+    probe.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "tripped")
+    probe.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
+    tick(1000.1, 0.0, False)  # the next tick: the short cleared, the rail off as the loads know
+    ev = probe.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("/5V_CH2"))
+    assert ev["params"]["state"] == "on", ev["message"]
+    probe.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "on")
+
+
+def test_a_rail_reset_is_answered_without_a_tick_of_loads(twin_factory, probe, mapp_file):
+    # No loads service: no tick of loads will come (as with a paused clock's); the reset waits
+    # RESET_HOLD_S for one, then is judged on what the PDM has.
+    probe.watch(f"lunaris/{R}/**")
+    twin_factory([mapp_file], services=("clock", "power"))
+    probe.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "on")
+    probe.put(keys.cmd_rail(R, "5V_CH2"), {"on": False, "reset": True})
+    ev = probe.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("/5V_CH2"))
+    assert ev["params"] == {"on": False, "reset": True, "state": "off"}
+    probe.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "off")
 
 
 def test_cmd_rail_switches_a_rail_and_its_loads(twin_factory, probe, mapp_file):
