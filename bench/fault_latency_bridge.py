@@ -116,7 +116,8 @@ class _Rclpy:
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         import threading
-        threading.Thread(target=self.executor.spin, daemon=True).start()
+        self.spinning = threading.Thread(target=self.executor.spin, daemon=True)
+        self.spinning.start()
 
     def end_point(self) -> fl.EndPoint:
         from diagnostic_msgs.msg import DiagnosticArray
@@ -127,7 +128,11 @@ class _Rclpy:
         return e
 
     def close(self) -> None:
-        self.executor.shutdown()
+        # In this order: the spinning thread left in the executor at exit aborted the process
+        # now and then ("terminate called without an active exception") after the figures.
+        self.executor.shutdown(timeout_sec=5.0)
+        self.spinning.join(timeout=5.0)
+        self.node.destroy_node()
         self.rclpy.shutdown(context=self.ctx)
 
 
