@@ -44,7 +44,7 @@ RESET_HOLD_S = 0.25  # the longest a rail reset waits for its rover's next tick 
 
 
 class _Held(NamedTuple):
-    """A rail command with a reset, waiting for the rover's next tick of loads."""
+    """A rail command waiting for the rover's next tick of loads: a reset, or one behind it."""
     key: str
     rail: str
     cmd: RailCommand
@@ -74,7 +74,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                 rt.faults.sync_derived(rover, f"rail/{r.name}", m.derived_faults(r.name))
         rt.publish(keys.power_summary(rover), PowerSummary(t, *summary))
 
-    held: dict[str, list[_Held]] = {}  # rover -> its rail resets waiting for a tick
+    held: dict[str, list[_Held]] = {}  # rover -> its rail commands waiting for a tick, in order
 
     def flush() -> None:
         now = time.monotonic()
