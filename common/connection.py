@@ -2,8 +2,9 @@
 
 ``--connect ENDPOINT`` / ``--listen ENDPOINT`` or ``LUNARIS_ZENOH_CONFIG`` naming
 a Zenoh JSON5 file (credentials, TLS). Whatever the source, multicast scouting
-is switched off (SPEC §11: endpoints are always explicit) and timestamping is
-on (the advanced publishers' caches need it).
+is switched off (SPEC §11: endpoints are always explicit), timestamping is
+on (the advanced publishers' caches need it) and each link's send queues hold a
+fleet's tick (:data:`TX_QUEUE_SIZE`).
 """
 
 from __future__ import annotations
@@ -15,11 +16,19 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULT_ENDPOINT", "ConnectionConfigError", "add_connection_args", "config_from_args",
-           "make_config", "write"]
+__all__ = ["DEFAULT_ENDPOINT", "TX_QUEUE_SIZE", "ConnectionConfigError", "add_connection_args",
+           "config_from_args", "make_config", "write"]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 CONFIG_ENV = "LUNARIS_ZENOH_CONFIG"
+# Batches of 64 kB a link may queue per priority before a sample sent with
+# CongestionControl.DROP (telemetry) is dropped; Zenoh's default is 2. A fleet's tick is a
+# burst: at 100 rovers the PDM publishes ~700 samples (~175 kB) at once and the router
+# forwards ~1,100 to each bridge shard. With 2 batches, whenever a link's thread waited for a
+# core, PDM summaries and rail states of 20-36 rovers at a time were lost (each rover 5 of
+# 600 ticks in a minute, measured by a subscriber of its own); with 16, the most Zenoh allows
+# (allocated only when used), none. Telemetry (DATA) and what goes ahead of it (PRIORITY).
+TX_QUEUE_SIZE = {"data_high": 16, "data": 16}
 
 
 class ConnectionConfigError(ValueError):
@@ -71,6 +80,8 @@ def make_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
     conf.insert_json5("timestamping/enabled", "true")
+    for priority, batches in TX_QUEUE_SIZE.items():
+        conf.insert_json5(f"transport/link/tx/queue/size/{priority}", str(batches))
     if mode == "client":
         # Wait for a router that is not up yet, and keep retrying after it goes away.
         conf.insert_json5("connect/timeout_ms", "-1")

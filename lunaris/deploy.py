@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from common import keys
+from common.connection import TX_QUEUE_SIZE
 from lunaris.deploy_dashboard import (
     FLEET_FILES,
     dashboard_keys,
@@ -181,7 +182,9 @@ def router_config(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
         "transport": {
             "auth": {"usrpwd": {"dictionary_file": f"{ROUTER_SECRETS}/credentials.txt"}},
             "link": {"tls": {"listen_certificate": f"{ROUTER_SECRETS}/tls/router.crt",
-                             "listen_private_key": f"{ROUTER_SECRETS}/tls/router.key"}},
+                             "listen_private_key": f"{ROUTER_SECRETS}/tls/router.key"},
+                     # what each Lunaris session queues: a fleet's tick, not dropped
+                     "tx": {"queue": {"size": TX_QUEUE_SIZE}}},
         },
         "access_control": acl(mf, fleet),
     }
