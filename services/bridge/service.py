@@ -21,6 +21,7 @@ import heapq
 import sys
 import time
 from collections.abc import Callable
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -99,16 +100,39 @@ class _Shared:
         return domain_of(self.opts, self.ros2_base, b.rover, b.place)
 
 
+class _Feed:
+    """One twin key the bridge publishes from: its newest sample, counted, and its outlets.
+    A sample is decoded once and its discrete fields compared once, whatever the number of
+    outlets; a sample that changes nothing discrete, for outlets whose rate holds them, costs
+    nothing more (the rate timer takes the newest sample when an outlet is due)."""
+
+    def __init__(self, payload_type: type[msgspec.Struct], discrete: tuple[str, ...]):
+        self.type = payload_type
+        self.discrete_of: Callable[[Any], Any] = (attrgetter(*discrete) if discrete
+                                                  else lambda _: None)
+        self.outlets: list[_Outlet] = []
+        self.payload: Any = None  # the newest sample
+        self.seq = 0  # samples so far
+        self.discrete: Any = None  # the discrete fields of the newest sample
+        self.unrated = False  # some outlet follows every sample
+        self.idle = False  # some outlet with a rate is off its timer: the next sample goes at once
+
+
 class _Outlet:
     """One outbound topic of one binding in every enabled flavour: the message is built and
     CDR-encoded once per published sample, whatever the number of flavours; a flavour that is
     not enabled costs nothing. The rmw_zenoh publisher (its liveliness token included) and the
     ROS 2 publisher are declared with the first sample, so a topic that never publishes (a
-    null value without a default) is not advertised."""
+    null value without a default) is not advertised.
 
-    def __init__(self, shared: _Shared, b: Binding, entity_id: int):
+    With a rate, the outlet is on a grid of its period: when due it sends its feed's newest
+    sample if one came since it last sent, else it goes idle until the next sample, which is
+    sent at once. A sample whose discrete fields changed goes at once and leaves the grid as
+    it is; a late timer does not push the grid later (after a pause it starts again)."""
+
+    def __init__(self, shared: _Shared, b: Binding, entity_id: int, feed: _Feed | None):
         out = shared.opts.outputs
-        self.shared, self.binding, self.entity_id = shared, b, entity_id
+        self.shared, self.binding, self.entity_id, self.feed = shared, b, entity_id, feed
         self.type = b.mapping.type
         self.dds_key = zenoh_key(b, shared.opts, "ros2dds") if out.ros2dds.enabled else None
         self.json_key = zenoh_key(b, shared.opts, "json") if out.json.enabled else None
@@ -122,10 +146,9 @@ class _Outlet:
         self._ros2_publish: Callable[[bytes], None] | None = None
         rate = b.mapping.rate_hz
         self.period_s = 1.0 / rate if rate else 0.0
-        self.next_s = 0.0  # monotonic time from which the next sample may go
-        self.discrete: tuple | None = None  # the discrete fields at the last publish
-        self.pending: Any = None  # the latest payload held back by the rate
-        self.scheduled = False
+        self.next_s = 0.0  # monotonic time of its next slot on the grid
+        self.idle = bool(rate)  # off the rate timer (no sample since it last sent)
+        self.sent_seq = 0  # its feed's sample it last sent
         self.last: tuple[Any, bytes] | None = None  # what a restamped message repeats
 
     def _declare_rmw(self) -> None:
@@ -162,33 +185,22 @@ class _Outlet:
         if self.json_key:
             rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON, reliable=self.urgent)
 
-    def offer(self, payload: Any, discrete: tuple, now: float,
-              build: Callable[[_Outlet, Any], dict | None]) -> None:
-        """A new twin sample: published at once when the mapping has no rate, when its rate
-        allows, or when a discrete field changed; else held until the rate allows."""
-        if self.period_s == 0.0 or now >= self.next_s or discrete != self.discrete:
-            self.send(payload, discrete, now, build)
-            return
-        self.pending = (payload, discrete)
-        if not self.scheduled:
-            self.scheduled = True
-            sh = self.shared
-            sh.seq += 1
-            heapq.heappush(sh.due, (self.next_s, sh.seq, self))
-
-    def send(self, payload: Any, discrete: tuple, now: float,
-             build: Callable[[_Outlet, Any], dict | None]) -> None:
-        self.pending = None
-        msg = build(self, payload)
+    def send(self, build: Callable[[_Outlet, Any], dict | None]) -> None:
+        """Publish the feed's newest sample."""
+        feed = self.feed
+        assert feed is not None, "an outlet of a twin key"
+        self.sent_seq = feed.seq
+        msg = build(self, feed.payload)
         if msg is not None:
             self.publish(msg)
-        self.discrete = discrete
-        # On a grid: a sample held back and sent late by the timer does not push the next one
-        # later, so a topic keeps its rate on average (after a pause the grid starts again); a
-        # discrete change sent early leaves the grid as it is.
-        if now >= self.next_s:
-            grid = self.next_s + self.period_s
-            self.next_s = grid if now < grid else now + self.period_s
+
+    def schedule(self, now: float) -> None:
+        """Put the outlet on the rate timer at its next slot."""
+        grid = self.next_s + self.period_s
+        self.next_s = grid if now < grid else now + self.period_s
+        sh = self.shared
+        sh.seq += 1
+        heapq.heappush(sh.due, (self.next_s, sh.seq, self))
 
 
 def _family(key_template: str) -> keys.Family:
@@ -243,24 +255,26 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
                 node_token(domain, shared.zid, 0, rmw.namespace, rmw.node)))
 
     # -- outbound -----------------------------------------------------------------------------
-    by_key: dict[str, list[_Outlet]] = {}  # twin key -> its outlets
-    payload_type: dict[str, type[msgspec.Struct]] = {}
+    feeds: dict[str, _Feed] = {}  # twin key -> its feed
     discrete_of: dict[type, tuple[str, ...]] = {}
     diag_outlets: dict[str, list[_Outlet]] = {}  # rover -> DiagnosticArray outlets
     # rmw_zenoh entity ids: the node is 0, each binding its position in the list from 1
     for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction == "in":
             continue
-        outlet = _Outlet(shared, b, entity_id)
         if b.mapping.convert == "diagnostics":
-            diag_outlets.setdefault(b.rover, []).append(outlet)
-        else:
-            by_key.setdefault(b.key, []).append(outlet)
-            payload_type[b.key] = typ = _family(b.mapping.key).payload
-            discrete_of.setdefault(typ, _discrete_fields(typ))
+            diag_outlets.setdefault(b.rover, []).append(_Outlet(shared, b, entity_id, None))
+            continue
+        feed = feeds.get(b.key)
+        if feed is None:
+            typ = _family(b.mapping.key).payload
+            feed = feeds[b.key] = _Feed(typ, discrete_of.setdefault(typ, _discrete_fields(typ)))
+        outlet = _Outlet(shared, b, entity_id, feed)
+        feed.outlets.append(outlet)
+        feed.unrated |= outlet.period_s == 0.0
+        feed.idle |= outlet.idle
 
-    latest: dict[str, msgspec.Struct] = {}
-    dirty: set[str] = set()
+    dirty: set[str] = set()  # twin keys whose newest sample some outlet sends now
 
     def stamp_ns(t_s: float) -> int:
         return time.time_ns() if opts.stamp == "wall" else int(round(t_s * 1e9))
@@ -315,9 +329,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             if now - last_seen.get(s.key, started) > opts.stale_after_s:
                 diag_dirty.add(alive[0])  # back from STALE
             last_seen[s.key] = now
-        if s.key in by_key and not s.deleted:
-            latest[s.key] = decode(s.payload, payload_type[s.key])
-            dirty.add(s.key)
+        feed = feeds.get(s.key)
+        if feed is not None and not s.deleted:
+            feed.payload = payload = decode(s.payload, feed.type)
+            feed.seq += 1
+            if feed.unrated or feed.idle or feed.discrete_of(payload) != feed.discrete:
+                dirty.add(s.key)
 
     def on_faults(s: Sample) -> None:
         if s.rover not in in_effect or s.deleted:
@@ -331,29 +348,40 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             publish_diagnostics(s.rover)
 
     def flush() -> None:
+        """The samples some outlet sends at once: every one for an outlet without a rate, the
+        first after an outlet's idle spell, and a change of a discrete field for all."""
         now = time.monotonic()
         for key in sorted(dirty):
             rt.urgent_first()  # a fleet's tick is thousands of samples
-            payload = latest[key]
-            discrete = tuple(getattr(payload, f) for f in discrete_of[type(payload)])
-            for outlet in by_key[key]:
-                outlet.offer(payload, discrete, now, message)
+            feed = feeds[key]
+            discrete = feed.discrete_of(feed.payload)
+            changed, feed.discrete, feed.idle = discrete != feed.discrete, discrete, False
+            for outlet in feed.outlets:
+                if outlet.idle:
+                    outlet.idle = False
+                    outlet.send(message)
+                    outlet.schedule(now)
+                elif changed or outlet.period_s == 0.0:
+                    outlet.send(message)
         dirty.clear()
         for rover in sorted(diag_dirty):
             publish_diagnostics(rover)
         diag_dirty.clear()
 
     def flush_due() -> None:
-        """The samples held back by a rate, once it allows them."""
+        """The outlets whose rate allows the newest sample: sent, or idle when none came."""
         now = time.monotonic()
         due = shared.due
         while due and due[0][0] <= now:
             rt.urgent_first()
             _, _, outlet = heapq.heappop(due)
-            outlet.scheduled = False
-            if outlet.pending is not None:
-                payload, discrete = outlet.pending
-                outlet.send(payload, discrete, now, message)
+            feed = outlet.feed
+            assert feed is not None, "an outlet with a rate has a feed"
+            if outlet.sent_seq == feed.seq:
+                outlet.idle = feed.idle = True
+            else:
+                outlet.send(message)
+                outlet.schedule(now)
 
     # The periodic DiagnosticArrays are spread over the period (a fleet's rovers one after the
     # other, a timer every 20 ms or more), not sent all at once: no burst every second.
@@ -375,7 +403,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     # each tick (the radio link each second), so a bridge that joins late has them within a
     # tick anyway, and an advanced subscriber costs ~10 us more per sample (at 100 rovers a
     # bridge shard receives ~10,000 a second).
-    fams = {_family(o.binding.mapping.key) for ol in by_key.values() for o in ol}
+    fams = {_family(o.binding.mapping.key) for feed in feeds.values() for o in feed.outlets}
     fams |= {_family(data_key("{rover}", c)) for cs in comps.values() for c in cs}
     fleet_size = len(fleet) if fleet is not None else len(rovers)
     served = ["*"] if len(rovers) == fleet_size else sorted(rover_cfg)
@@ -385,7 +413,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
         for r in served:
             rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True, urgent=True)
         rt.every(opts.diagnostics_period_s / diag_slots, periodic_diagnostics)
-    if any(o.period_s for ol in by_key.values() for o in ol):
+    if any(o.period_s for feed in feeds.values() for o in feed.outlets):
         rt.every(RATE_TIMER_S, flush_due)
     rt.after_batch(flush)
 
