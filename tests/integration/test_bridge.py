@@ -408,12 +408,14 @@ def _status(tap: Tap, flavour: str, component: str, after: float = 0.0) -> dict 
     return next((s for s in m["status"] if s["name"] == f"{R}/{component}"), None) if m else None
 
 
-def _first(tap: Tap, flavour: str, topic: str, since: float, predicate) -> float | None:
-    """Arrival time of the first sample on a topic after ``since`` that satisfies ``predicate``."""
+def _first(tap: Tap, flavour: str, topic: str, since: float, predicate,
+           typename: str | None = None) -> float | None:
+    """Arrival time of the first sample on a topic after ``since`` that satisfies ``predicate``
+    (``typename``: of a topic the default mapping does not have)."""
     for raw in tap.history(tap.key(flavour, topic) or ""):
         if raw.t_mono >= since:
             msg = (json.loads(raw.payload) if flavour == "json"
-                   else as_dict(rosmsg.decode(TOPICS[topic], raw.payload)))
+                   else as_dict(rosmsg.decode(typename or TOPICS[topic], raw.payload)))
             if predicate(msg):
                 return raw.t_mono
     return None
@@ -549,3 +551,47 @@ def test_rates_hold_continuous_values_and_let_discrete_changes_through(dashboard
     latency = _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2, lambda m: m["data"] == 0) - t2
     assert latency < 0.25, f"the failed rail took {latency * 1e3:.0f} ms at rate_hz 2"
     probe.delete(keys.fault(R, "rail/5V_CH2", "fail"))
+
+
+def test_a_rate_sends_the_first_sample_after_a_silence_at_once_and_holds_the_rest(
+        probe, twin_factory, mapp_file, tmp_path):
+    """A topic at ``rate_hz`` 0.5 (a slot every 2 s) fed by hand: the first sample goes at once;
+    one right behind it waits for the next slot; after a silence (no sample at a slot) the
+    next one goes at once again, wherever the grid of slots is; a change of a discrete field
+    (the pack's ``operational``) goes at once."""
+    mapping = tmp_path / "slow.yaml"
+    mapping.write_text(
+        "bridge: {outputs: {ros2dds: {enabled: true}, rmw_zenoh: {enabled: false}}}\n"
+        "mappings:\n"
+        "  - {topic: /slow_voltage_mv, type: std_msgs/msg/Int32, key: 'lunaris/{rover}/battery/state',\n"
+        "     field: voltage_v, scale: 1000, rate_hz: 0.5}\n")
+    tap = Tap(probe.session)
+    twin_factory([mapp_file], services=("bridge",), extra={"bridge": ["--bridge-config", str(mapping)]})
+    probe.wait_services(R, ("bridge",))
+    state = dict(t_s=1.0, energy_j=2.65e5, capacity_j=5.3e5, soc=0.5, ocv_v=15.4, voltage_v=15.0,
+                 current_a=3.0, power_w=45.0, temperature_c=20.0, operational=True, fault_code=0,
+                 faults=[], time_to_empty_s=1000.0)
+
+    def put(voltage_v: float, **kw: Any) -> float:
+        state.update(voltage_v=voltage_v, t_s=state["t_s"] + 0.1, **kw)
+        t = time.monotonic()
+        probe.put(keys.battery_state(R), state)
+        return t
+
+    def arrival(mv: int, since: float, timeout_s: float = 5.0) -> float:
+        return wait_for(lambda: first(since, lambda m: m["data"] == mv), timeout_s, f"{mv} mV") - since
+
+    def first(since: float, predicate) -> float | None:
+        return _first(tap, "ros2dds", "/slow_voltage_mv", since, predicate, INT32)
+
+    # the bridge's subscription is in place once a sample gets through: the first goes at once
+    wait_for(lambda: put(15.0) and first(0.0, lambda m: m["data"] == 15000), 10, "the first sample")
+    slot = first(0.0, lambda m: m["data"] == 15000)
+    assert slot is not None
+    held = arrival(15100, put(15.1))  # right behind it: the next slot, 2 s after the first
+    assert 1.5 < held < 2.6, f"the held sample came {held:.2f} s after it was written"
+    # no sample at the slot after that (the outlet goes idle); the next one, 0.5 s after that
+    # silent slot, is sent at once, not at the slot 1.5 s later
+    time.sleep(max(0.0, slot + 4.5 - time.monotonic()))
+    assert arrival(15200, put(15.2)) < 0.5
+    assert arrival(15300, put(15.3, operational=False)) < 0.5  # a discrete change
