@@ -34,6 +34,7 @@ from common import keys
 from common.connection import TX_QUEUE_SIZE
 from lunaris.deploy_dashboard import (
     FLEET_FILES,
+    bridge_hears,
     dashboard_keys,
     fleet_names,
     inbound_regexes,
@@ -103,6 +104,7 @@ def _rule(rule_id: str, permission: str, flows: list[str], messages: list[str],
 def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
     """The router's ``access_control`` section."""
     reads, writes = dashboard_keys(mf, fleet)
+    hears = bridge_hears(mf, fleet)
     inbound = sorted({m.key.replace("{rover}", "*") for m in mf.mappings if m.direction == "in"})
     inbound = [re.sub(r"\{[a-z_]*\}", "*", k) for k in inbound]
     ros = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
@@ -117,7 +119,10 @@ def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
         _rule("dashboard-read", "allow", ["ingress"], _READ_IN, reads + dash_adv + ros),
         _rule("dashboard-deliver", "allow", ["egress"], _READ_OUT, reads + dash_adv + ros),
         _rule("dashboard-write", "allow", ["ingress"], ["put", "liveliness_token"], writes + ros[:1]),
-        _rule("dashboard-write-matching", "allow", ["egress"], ["declare_subscriber"], writes),
+        # what the bridge hears them on (one key expression for the rovers of a bridge serving
+        # several): the dashboard's publishers must see that subscriber, or they never send
+        _rule("dashboard-write-matching", "allow", ["egress"], ["declare_subscriber"],
+              sorted(set(writes) | set(hears))),
     ]
     subjects = [{"id": person, "usernames": [person]} for person in PEOPLE]
     policies = [
@@ -153,7 +158,8 @@ def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
                   + (dash_adv + ["@ros2_lv/**"] if service == "bridge" else [])),
         ]
         if service == "bridge":  # it hears the dashboard's inbound topics and ROS 2 discovery
-            rules += [_rule("svc-bridge-hear", "allow", ["ingress"], _READ_IN, writes + ros),
+            # (a bridge serving several rovers hears a topic of them all on one key expression)
+            rules += [_rule("svc-bridge-hear", "allow", ["ingress"], _READ_IN, hears + ros),
                       _rule("svc-bridge-heard", "allow", ["egress"], _READ_OUT, writes + ros)]
         subjects.append({"id": f"lunaris-{service}", "usernames": [f"lunaris-{service}"]})
         policies.append({

@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import Any
 
 from common.config import load_rover
-from services.bridge.bindings import Binding, RoverNames, rover_names, zenoh_key
+from services.bridge.bindings import Binding, RoverNames, open_keyexpr, rover_names, zenoh_key
 from services.bridge.mapping import MappingFile, ros_name
 
-__all__ = ["FLEET_FILES", "dashboard_keys", "fleet_names", "inbound_regexes", "ros2dds_config",
-           "rmw_zenoh_config"]
+__all__ = ["FLEET_FILES", "bridge_hears", "dashboard_keys", "fleet_names", "inbound_regexes",
+           "ros2dds_config", "rmw_zenoh_config"]
 
 REPO = Path(__file__).resolve().parent.parent
 # The rovers docker-compose.yml serves (in this order: the fleet, so rover i has ROS 2 domain i).
@@ -33,28 +33,50 @@ def fleet_names(files: list[str] | tuple[str, ...] = FLEET_FILES) -> list[RoverN
     return [rover_names(load_rover(REPO / f if not Path(f).is_absolute() else f)) for f in files]
 
 
-def dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> tuple[list[str], list[str]]:
-    """(keys the dashboard reads, keys it writes) in every enabled Zenoh flavour of a mapping,
-    for each rover of the fleet: its own namespace (ros2dds, json) and ROS 2 domain
-    (rmw_zenoh), component names as ``$*``. Exact to the chunk, so the one inbound topic's
-    rule matches no other key (not ``json/curr_to_receiving_radio_m`` when json is off)."""
+def _dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> list[tuple[int, str, str, str]]:
+    """(mapping index, flavour, direction, key) of every dashboard topic of every rover of the
+    fleet in every enabled Zenoh flavour: its own namespace (ros2dds, json) and ROS 2 domain
+    (rmw_zenoh), component names as ``$*``; an inbound rmw_zenoh key with any type hash (a
+    Humble node's as well as a Jazzy one's)."""
     out = mf.bridge.outputs
     several = len(fleet) > 1
     prefix = mf.bridge.fleet_topic_prefix if several else mf.bridge.topic_prefix
-    reads: list[str] = []
-    writes: list[str] = []
+    flavours = [f for f in ("ros2dds", "json", "rmw_zenoh") if getattr(out, f).enabled]
+    got: list[tuple[int, str, str, str]] = []
     for place, rover in enumerate(fleet):
         for i, m in enumerate(mf.mappings):
             topic = "/" + _topic_key((prefix + m.topic).replace("{rover}", ros_name(rover.id)))
             b = Binding(i, m, rover.id, None, "", topic, place, several)
-            flavours = [f for f in ("ros2dds", "json", "rmw_zenoh") if getattr(out, f).enabled]
-            got = [zenoh_key(b, mf.bridge, f) for f in flavours]
-            if m.direction == "in":  # any type hash: a Humble node's as well as a Jazzy one's
-                writes += [k.rsplit("/", 1)[0] + "/*" if f == "rmw_zenoh" else k
-                           for f, k in zip(flavours, got, strict=True)]
-            else:
-                reads += got
-    return sorted(set(reads)), sorted(set(writes))
+            for f in flavours:
+                key = zenoh_key(b, mf.bridge, f)
+                if m.direction == "in" and f == "rmw_zenoh":
+                    key = key.rsplit("/", 1)[0] + "/*"
+                got.append((i, f, m.direction, key))
+    return got
+
+
+def dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> tuple[list[str], list[str]]:
+    """(keys the dashboard reads, keys it writes) in every enabled Zenoh flavour of a mapping,
+    for each rover of the fleet. Exact to the chunk, so the one inbound topic's rule matches
+    no other key (not ``json/curr_to_receiving_radio_m`` when json is off)."""
+    keys = _dashboard_keys(mf, fleet)
+    return (sorted({k for _, _, d, k in keys if d == "out"}),
+            sorted({k for _, _, d, k in keys if d == "in"}))
+
+
+def bridge_hears(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
+    """The key expressions a bridge may hear the dashboard's inbound topics on: one for all
+    the rovers of each topic and flavour, as a bridge serving several of them subscribes
+    (:func:`~services.bridge.bindings.open_keyexpr`; a shard's is within the fleet's)."""
+    groups: dict[tuple[int, str], list[str]] = {}
+    for i, f, direction, key in _dashboard_keys(mf, fleet):
+        if direction == "in":
+            groups.setdefault((i, f), []).append(key)
+    out: set[str] = set()
+    for ks in groups.values():
+        shared = open_keyexpr(ks)
+        out |= {shared} if shared is not None else set(ks)
+    return sorted(out)
 
 
 def ros2dds_config(password: str, ca_pem: bytes | None, rover: str, domain: int,

@@ -25,7 +25,7 @@ from common.datafile import ConfigError
 from services.bridge.mapping import ROS_TOPIC, BridgeOptions, Mapping, MappingFile, ros_name
 from services.bridge.rmw_zenoh import rmw_topic_key
 
-__all__ = ["Binding", "RoverNames", "domain_of", "expand", "rover_names", "zenoh_key"]
+__all__ = ["Binding", "RoverNames", "domain_of", "expand", "open_keyexpr", "rover_names", "zenoh_key"]
 
 
 class RoverNames(NamedTuple):
@@ -97,6 +97,17 @@ def zenoh_key(b: Binding, opts: BridgeOptions, flavour: str) -> str:
         prefix = opts.outputs.json.prefix
         return f"{prefix}/{bare}" if prefix else bare
     return bare
+
+
+def open_keyexpr(keyexprs: list[str]) -> str | None:
+    """One key expression matching each of ``keyexprs`` (keys of as many chunks): a chunk in
+    which they differ is ``*``. So one subscription hears an inbound topic of several rovers,
+    whose keys differ in the rover's namespace or ROS 2 domain only. None when they do not
+    have as many chunks."""
+    split = [k.split("/") for k in keyexprs]
+    if len({len(chunks) for chunks in split}) != 1:
+        return None
+    return "/".join(col[0] if len(set(col)) == 1 else "*" for col in zip(*split, strict=True))
 
 
 def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mapping>",

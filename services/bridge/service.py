@@ -36,7 +36,7 @@ from common.connection import write
 from common.datafile import field_kind, struct_fields
 from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
-from services.bridge.bindings import Binding, domain_of, expand, rover_names, zenoh_key
+from services.bridge.bindings import Binding, domain_of, expand, open_keyexpr, rover_names, zenoh_key
 from services.bridge.cdr import decode_cdr, encode_cdr, restamp
 from services.bridge.convert import (
     battery_state_message,
@@ -411,8 +411,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     for pattern in sorted({f.pattern(r) for f in fams for r in served}):
         rt.subscribe(pattern, on_twin, telemetry=True)
     if diag_outlets:
-        for r in served:
-            rt.subscribe(keys.faults_active(r, "*"), on_faults, history=True, urgent=True)
+        # rare, and a subscription with a callback is a thread: one for the whole fleet (a
+        # shard drops the other shards' rovers)
+        rt.subscribe(keys.faults_active("*", "*"), on_faults, history=True, urgent=True)
         rt.every(opts.diagnostics_period_s / diag_slots, periodic_diagnostics)
     if any(o.period_s for feed in feeds.values() for o in feed.outlets):
         rt.every(RATE_TIMER_S, flush_due)
@@ -437,22 +438,27 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             return
         write(rt.zenoh_session, b.key, msgspec.json.encode(value))
 
-    def listen(b: Binding, flavour: str, keyexpr: str) -> None:
-        def on_sample(s: zenoh.Sample) -> None:
-            if s.kind == zenoh.SampleKind.PUT:
-                rt.call_soon(on_inbound, b, flavour, str(s.key_expr), s.payload.to_bytes())
-        rt.keep(rt.zenoh_session.declare_subscriber(keyexpr, on_sample))
+    # One subscription per inbound topic and flavour for all the rovers served: their keys
+    # differ only in a rover's namespace or domain, which the subscription leaves open, and
+    # a sample is told apart by its exact key (another shard's rover: not heard here). A
+    # subscription with a Python callback has a thread of its own: one per rover and topic
+    # was ~550 threads in a bridge shard of 50 rovers.
+    heard: dict[tuple[str, int, str | None], dict[str, Binding]] = {}
+
+    def hear(b: Binding, flavour: str, key: str) -> None:
+        heard.setdefault((flavour, b.position, b.item), {})[key] = b
 
     for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction != "in":
             continue
         if opts.outputs.ros2dds.enabled:
-            listen(b, "ros2dds", zenoh_key(b, opts, "ros2dds"))
+            hear(b, "ros2dds", zenoh_key(b, opts, "ros2dds"))
         if opts.outputs.json.enabled:
-            listen(b, "json", zenoh_key(b, opts, "json"))
+            hear(b, "json", zenoh_key(b, opts, "json"))
         if rmw.enabled:
-            # Any type hash: a Humble node (TypeHashNotSupported) is heard as well as a Jazzy one.
-            listen(b, "rmw_zenoh", zenoh_key(b, opts, "rmw_zenoh").rsplit("/", 1)[0] + "/*")
+            # Any type hash (the key's last chunk): a Humble node (TypeHashNotSupported) is
+            # heard as well as a Jazzy one.
+            hear(b, "rmw_zenoh", zenoh_key(b, opts, "rmw_zenoh").rsplit("/", 1)[0])
             rt.keep(rt.zenoh_session.liveliness().declare_token(entity_token(
                 shared.rmw_domain(b), shared.zid, 0, entity_id, "MS", rmw.namespace, rmw.node,
                 b.topic, b.mapping.type, qos_keyexpr(False, SUBSCRIPTION_DEPTH), opts.ros_distro)))
@@ -460,6 +466,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             def on_ros2(raw: bytes, b: Binding = b) -> None:
                 rt.call_soon(on_inbound, b, "ros2", b.topic, bytes(raw))
             graph.subscribe(shared.ros2_domain(b), b.topic, b.mapping.type, on_ros2)
+
+    def listen(flavour: str, by_key: dict[str, Binding], keyexpr: str) -> None:
+        any_hash = flavour == "rmw_zenoh"
+
+        def on_sample(s: zenoh.Sample) -> None:
+            key = str(s.key_expr)
+            b = by_key.get(key.rsplit("/", 1)[0] if any_hash else key)
+            if b is not None and s.kind == zenoh.SampleKind.PUT:
+                rt.call_soon(on_inbound, b, flavour, key, s.payload.to_bytes())
+        rt.keep(rt.zenoh_session.declare_subscriber(keyexpr + ("/*" if any_hash else ""), on_sample))
+
+    for group, by_key in heard.items():
+        shared_key = open_keyexpr(list(by_key))
+        for keyexpr in [shared_key] if shared_key is not None else list(by_key):
+            listen(group[0], by_key, keyexpr)
 
     for rover in diag_outlets:
         diag_dirty.add(rover)

@@ -133,7 +133,9 @@ def test_the_dashboard_sends_its_inbound_topic_and_nothing_else(router: Router) 
     inbound = Collector()
     # The deployment's fleet has two rovers: each dashboard topic carries the rover's
     # namespace (ros2dds) or ROS 2 domain (rmw_zenoh), the plain name on the dashboard's side.
-    bridge.declare_subscriber("mapp_1/curr_to_receiving_radio_m", inbound)
+    # A bridge serving both hears a topic of both on one key expression (its ros2dds one
+    # here); a bridge serving one, on that rover's key (its rmw_zenoh one here).
+    bridge.declare_subscriber("*/curr_to_receiving_radio_m", inbound)
     bridge.declare_subscriber("json/**", inbound)
     bridge.declare_subscriber("1/curr_to_receiving_radio_m/std_msgs::msg::dds_::Float64MultiArray_/*",
                               inbound)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter, defaultdict
+from pathlib import Path
 
 import msgspec
 import pytest
@@ -15,6 +16,7 @@ import zenoh
 
 from common import keys
 from common.runtime import POLL_FROM_ROVERS
+from services.bridge.rmw_zenoh import rmw_topic_key
 from tests import rosmsg
 from tests.harness import static_rover, wait_for
 
@@ -193,3 +195,56 @@ def test_a_fault_goes_ahead_of_a_fleets_telemetry_and_a_command_after_what_came_
     assert order[11] == second_fault  # the burst broken off for it
     assert order[-1] == command  # after the whole burst that came before it
     assert sorted(o for o in order if o in burst) == sorted(burst)  # nothing lost or doubled
+
+
+def test_a_fleets_bridge_hears_each_inbound_topic_once_for_all_its_rovers(
+        twin_factory, probe, tmp_path):
+    """The dashboard's inbound topics of the rovers a bridge shard serves: one subscription
+    per topic and flavour (each with a thread of its own), not one per rover; a message on a
+    served rover's topic reaches its input once, in each flavour, and one on another shard's
+    rover is not this shard's to write."""
+    n = 2 * POLL_FROM_ROVERS  # the first of two shards serves every other rover: a fleet's worth
+    base = static_rover("mapp.yaml").read_text()
+    files = []
+    for i in range(1, n + 1):
+        f = tmp_path / f"mapp-{i:02d}.yaml"
+        f.write_text(base.replace("id: mapp-1", f"id: mapp-{i:02d}"))
+        files.append(f)
+    written: list[str] = []
+    sub = probe.session.declare_subscriber(keys.input_radio_position("*", "*"),
+                                           lambda s: written.append(str(s.key_expr)))
+    twin = twin_factory(files, services=("bridge",), extra={"bridge": ["--shard", "1/2"]})
+    probe.wait_services("mapp-01", ("bridge",), timeout_s=60)
+    probe.wait_services(f"mapp-{n - 1:02d}", ("bridge",), timeout_s=60)
+    threads = len(list(Path(f"/proc/{twin.procs['bridge'].pid}/task").iterdir()))
+    # Zenoh's own, the worker, one per callback subscription: 19 when written. Per rover it
+    # was 11 more (5 inbound topics in 2 flavours, the faults in effect): 209 here
+    assert threads < 30, f"the bridge shard of {n // 2} rovers runs {threads} threads"
+
+    cdr = rosmsg.encode("std_msgs/msg/Float64MultiArray",
+                        {"layout": {"dim": [], "data_offset": 0}, "data": [100.0, 30.0]})
+
+    def topic_keys(rover: str, place: int) -> dict[str, str]:
+        """The rover's inbound position topic: ros2dds in its namespace, rmw_zenoh in its
+        ROS 2 domain (its place in the fleet)."""
+        return {"ros2dds": f"{rover.replace('-', '_')}/curr_to_receiving_radio_m",
+                "rmw_zenoh": rmw_topic_key(place, "/curr_to_receiving_radio_m",
+                                           "std_msgs/msg/Float64MultiArray")}
+
+    served, target = topic_keys("mapp-05", 4), keys.input_radio_position("mapp-05", "lander")
+    for flavour, key in served.items():
+        written.clear()
+        # until the bridge's subscription has it (declared as the bridge starts)
+        wait_for(lambda k=key: probe.session.put(k, cdr) or target in written, 10, flavour)
+        time.sleep(0.3)  # a second writer, were there one, has written by now
+        before = len(written)
+        probe.session.put(key, cdr)
+        wait_for(lambda b=before: len(written) > b, 5, f"the {flavour} position written")
+        time.sleep(0.3)
+        assert written[before:] == [target], f"{flavour}: {written[before:]}"
+    written.clear()
+    for key in topic_keys("mapp-06", 5).values():  # the other shard's rover
+        probe.session.put(key, cdr)
+    time.sleep(0.5)
+    assert written == []
+    sub.undeclare()

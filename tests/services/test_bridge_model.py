@@ -624,3 +624,14 @@ def test_attachment_layout():
     assert rosmsg.parse_attachment(raw) == (1, 1_700_000_000_000_000_001, gid)
     with pytest.raises(ValueError, match="gid must be 16 bytes"):
         rmw_zenoh.attachment(1, 0, b"short")
+
+
+def test_one_key_expression_hears_a_topic_of_several_rovers():
+    assert bd.open_keyexpr(["mapp_01/curr_to_receiving_radio_m",
+                            "mapp_03/curr_to_receiving_radio_m"]) == "*/curr_to_receiving_radio_m"
+    assert bd.open_keyexpr(["0/solar_left_dust/std_msgs::msg::dds_::Float64_",
+                            "4/solar_left_dust/std_msgs::msg::dds_::Float64_"]) == \
+        "*/solar_left_dust/std_msgs::msg::dds_::Float64_"
+    assert bd.open_keyexpr(["fleet/a/x", "fleet/b/x"]) == "fleet/*/x"
+    assert bd.open_keyexpr(["mapp_1/x"]) == "mapp_1/x"  # one rover: its own key
+    assert bd.open_keyexpr(["a/x", "b/c/x"]) is None
