@@ -21,8 +21,6 @@ from __future__ import annotations
 import heapq
 import sys
 import time
-from collections.abc import Callable
-from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +34,7 @@ from common.connection import write
 from common.datafile import field_kind, struct_fields
 from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
-from services.bridge.bindings import Binding, domain_of, expand, open_keyexpr, rover_names, zenoh_key
+from services.bridge.bindings import Binding, expand, open_keyexpr, rover_names, zenoh_key
 from services.bridge.cdr import decode_cdr, encode_cdr, restamp
 from services.bridge.convert import (
     battery_state_message,
@@ -48,27 +46,18 @@ from services.bridge.convert import (
     odometry_message,
     out_message,
 )
-from services.bridge.mapping import BridgeOptions, load_mapping
-from services.bridge.rmw_zenoh import (
-    HEARTBEAT_S,
-    attachment,
-    entity_token,
-    gid_of,
-    node_token,
-    qos_keyexpr,
-)
-from services.bridge.ros2_node import Ros2Graph, Ros2Unavailable, env_domain
+from services.bridge.mapping import load_mapping
+from services.bridge.outlets import Feed, Outlet, Shared
+from services.bridge.rmw_zenoh import entity_token, node_token, qos_keyexpr
+from services.bridge.ros2_node import Ros2Graph, Ros2Unavailable
 
 __all__ = ["DEFAULT_MAPPING", "resolve_mapping", "serve"]
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT_MAPPING = REPO / "config" / "bridge" / "default.yaml"
-PUBLISHER_DEPTH = 1  # the last-value cache: TRANSIENT_LOCAL, KEEP_LAST 1
 SUBSCRIPTION_DEPTH = 10
 RATE_TIMER_S = 0.02  # how often the samples held back by a rate are looked at
 DIAG_SLOT_S = 0.02  # the shortest step of the periodic diagnostics spread over a period
-CDR = zenoh.Encoding.APPLICATION_CDR
-JSON = zenoh.Encoding.APPLICATION_JSON
 
 
 def resolve_mapping(mapping_file: str | None) -> Path:
@@ -82,126 +71,6 @@ def resolve_mapping(mapping_file: str | None) -> Path:
     if not path.is_absolute() and not path.exists() and (REPO / path).exists():
         return REPO / path
     return path
-
-
-class _Shared:
-    """What every outlet of one bridge process shares."""
-
-    def __init__(self, rt: Runtime, opts: BridgeOptions, zid: str, graph: Ros2Graph | None):
-        self.rt, self.opts, self.zid, self.graph = rt, opts, zid, graph
-        self.ros2_base = (opts.outputs.ros2.domain_id if opts.outputs.ros2.domain_id is not None
-                          else env_domain())
-        self.due: list[tuple[float, int, _Outlet]] = []  # outlets waiting for their rate
-        self.seq = 0
-
-    def rmw_domain(self, b: Binding) -> int:
-        return domain_of(self.opts, self.opts.outputs.rmw_zenoh.domain_id, b.rover, b.place)
-
-    def ros2_domain(self, b: Binding) -> int:
-        return domain_of(self.opts, self.ros2_base, b.rover, b.place)
-
-
-class _Feed:
-    """One twin key the bridge publishes from: its newest sample, counted, and its outlets.
-    A sample is decoded once and its discrete fields compared once, whatever the number of
-    outlets; a sample that changes nothing discrete, for outlets whose rate holds them, costs
-    nothing more (the rate timer takes the newest sample when an outlet is due)."""
-
-    def __init__(self, payload_type: type[msgspec.Struct], discrete: tuple[str, ...]):
-        self.type = payload_type
-        self.discrete_of: Callable[[Any], Any] = (attrgetter(*discrete) if discrete
-                                                  else lambda _: None)
-        self.outlets: list[_Outlet] = []
-        self.payload: Any = None  # the newest sample
-        self.seq = 0  # samples so far
-        self.discrete: Any = None  # the discrete fields of the newest sample
-        self.unrated = False  # some outlet follows every sample
-        self.idle = False  # some outlet with a rate is off its timer: the next sample goes at once
-
-
-class _Outlet:
-    """One outbound topic of one binding in every enabled flavour: the message is built and
-    CDR-encoded once per published sample, whatever the number of flavours; a flavour that is
-    not enabled costs nothing. The rmw_zenoh publisher (its liveliness token included) and the
-    ROS 2 publisher are declared with the first sample, so a topic that never publishes (a
-    null value without a default) is not advertised.
-
-    With a rate, the outlet is on a grid of its period: when due it sends its feed's newest
-    sample if one came since it last sent, else it goes idle until the next sample, which is
-    sent at once. A sample whose discrete fields changed goes at once and leaves the grid as
-    it is; a late timer does not push the grid later (after a pause it starts again)."""
-
-    def __init__(self, shared: _Shared, b: Binding, entity_id: int, feed: _Feed | None):
-        out = shared.opts.outputs
-        self.shared, self.binding, self.entity_id, self.feed = shared, b, entity_id, feed
-        self.type = b.mapping.type
-        self.dds_key = zenoh_key(b, shared.opts, "ros2dds") if out.ros2dds.enabled else None
-        self.json_key = zenoh_key(b, shared.opts, "json") if out.json.enabled else None
-        self.rmw_key = zenoh_key(b, shared.opts, "rmw_zenoh") if out.rmw_zenoh.enabled else None
-        self.ros2 = out.ros2.enabled
-        self.encodes = bool(self.dds_key or self.rmw_key or self.ros2)  # some flavour wants CDR
-        # /diagnostics carries the faults: never dropped, ahead of a fleet's telemetry
-        self.urgent = b.mapping.convert == "diagnostics"
-        self.gid = b""
-        self.sequence = 0
-        self._ros2_publish: Callable[[bytes], None] | None = None
-        rate = b.mapping.rate_hz
-        self.period_s = 1.0 / rate if rate else 0.0
-        self.next_s = 0.0  # monotonic time of its next slot on the grid
-        self.idle = bool(rate)  # off the rate timer (no sample since it last sent)
-        self.sent_seq = 0  # its feed's sample it last sent
-        self.last: tuple[Any, bytes] | None = None  # what a restamped message repeats
-
-    def _declare_rmw(self) -> None:
-        sh, b = self.shared, self.binding
-        r = sh.opts.outputs.rmw_zenoh
-        token = entity_token(sh.rmw_domain(b), sh.zid, 0, self.entity_id, "MP", r.namespace,
-                             r.node, b.topic, self.type, qos_keyexpr(True, PUBLISHER_DEPTH),
-                             sh.opts.ros_distro)
-        sh.rt.keep(sh.rt.zenoh_session.liveliness().declare_token(token))
-        self.gid = gid_of(token)
-
-    def publish(self, msg: dict, cdr: bytes | None = None) -> None:
-        """Publish a message (``cdr``: already encoded) in every enabled flavour."""
-        rt, distro = self.shared.rt, self.shared.opts.ros_distro
-        if self.encodes:
-            if cdr is None:
-                cdr = encode_cdr(self.type, msg, distro)
-            if self.dds_key:
-                rt.publish_bytes(self.dds_key, cdr, CDR, reliable=self.urgent)
-            if self.rmw_key:
-                if not self.gid:
-                    self._declare_rmw()
-                self.sequence += 1
-                rt.publish_bytes(self.rmw_key, cdr, CDR,
-                                 attachment(self.sequence, time.time_ns(), self.gid),
-                                 reliable=self.urgent, heartbeat_s=HEARTBEAT_S)
-            if self.ros2:
-                if self._ros2_publish is None:
-                    graph = self.shared.graph
-                    assert graph is not None, "the ros2 flavour has its graph"
-                    self._ros2_publish = graph.publisher(self.shared.ros2_domain(self.binding),
-                                                         self.binding.topic, self.type)
-                self._ros2_publish(cdr)
-        if self.json_key:
-            rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON, reliable=self.urgent)
-
-    def send(self, build: Callable[[_Outlet, Any], dict | None]) -> None:
-        """Publish the feed's newest sample."""
-        feed = self.feed
-        assert feed is not None, "an outlet of a twin key"
-        self.sent_seq = feed.seq
-        msg = build(self, feed.payload)
-        if msg is not None:
-            self.publish(msg)
-
-    def schedule(self, now: float) -> None:
-        """Put the outlet on the rate timer at its next slot."""
-        grid = self.next_s + self.period_s
-        self.next_s = grid if now < grid else now + self.period_s
-        sh = self.shared
-        sh.seq += 1
-        heapq.heappush(sh.due, (self.next_s, sh.seq, self))
 
 
 def _family(key_template: str) -> keys.Family:
@@ -248,7 +117,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             raise SystemExit(2) from None
         rt.on_exit(graph.close)
     rover_cfg = {r.id: r for r in rovers}
-    shared = _Shared(rt, opts, str(rt.zenoh_session.info.zid()), graph)
+    shared = Shared(rt, opts, str(rt.zenoh_session.info.zid()), graph)
     rmw = opts.outputs.rmw_zenoh
     if rmw.enabled:
         for domain in sorted({shared.rmw_domain(b) for b in bindings}):
@@ -256,21 +125,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
                 node_token(domain, shared.zid, 0, rmw.namespace, rmw.node)))
 
     # -- outbound -----------------------------------------------------------------------------
-    feeds: dict[str, _Feed] = {}  # twin key -> its feed
+    feeds: dict[str, Feed] = {}  # twin key -> its feed
     discrete_of: dict[type, tuple[str, ...]] = {}
-    diag_outlets: dict[str, list[_Outlet]] = {}  # rover -> DiagnosticArray outlets
+    diag_outlets: dict[str, list[Outlet]] = {}  # rover -> DiagnosticArray outlets
     # rmw_zenoh entity ids: the node is 0, each binding its position in the list from 1
     for entity_id, b in enumerate(bindings, start=1):
         if b.mapping.direction == "in":
             continue
         if b.mapping.convert == "diagnostics":
-            diag_outlets.setdefault(b.rover, []).append(_Outlet(shared, b, entity_id, None))
+            diag_outlets.setdefault(b.rover, []).append(Outlet(shared, b, entity_id, None))
             continue
         feed = feeds.get(b.key)
         if feed is None:
             typ = _family(b.mapping.key).payload
-            feed = feeds[b.key] = _Feed(typ, discrete_of.setdefault(typ, _discrete_fields(typ)))
-        outlet = _Outlet(shared, b, entity_id, feed)
+            feed = feeds[b.key] = Feed(typ, discrete_of.setdefault(typ, _discrete_fields(typ)))
+        outlet = Outlet(shared, b, entity_id, feed)
         feed.outlets.append(outlet)
         feed.unrated |= outlet.period_s == 0.0
         feed.idle |= outlet.idle
@@ -280,7 +149,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     def stamp_ns(t_s: float) -> int:
         return time.time_ns() if opts.stamp == "wall" else int(round(t_s * 1e9))
 
-    def message(outlet: _Outlet, payload: Any) -> dict | None:
+    def message(outlet: Outlet, payload: Any) -> dict | None:
         m = outlet.binding.mapping
         if m.convert == "battery_state":
             return battery_state_message(payload, rover_cfg[outlet.binding.rover].battery,

@@ -456,15 +456,18 @@ def test_an_injected_fault_reaches_the_dashboard(dashboard, probe):
 
 def test_a_short_trips_the_rail_to_error(dashboard, probe):
     twin, tap = dashboard
-    settle(lambda: [] if tap.message("ros2dds", "/diagnostics") else ["diag"])
+    current = "/pdm/rail_5V_CH2_current_ma"
+    # the faults reach the bridge apart from the telemetry: both flowing before the short
+    settle(lambda: [] if tap.message("ros2dds", "/diagnostics") and tap.message("ros2dds", current)
+           else ["diag and PDM"])
     probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
     settle(lambda: [] if (st := _status(tap, "rmw_zenoh", "rail/5V_CH2")) is not None and st["level"] == 2
            and "tripped" in [v["key"] for v in st["values"]] else ["ERROR"],
            what="the tripped rail as ERROR")
     cam = _status(tap, "rmw_zenoh", "load/nav_camera")
     assert cam["level"] == 1 and cam["message"] == "short"
-    settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_current_ma")["data"] == 0
-           else ["0 mA"], what="the tripped rail at 0 mA")
+    settle(lambda: [] if tap.message("ros2dds", current)["data"] == 0 else ["0 mA"],
+           what="the tripped rail at 0 mA")
 
 
 def test_a_silent_component_goes_stale(dashboard, probe):
