@@ -28,10 +28,18 @@ from common.connection import DEFAULT_ENDPOINT, make_config
 from common.messages import BatteryState, RailState, decode
 from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV, load_rovers, served
 
-__all__ = ["Supervisor", "add_arguments", "main"]
+__all__ = ["ROVERS_PER_BRIDGE", "Supervisor", "add_arguments", "default_bridges", "main"]
 
 DEFAULT_ROVER = "config/rovers/mapp.yaml"
 PR_SET_PDEATHSIG = 1  # prctl(2)
+# A bridge process serves this many rovers by default: at 100 MAPP rovers each of two
+# shards took 25-45 % of a core (bench/fleet.py), one Python thread's worth to spare.
+ROVERS_PER_BRIDGE = 50
+
+
+def default_bridges(rovers: int) -> int:
+    """How many bridge processes share a fleet of ``rovers`` when ``--bridges`` is not given."""
+    return max(1, -(-rovers // ROVERS_PER_BRIDGE))
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,8 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="random seed for the loads")
     p.add_argument("--bridge-config", metavar="FILE", default=None,
                    help="the bridge's mapping (default config/bridge/default.yaml)")
-    p.add_argument("--bridges", type=int, default=1, metavar="N",
-                   help="bridge processes sharing the fleet (default 1)")
+    p.add_argument("--bridges", type=int, default=None, metavar="N",
+                   help="bridge processes sharing the fleet (default: one per "
+                        f"{ROVERS_PER_BRIDGE} rovers)")
     p.add_argument("--no-status", action="store_true", help="no live status display")
     p.add_argument("--console", nargs="?", const="127.0.0.1:8080", default=None, metavar="HOST:PORT",
                    help="also serve the instructor console (default address 127.0.0.1:8080), "
@@ -240,8 +249,9 @@ def main(args: argparse.Namespace) -> int:
         print(f"[up] {service} not started: no rover needs it ({service} serves only rovers "
               f"with a {service} section)", flush=True)
         services.remove(service)
-    if args.bridges < 1:
-        print(f"--bridges: expected 1 or more, got {args.bridges}", file=sys.stderr)
+    bridges = default_bridges(len(rovers)) if args.bridges is None else args.bridges
+    if bridges < 1:
+        print(f"--bridges: expected 1 or more, got {bridges}", file=sys.stderr)
         return 2
     bridge_config = None
     if args.bridge_config is not None:
@@ -263,7 +273,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"[up] router listening on {', '.join(listen)}; rovers: "
           f"{', '.join(r.id for r in rovers)}; state in {state_dir}", flush=True)
     sup = Supervisor(services, [os.path.abspath(f) for f in rover_files], listen[0], state_dir,
-                     args.seed, bridge_config, args.bridges)
+                     args.seed, bridge_config, bridges)
     if args.console:
         console = ["console", "--http", args.console, "--connect", listen[0]]
         if args.console_accounts:

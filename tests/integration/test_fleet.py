@@ -5,6 +5,7 @@ tripping its rail and showing on its dashboard at once, the other rovers untouch
 
 from __future__ import annotations
 
+import subprocess
 import threading
 import time
 from collections import Counter, defaultdict
@@ -18,7 +19,7 @@ from common import keys
 from common.runtime import POLL_FROM_ROVERS
 from services.bridge.rmw_zenoh import rmw_topic_key
 from tests import rosmsg
-from tests.harness import static_rover, wait_for
+from tests.harness import ROOT, free_endpoint, lunaris_cmd, static_rover, stop_process, wait_for
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -248,3 +249,32 @@ def test_a_fleets_bridge_hears_each_inbound_topic_once_for_all_its_rovers(
     time.sleep(0.5)
     assert written == []
     sub.undeclare()
+
+
+def test_lunaris_up_shares_a_large_fleet_among_bridges_by_default(tmp_path):
+    """Without ``--bridges``, ``lunaris up`` starts one bridge process per 50 rovers."""
+    from lunaris.up import ROVERS_PER_BRIDGE, default_bridges
+
+    assert [default_bridges(n) for n in (1, ROVERS_PER_BRIDGE, ROVERS_PER_BRIDGE + 1, 100, 101)] \
+        == [1, 1, 2, 2, 3]
+    base = static_rover("mapp.yaml").read_text()
+    args = []
+    for i in range(1, ROVERS_PER_BRIDGE + 2):
+        f = tmp_path / f"mapp-{i:02d}.yaml"
+        f.write_text(base.replace("id: mapp-1", f"id: mapp-{i:02d}"))
+        args += ["--rover", str(f)]
+    up = subprocess.Popen(lunaris_cmd("up", *args, "--listen", free_endpoint(), "--services", "bridge",
+                                      "--no-status", "--state-dir", str(tmp_path / "state")),
+                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(up.stdout.readline, "")), daemon=True)
+    reader.start()
+    try:
+        wait_for(lambda: any("[up] bridge" in x and "started" in x for x in lines), 60,
+                 lambda: f"a bridge started: {lines[-5:]}")
+        wait_for(lambda: sum("started" in x and "[up] bridge-" in x for x in lines) >= 2, 10,
+                 lambda: f"two bridges started: {lines[-5:]}")
+        assert not any("[up] bridge-3" in x or "[up] bridge started" in x for x in lines), lines
+    finally:
+        stop_process(up, timeout_s=20)
+        reader.join(timeout=5)
