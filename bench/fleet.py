@@ -50,7 +50,7 @@ from common.connection import write
 from common.messages import BatteryState, Clock, PowerSummary, RadioLink
 from services.bridge.mapping import load_mapping
 from tests import rosmsg
-from tests.harness import static_rover
+from tests.harness import mapp_fleet
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
 
@@ -138,16 +138,11 @@ def main() -> None:
                    help="rovers whose bridge topics are counted, spread over the fleet")
     args = p.parse_args()
     n, seconds, nb = args.rovers, args.seconds, args.bridges
-    ids = [f"mapp-{i:02d}" for i in range(1, n + 1)]
-    base = static_rover("mapp.yaml").read_text()
     bridges = [f"bridge-{k}" for k in range(1, nb + 1)]
     services = (*SERVICES, *bridges)
     with tempfile.TemporaryDirectory(prefix="lunaris-fleet-") as tmp:
-        files = []
-        for rid in ids:
-            f = Path(tmp) / f"{rid}.yaml"
-            f.write_text(base.replace("id: mapp-1", f"id: {rid}"))
-            files.append(f)
+        files = mapp_fleet(Path(tmp), n)
+        ids = [f.stem for f in files]
         print(f"fleet: {n} MAPP rovers at 10 Hz, {nb} bridge process(es) with the mapping "
               f"{args.bridge_config or 'config/bridge/default.yaml'}, {seconds:g} s ({machine()})")
         counts: dict[str, dict[str, int]] = defaultdict(lambda: defaultdict(int))

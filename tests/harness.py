@@ -74,6 +74,19 @@ def static_rover(name: str) -> Path:
     return rover_without_drive(ROVERS / name, _static_folder())
 
 
+def mapp_fleet(folder: Path, n: int) -> list[Path]:
+    """``n`` files of the MAPP rover without its drive (:func:`static_rover`), ids mapp-01,
+    mapp-02 ..., written to ``folder``."""
+    base = static_rover("mapp.yaml").read_text()
+    files = []
+    for i in range(1, n + 1):
+        rid = f"mapp-{i:02d}"
+        f = folder / f"{rid}.yaml"
+        f.write_text(base.replace("id: mapp-1", f"id: {rid}"))
+        files.append(f)
+    return files
+
+
 def copies_of(rover: Rover, n: int, **load_changes: Any) -> list[Rover]:
     """``n`` copies of a rover (ids r0, r1, ...), each of its loads changed as given."""
     loads = [msgspec.structs.replace(ld, **load_changes) for ld in rover.loads]

@@ -19,7 +19,7 @@ from common import keys
 from common.runtime import POLL_FROM_ROVERS
 from services.bridge.rmw_zenoh import rmw_topic_key
 from tests import rosmsg
-from tests.harness import ROOT, free_endpoint, lunaris_cmd, static_rover, stop_process, wait_for
+from tests.harness import ROOT, free_endpoint, lunaris_cmd, mapp_fleet, stop_process, wait_for
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -29,12 +29,7 @@ WATCHED = ("mapp-01", "mapp-10", f"mapp-{POLL_FROM_ROVERS:02d}")
 
 @pytest.fixture
 def fleet(twin_factory, tmp_path):
-    base = static_rover("mapp.yaml").read_text()
-    files = []
-    for i in range(1, POLL_FROM_ROVERS + 1):
-        f = tmp_path / f"mapp-{i:02d}.yaml"
-        f.write_text(base.replace("id: mapp-1", f"id: mapp-{i:02d}"))
-        files.append(f)
+    files = mapp_fleet(tmp_path, POLL_FROM_ROVERS)
     return lambda: twin_factory(files, services=SERVICES)
 
 
@@ -205,12 +200,7 @@ def test_a_fleets_bridge_hears_each_inbound_topic_once_for_all_its_rovers(
     served rover's topic reaches its input once, in each flavour, and one on another shard's
     rover is not this shard's to write."""
     n = 2 * POLL_FROM_ROVERS  # the first of two shards serves every other rover: a fleet's worth
-    base = static_rover("mapp.yaml").read_text()
-    files = []
-    for i in range(1, n + 1):
-        f = tmp_path / f"mapp-{i:02d}.yaml"
-        f.write_text(base.replace("id: mapp-1", f"id: mapp-{i:02d}"))
-        files.append(f)
+    files = mapp_fleet(tmp_path, n)
     written: list[str] = []
     sub = probe.session.declare_subscriber(keys.input_radio_position("*", "*"),
                                            lambda s: written.append(str(s.key_expr)))
@@ -257,12 +247,7 @@ def test_lunaris_up_shares_a_large_fleet_among_bridges_by_default(tmp_path):
 
     assert [default_bridges(n) for n in (1, ROVERS_PER_BRIDGE, ROVERS_PER_BRIDGE + 1, 100, 101)] \
         == [1, 1, 2, 2, 3]
-    base = static_rover("mapp.yaml").read_text()
-    args = []
-    for i in range(1, ROVERS_PER_BRIDGE + 2):
-        f = tmp_path / f"mapp-{i:02d}.yaml"
-        f.write_text(base.replace("id: mapp-1", f"id: mapp-{i:02d}"))
-        args += ["--rover", str(f)]
+    args = [a for f in mapp_fleet(tmp_path, ROVERS_PER_BRIDGE + 1) for a in ("--rover", str(f))]
     up = subprocess.Popen(lunaris_cmd("up", *args, "--listen", free_endpoint(), "--services", "bridge",
                                       "--no-status", "--state-dir", str(tmp_path / "state")),
                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT)
