@@ -3,11 +3,12 @@
 The mapping file (``config/bridge/default.yaml`` unless ``--bridge-config``) is validated at
 start-up; with a problem the service prints every one and exits with status 2. Then:
 
-- every outbound topic follows its twin key: each sample (folded per batch of samples), or
-  with the mapping's ``rate_hz`` the newest at that rate, a change of a discrete field (a
-  rail's state, the pack's faults) at once; in each enabled flavour: ``ros2dds`` (CDR on the topic name),
-  ``rmw_zenoh`` (CDR on the rmw_zenoh key with its attachment; the node, publisher and
-  subscription liveliness tokens are held for the life of the service) and ``json``;
+- every outbound topic follows its twin key (:mod:`services.bridge.outlets`): each sample
+  (folded per batch of samples), or with the mapping's ``rate_hz`` the newest at that rate,
+  a change of a discrete field (a rail's state, the pack's faults) at once; in each enabled
+  flavour: ``ros2dds`` (CDR on the topic name), ``rmw_zenoh`` (CDR on the rmw_zenoh key with
+  its attachment; the node, publisher and subscription liveliness tokens are held for the
+  life of the service) and ``json``;
 - the DiagnosticArray follows the faults in effect (each owning service's
   ``faults/active/<service>``, replayed from its cache when the bridge joins late) and each
   component's telemetry (STALE when it stops), published on every change of the active
