@@ -26,7 +26,7 @@ from services.bridge.mapping import BridgeOptions
 from services.bridge.rmw_zenoh import HEARTBEAT_S, attachment, entity_token, gid_of, qos_keyexpr
 from services.bridge.ros2_node import Ros2Graph, env_domain
 
-__all__ = ["CDR", "JSON", "PUBLISHER_DEPTH", "Feed", "Outlet", "Shared"]
+__all__ = ["Feed", "Outlet", "Shared"]
 
 PUBLISHER_DEPTH = 1  # the last-value cache: TRANSIENT_LOCAL, KEEP_LAST 1
 CDR = zenoh.Encoding.APPLICATION_CDR
@@ -63,7 +63,7 @@ class Feed:
         self.outlets: list[Outlet] = []
         self.payload: Any = None  # the newest sample
         self.seq = 0  # samples so far
-        self.discrete: Any = None  # the discrete fields of the newest sample
+        self.discrete: Any = None  # the discrete fields when last flushed (a change goes at once)
         self.unrated = False  # some outlet follows every sample
         self.idle = False  # some outlet with a rate is off its timer: the next sample goes at once
 
