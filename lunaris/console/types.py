@@ -87,10 +87,28 @@ def _typedef(name: str, schema: dict[str, Any]) -> str:
     return "\n".join(out)
 
 
+def _payload_of() -> str:
+    """``Payload<K>``: the payload of the key ``K`` under ``lunaris/<rover>/`` (``{load}`` in a
+    family's shape is any name), from :data:`common.keys.FAMILIES`."""
+    cases = []
+    for fam in keys.families("out"):
+        shape = "/".join("${string}" if c.startswith("{") else c for c in fam.chunks)
+        cases.append(f" *   K extends `{shape}` ? {fam.payload.__name__} :")
+    return "\n".join([
+        "/**",
+        " * The payload of each key the twin publishes, by its key under lunaris/<rover>/:",
+        ' * `Payload<"battery/state">` is BatteryState, `Payload<`rail/${string}/state`>` RailState.',
+        " * @template {string} K",
+        " * @typedef {(",
+        *cases,
+        " *   never)} Payload",
+        " */"])
+
+
 def source() -> str:
     """The text of ``static/types.js``."""
     _, components = msgspec.json.schema_components(payload_structs(), ref_template="#/$defs/{name}")
-    parts = [HEADER] + [_typedef(name, components[name]) for name in sorted(components)]
+    parts = [HEADER] + [_typedef(name, components[name]) for name in sorted(components)] + [_payload_of()]
     return "\n".join(parts) + "\n\nexport {};\n"
 
 

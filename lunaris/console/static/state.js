@@ -98,30 +98,32 @@ export const mayAct = () => !!store.me?.may_act;
 export const key = (rover, tail) => `lunaris/${rover}/${tail}`;
 
 /**
+ * The latest payload of a key of the rover (typed by the key: see types.js's Payload).
+ * @template {string} K
  * @param {string} rover
- * @param {string} tail
- * @returns {Record<string, unknown> | undefined}
+ * @param {K} tail the key under lunaris/<rover>/
+ * @returns {import("./types.js").Payload<K> | undefined}
  */
-export const val = (rover, tail) => /** @type {Record<string, unknown> | undefined} */ (store.values[key(rover, tail)]);
+export const val = (rover, tail) => /** @type {import("./types.js").Payload<K> | undefined} */ (store.values[key(rover, tail)]);
 
 /** @param {string} rover @returns {BatteryState | undefined} */
-export const battery = (rover) => /** @type {BatteryState | undefined} */ (val(rover, "battery/state"));
+export const battery = (rover) => val(rover, "battery/state");
 /** @param {string} rover @returns {Clock | undefined} */
-export const clock = (rover) => /** @type {Clock | undefined} */ (val(rover, "clock"));
+export const clock = (rover) => val(rover, "clock");
 /** @param {string} rover @returns {PowerSummary | undefined} */
-export const powerSummary = (rover) => /** @type {PowerSummary | undefined} */ (val(rover, "power/summary"));
+export const powerSummary = (rover) => val(rover, "power/summary");
 /** @param {string} rover @param {string} name @returns {RailState | undefined} */
-export const rail = (rover, name) => /** @type {RailState | undefined} */ (val(rover, `rail/${name}/state`));
+export const rail = (rover, name) => val(rover, `rail/${name}/state`);
 /** @param {string} rover @param {string} name @returns {LoadPower | undefined} */
-export const load = (rover, name) => /** @type {LoadPower | undefined} */ (val(rover, `load/${name}/power`));
+export const load = (rover, name) => val(rover, `load/${name}/power`);
 /** @param {string} rover @param {string} name @returns {SolarPower | undefined} */
-export const panel = (rover, name) => /** @type {SolarPower | undefined} */ (val(rover, `solar/${name}/power`));
+export const panel = (rover, name) => val(rover, `solar/${name}/power`);
 /** @param {string} rover @param {string} name @returns {RadioLink | undefined} */
-export const radio = (rover, name) => /** @type {RadioLink | undefined} */ (val(rover, `radio/${name}/link`));
+export const radio = (rover, name) => val(rover, `radio/${name}/link`);
 /** @param {string} rover @returns {DriveState | undefined} */
-export const drive = (rover) => /** @type {DriveState | undefined} */ (val(rover, "drive/state"));
+export const drive = (rover) => val(rover, "drive/state");
 /** @param {string} rover @returns {UmbilicalState | undefined} */
-export const umbilical = (rover) => /** @type {UmbilicalState | undefined} */ (val(rover, "umbilical/state"));
+export const umbilical = (rover) => val(rover, "umbilical/state");
 
 // -- what a rover has, from its keys ----------------------------------------------------------
 

@@ -160,5 +160,23 @@
  * @property {boolean} connected
  * @property {number} power_w
  */
+/**
+ * The payload of each key the twin publishes, by its key under lunaris/<rover>/:
+ * `Payload<"battery/state">` is BatteryState, `Payload<`rail/${string}/state`>` RailState.
+ * @template {string} K
+ * @typedef {(
+ *   K extends `clock` ? Clock :
+ *   K extends `battery/state` ? BatteryState :
+ *   K extends `load/${string}/power` ? LoadPower :
+ *   K extends `rail/${string}/state` ? RailState :
+ *   K extends `power/summary` ? PowerSummary :
+ *   K extends `solar/${string}/power` ? SolarPower :
+ *   K extends `umbilical/state` ? UmbilicalState :
+ *   K extends `radio/${string}/link` ? RadioLink :
+ *   K extends `drive/state` ? DriveState :
+ *   K extends `event` ? Event :
+ *   K extends `faults/active/${string}` ? ActiveFaults :
+ *   never)} Payload
+ */
 
 export {};

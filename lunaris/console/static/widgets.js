@@ -10,10 +10,12 @@ import {activeFaults, linkLost, mayAct, store, val} from "./state.js";
 
 /**
  * A twin value: `data-key` (the key under lunaris/<rover>/) and `data-field` name it for
- * tests and tools (SPEC 8a); a state's value gives its class (`st-on`, `in`, `out`).
+ * tests and tools (SPEC 8a); a state's value gives its class (`st-on`, `in`, `out`). The
+ * field must be one of the key's payload (types.js, generated from the twin's Structs).
+ * @template {string} K
  * @param {string} rover
- * @param {string} tail
- * @param {string} name
+ * @param {K} tail
+ * @param {keyof import("./types.js").Payload<K> & string} name
  * @param {Format} how
  * @param {{hidden?: boolean}} [opts]
  */
