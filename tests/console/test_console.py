@@ -106,6 +106,34 @@ def test_the_page_shows_the_twin_live(live, page, artefacts):
     shoot(page, artefacts, "live-tablet", 768, 1024)
 
 
+def _stream(page, message: dict) -> None:
+    """A message of the live stream, handed to the page's own stream module."""
+    page.set_script_timeout(10)
+    page.execute_async_script(
+        "const [msg, done] = arguments; "
+        "import('/static/stream.js').then((m) => { m.receive(msg); done(); });", message)
+
+
+def test_a_lost_link_is_said_on_the_rover_s_views(page):
+    """A rover's link state, where the console's stream carries it (``link: "lost" | "ok"``,
+    per rover), shows as a banner on the rover's views and a mark on its button."""
+    view(page, "live")
+    banner, button = "#main .link-lost", f'#rovers [data-rover-pick="{R}"]'
+    batch = {"type": "batch", "values": {}, "events": [], "services": {}}
+    assert not page.find_elements(By.CSS_SELECTOR, banner)
+    for shape in ({"rovers": {R: {"link": "lost"}}}, {"links": {R: "lost"}}):
+        _stream(page, {**batch, **shape})
+        text = WebDriverWait(page, 10).until(lambda d: d.find_element(By.CSS_SELECTOR, banner).text)
+        assert text.startswith(f"Link to {R} lost")
+        assert "link lost" in page.find_element(By.CSS_SELECTOR, button).text.lower()
+        view(page, "faults")
+        assert page.find_element(By.CSS_SELECTOR, banner).is_displayed()
+        view(page, "live")
+        _stream(page, {**batch, "rovers": {R: {"link": "ok"}}})
+        WebDriverWait(page, 10).until(lambda d: not d.find_elements(By.CSS_SELECTOR, banner))
+    assert "link lost" not in page.find_element(By.CSS_SELECTOR, button).text.lower()
+
+
 def _fault_form(page, component: str, kind: str, value: str | None) -> None:
     view(page, "faults")
     Select(page.find_element(By.ID, "f-comp")).select_by_value(component)

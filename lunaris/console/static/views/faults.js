@@ -1,0 +1,97 @@
+// Faults: inject or clear any fault of the catalogue. The form is built from the catalogue
+// the console serves (part, kind, its values with their ranges), so a new kind of fault
+// appears here without a change to the page.
+
+import {html, nothing} from "../vendor/lit-html/lit-html.js";
+import {keyed} from "../vendor/lit-html/directives/keyed.js";
+import {send} from "../api.js";
+import {redraw, store} from "../state.js";
+import {actionButton, eventsCard, faultsCard} from "../widgets.js";
+import {clearFault} from "./live.js";
+
+/** @typedef {import("../state.js").Parts} Parts */
+/** @typedef {import("../state.js").Catalogue} Catalogue */
+/** @typedef {import("../state.js").CatalogueParam} CatalogueParam */
+
+/** The part and kind chosen in the form (the part as `load/imu`, or `battery`). */
+const form = {component: "", kind: ""};
+
+/** @param {Catalogue} cat @param {Parts} p @returns {string[]} every part the form offers */
+function components(cat, p) {
+  /** @type {Record<string, string[]>} */
+  const names = {load: p.loads, rail: p.rails, solar: p.panels, radio: p.radios};
+  return Object.entries(cat.components).flatMap(([c, spec]) => (spec.named ? (names[c] ?? []).map((n) => `${c}/${n}`) : [c]));
+}
+
+/** @param {CatalogueParam} q its range in words: "> 0, ≤ 1000000000" */
+function range(q) {
+  const lo = q.ge ?? q.gt, hi = q.le ?? q.lt, out = [];
+  if (lo !== undefined) out.push(`${q.gt !== undefined ? ">" : "≥"} ${lo}`);
+  if (hi !== undefined) out.push(`${q.lt !== undefined ? "<" : "≤"} ${hi}`);
+  return out.join(", ");
+}
+
+/** @param {HTMLElement} from an element of the form @returns {string} its values as the JSON body */
+function body(from) {
+  /** @type {Record<string, number>} */
+  const out = {};
+  const box = from.closest("section")?.querySelector("#f-params");
+  for (const el of box?.querySelectorAll("input[data-param]") ?? []) {
+    const input = /** @type {HTMLInputElement} */ (el);
+    if (input.value.trim() !== "") out[input.dataset.param ?? ""] = Number(input.value);
+  }
+  return JSON.stringify(out);
+}
+
+/** @param {string} rover @param {Parts} p */
+function faultForm(rover, p) {
+  const cat = store.cat;
+  if (!cat) return html`<p class="help">Loading the catalogue…</p>`;
+  const all = components(cat, p);
+  if (!all.includes(form.component)) form.component = all[0] ?? "";
+  const spec = cat.components[form.component.split("/")[0]];
+  const kinds = spec ? Object.keys(spec.kinds) : [];
+  if (!kinds.includes(form.kind)) form.kind = kinds[0] ?? "";
+  const kind = spec?.kinds[form.kind];
+  const target = {component: form.component, kind: form.kind};
+  /** @param {Event} ev */
+  const pickComponent = (ev) => { form.component = /** @type {HTMLSelectElement} */ (ev.target).value; redraw(); };
+  /** @param {Event} ev */
+  const pickKind = (ev) => { form.kind = /** @type {HTMLSelectElement} */ (ev.target).value; redraw(); };
+  /** @param {string} c */
+  const option = (c) => html`<option value=${c} .selected=${c === form.component}>${c.replace("/", " ")}</option>`;
+  return html`
+    <div class="row"><label>Part of the rover <select id="f-comp" @change=${pickComponent}>${Object.entries(cat.components)
+      .map(([c, s]) => (s.named ? html`<optgroup label=${c}>${all.filter((x) => x.startsWith(`${c}/`)).map(option)}</optgroup>`
+                                : option(c)))}</select></label>
+      <label>Fault <select id="f-kind" @change=${pickKind}>${kinds.map((k) => html`<option value=${k}
+        .selected=${k === form.kind}>${k.replace(/_/g, " ")}</option>`)}</select></label></div>
+    <p id="f-desc" class="help">${kind?.description ?? ""}</p>
+    <div id="f-params" class="row">${keyed(`${form.component}\n${form.kind}`, kind?.params.length
+      ? kind.params.map((q) => html`<label>${q.name.replace(/_/g, " ")}
+          <small>${range(q)}${q.default !== null ? `, default ${q.default}` : ""}</small>
+          <input type="number" step="any" data-param=${q.name} min=${q.ge ?? q.gt ?? nothing} max=${q.le ?? q.lt ?? nothing}></label>`)
+      : html`<span class="help">This fault takes no value.</span>`)}</div>
+    <div class="row" id="f-buttons">${actionButton({action: "fault-inject", label: "Inject", rover, target, cls: "primary",
+      run: () => send("PUT", `fault/${target.component}/${target.kind}`, body(/** @type {HTMLElement} */ (document.getElementById("f-buttons"))), rover)})}
+      ${actionButton({action: "fault-clear", label: "Clear", rover, target, run: () => clearFault(target.component, target.kind)})}</div>`;
+}
+
+/** @param {Catalogue | null} cat every fault the twin knows */
+function catalogueTable(cat) {
+  if (!cat) return nothing;
+  return html`<table><tr><th>part</th><th>fault</th><th>effect</th></tr>${Object.entries(cat.components).map(([c, spec]) =>
+    Object.entries(spec.kinds).map(([k, s]) => html`<tr><td>${c}${spec.named ? " <name>" : ""}</td><td>${k}</td>
+      <td>${s.description}</td></tr>`))}</table>`;
+}
+
+export const faults = {
+  name: "faults",
+  label: "Faults",
+  /** @param {{rover: string, parts: Parts}} ctx */
+  render: ({rover, parts}) => html`<div class="grid two"><div class="col"><section class="card"><h2>Inject or clear a fault</h2>
+      <p class="help">Choose the part, the kind of fault and its value. The twin answers at once: accepted, or refused
+        with the reason.</p>${faultForm(rover, parts)}</section>
+      <section class="card"><h2>Every fault the twin knows</h2><div id="f-catalogue">${catalogueTable(store.cat)}</div></section></div>
+    <div class="col">${faultsCard(rover, clearFault)}${eventsCard(rover)}</div></div>`,
+};
