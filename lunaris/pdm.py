@@ -27,7 +27,7 @@ from common import keys
 from common.config import ConfigError
 from common.connection import add_connection_args
 from common.messages import Clock, decode
-from lunaris.tooling import ToolError, live_rovers, open_session
+from lunaris.client import ToolError, live_rovers, open_session
 from services.bridge.bindings import Binding, RoverNames, expand
 from services.bridge.convert import out_value
 from services.bridge.mapping import PLACEHOLDERS, MappingFile, load_mapping

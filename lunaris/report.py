@@ -168,8 +168,8 @@ def load_session(path: Path) -> dict[str, Session]:
 
 def add_thresholds(s: Session, rover_file: str | None) -> str:
     """The rover file's alarm thresholds on the plots; a note of where they came from."""
+    from lunaris.client import ToolError
     from lunaris.scenario import find_rover
-    from lunaris.tooling import ToolError
 
     try:
         rover, note = find_rover(s.rover, rover_file)

@@ -39,7 +39,7 @@ from common.connection import add_connection_args, write
 from common.messages import Event, decode
 from common.scenario import Scenario, ScenarioError, describe_start, load_scenario, rover_id_of
 from common.scenario_player import Player, Write, describe_action, describe_trigger
-from lunaris.tooling import ToolError, describe_endpoint, ignored, open_session, require_rover
+from lunaris.client import ToolError, describe_endpoint, ignored, open_session, require_rover
 
 __all__ = ["add_arguments", "find_rover", "main"]
 

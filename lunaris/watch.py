@@ -41,7 +41,7 @@ from common.messages import (
     Event,
     decode,
 )
-from lunaris.tooling import ToolError, close_session, describe_endpoint, ignored, open_session
+from lunaris.client import ToolError, close_session, describe_endpoint, ignored, open_session
 from lunaris.watch_view import Connection, Snapshot, render
 
 __all__ = ["Connection", "Snapshot", "Store", "add_arguments", "main", "render"]

@@ -22,8 +22,8 @@ import sys
 from pathlib import Path
 
 from common.connection import add_connection_args
+from lunaris.client import ToolError, describe_endpoint, open_session
 from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
-from lunaris.tooling import ToolError, describe_endpoint, open_session
 
 __all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http"]
 

@@ -29,7 +29,7 @@ from common import keys
 from common.connection import write
 from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, NoParams
 from common.messages import MAX_INPUT_BYTES, BadInput
-from common.writes import check_write
+from common.writes import plan_write
 from lunaris.console.auth import User
 from lunaris.console.live import Hub
 
@@ -106,7 +106,7 @@ async def _write(request: Request) -> Response:
         return _answer(413, "invalid", "the payload is too large for an input")
     deleting = request.method == "DELETE"
     try:
-        checked = check_write([p for p in tail.split("/") if p], None if deleting else body)
+        checked = plan_write(rover, tail, None if deleting else body)
     except BadInput as exc:
         return _answer(422, "invalid", f"not sent: {humane(str(exc))}")
     if rover not in hub.services:

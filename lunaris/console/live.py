@@ -30,7 +30,7 @@ import zenoh.ext as zext
 
 from common import keys
 from common.messages import BatteryState, Event, PowerSummary
-from lunaris.tooling import ignored
+from lunaris.client import ignored
 
 __all__ = ["Hub"]
 

@@ -67,7 +67,9 @@ def test_the_twin_rejecting_is_printed_and_exits_1(live):
 @pytest.mark.parametrize("args, code, message", [
     (["inject", R, "battery", "heating", "hot"], 1, "VALUE must be a number or a JSON object, got 'hot'"),
     (["inject", R, "battery", "heating", "[1]"], 1, "VALUE must be a number or a JSON object"),
-    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: Expected `float` >= 0.0"),
+    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: heat_w must be at least 0.0"),
+    (["inject", R, "solar/left", "dust", "30"], 1, "solar/left dust: fraction must be at most 1.0"),
+    (["inject", R, "fault/*", "heating", "3"], 1, "is a wildcard: a write names exactly one key"),
     (["inject", R, "battery", "melt"], 1, "unknown battery fault kind 'melt'"),
     (["inject", R, "wheel/left", "flat"], 1, "unknown component 'wheel'"),
     (["inject", R, "battery", "disconnect", "3"], 1, "battery disconnect takes no parameters"),
@@ -82,24 +84,31 @@ def test_bad_input_is_refused_before_anything_is_sent(live, args, code, message)
     assert done.stdout == ""
 
 
-def test_no_answer_exits_2(router, twin_factory):
-    """Only the faults service runs: nobody owns the battery, so nobody answers."""
+def test_an_owner_that_is_not_running_is_said(router, twin_factory):
+    """Only the faults service runs: nobody owns the battery, so nobody answers, and the tool
+    says why (not "is the service running?")."""
     with Probe(router) as p:
         twin_factory([MAPP], services=("faults",))
         p.wait_services(R, ("faults",))
         done = run_tool("fault", "inject", R, "battery", "heating", "5", "--timeout", "1",
                         "--connect", router)
         assert done.returncode == 2
-        assert "no answer within 1 s to the injection of lunaris/mapp-1/fault/battery/heating" in done.stderr
+        assert ("not applied: mapp-1's battery service is not running (no liveliness token); the "
+                "twin refuses the write if it arrives later" in done.stderr), done.stderr
         done = run_tool("fault", "list", "mars-9", "--timeout", "1", "--connect", router)
         assert done.returncode == 2 and "no answer from the faults service of 'mars-9'" in done.stderr
 
 
-def test_no_router_exits_2():
+def test_no_router_is_said_at_once_with_how_to_start_the_twin():
+    """Nothing listens at the endpoint: the refused connection is said at once (not after the
+    30 s of --wait), with a hint to start the twin."""
     from tests.harness import free_endpoint
-    done = run_tool("fault", "list", R, "--connect", free_endpoint(), "--wait", "1.5", timeout_s=20)
-    assert done.returncode == 2
-    assert "no Zenoh router answered at tcp/127.0.0.1:" in done.stderr and "within 1.5 s" in done.stderr
+    for args in (["fault", "list", R, "--wait", "30"], ["rail", R, "12V", "off", "--wait", "30"],
+                 ["pdm", "--once", "--timeout", "30"]):
+        done = run_tool(*args, "--connect", free_endpoint(), timeout_s=15)
+        assert done.returncode == 2, done.stderr
+        assert "No Zenoh router answered at tcp/127.0.0.1:" in done.stderr, done.stderr
+        assert "connection was refused" in done.stderr and "lunaris up" in done.stderr
 
 
 def test_with_credentials_on_the_deployment_router(tmp_path):
