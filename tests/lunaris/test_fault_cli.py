@@ -142,3 +142,35 @@ def test_with_credentials_on_the_deployment_router(tmp_path):
             assert "solar/right/disconnect" in run_tool("fault", "list", R, *debrief).stdout
             done = run_tool("fault", "clear", R, "solar/right", "disconnect", *instructor)
             assert done.returncode == 0 and "fault_cleared" in done.stdout
+
+
+def test_fault_list_names_the_owners_that_did_not_answer_and_exits_2(router):
+    """The faults service replies the faults it gathered and one error per owner that did not
+    answer (DECISIONS D3): the list says so, and never 'no active faults'. (A queryable of the
+    test's own stands in for the faults service.)"""
+    import zenoh
+
+    from common.connection import make_config
+    fault = {"key": keys.fault(R, "solar/left", "dust"), "params": {"fraction": 0.4},
+             "since_t_s": 12.0, "origin": "injected", "severity": "warning"}
+    answers = {"faults": []}
+    missing = "the battery service of mapp-1 did not answer within 2 s: its faults are not listed"
+
+    def on_query(q):
+        with q:
+            q.reply(keys.faults(R), json.dumps(answers["faults"]))
+            q.reply_err(missing)
+
+    with zenoh.open(make_config("client", connect=[router])) as s:
+        queryable = s.declare_queryable(keys.faults(R), on_query)
+        done = run_tool("fault", "list", R, "--connect", router)
+        assert done.returncode == 2, done.stdout + done.stderr
+        assert "no active faults" not in done.stdout
+        assert "NOT every owner answered" in done.stdout and f"not listed: {missing}" in done.stdout
+        answers["faults"] = [fault]
+        done = run_tool("fault", "list", R, "--connect", router)
+        assert done.returncode == 2 and "1 active fault(s), but NOT every owner answered" in done.stdout
+        assert "solar/left/dust" in done.stdout and missing in done.stdout
+        as_json = json.loads(run_tool("fault", "list", R, "--json", "--connect", router).stdout)
+        assert as_json["missing"] == [missing] and len(as_json["active"]) == 1
+        queryable.undeclare()
