@@ -167,5 +167,5 @@ def _get_faults(session: zenoh.Session, selector: str, timeout_s: float) -> tupl
         if reply.ok is not None:
             out = (out or []) + json.loads(reply.ok.payload.to_bytes())
         elif reply.err is not None:
-            errors.append(humane(reply.err.payload.to_string()))
+            errors.append(humane(reply.err.payload.to_bytes().decode("utf-8", "replace")))
     return out, errors

@@ -43,7 +43,10 @@ except ImportError:  # until common.messages has it (the harden-input branch)
         m = re.search(r"malformed JSON: Expecting value: line 1 column 1 \(char 0\)", message)
         if m:
             return message[:m.start()] + "not a number, true/false or a JSON object"
-        m = re.search(r"malformed JSON: .*", message)
+        m = re.search(r"malformed JSON: .*\(char (\d+)\)", message)
         if m:
-            return message[:m.start()] + "not valid JSON"
+            return message[:m.start()] + f"not valid JSON (at character {int(m.group(1)) + 1})"
+        m = re.search(r"malformed JSON: ", message)
+        if m:
+            return message[:m.start()] + "not valid JSON: " + message[m.end():]
         return message
