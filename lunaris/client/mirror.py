@@ -31,8 +31,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
-from typing import Any, Literal, NamedTuple
+from typing import Any
 
 import msgspec
 import zenoh
@@ -43,6 +42,7 @@ from common.conditions import Lookup
 from common.messages import Event
 from lunaris.client.events import EventWindow, event_identity, source_mismatch
 from lunaris.client.link import LINK_TIMEOUT_S, Link, LinkTracker, clock_time
+from lunaris.client.records import Change, Token, Value, _Rover
 from lunaris.client.session import ignored
 
 __all__ = ["MAX_SAMPLE_BYTES", "Change", "Mirror", "Token", "Value"]
@@ -55,48 +55,6 @@ BUDGET_BYTES = 32 * 1024 * 1024  # the latest values of every key, together
 FORGET_S = 600.0  # a rover whose services are all gone is forgotten after this long quiet
 STRANGER_S = 30.0  # ... one that never had a live service, sooner
 SWEEP_EVERY_S = 5.0
-
-
-@dataclass(frozen=True)
-class Value:
-    """A key's sample: its payload as received, decoded, and the wall time it came."""
-
-    raw: bytes
-    value: Any
-    at: float
-
-
-class Token(NamedTuple):
-    """A service's liveliness token as last seen: alive or gone, since when (wall time)."""
-
-    alive: bool
-    since: float
-
-
-class Change(NamedTuple):
-    """What a listener is told: a value, an event, the services of a rover, or a rover
-    forgotten; ``key`` the Zenoh key (the rover's for ``services`` and ``forget``)."""
-
-    kind: Literal["value", "event", "services", "forget"]
-    rover: str
-    key: str
-    raw: bytes
-    value: Any
-
-
-@dataclass
-class _Rover:
-    latest: dict[str, Value] = field(default_factory=dict)
-    names: dict[str, set[str]] = field(default_factory=dict)  # family -> component names
-    history: dict[str, deque[Value]] = field(default_factory=dict)
-    events: deque[tuple[Event, bytes]] = field(default_factory=deque)
-    tokens: dict[str, Token] = field(default_factory=dict)
-    link: LinkTracker = field(default_factory=LinkTracker)
-    seen: float = 0.0  # wall time of the last sample or token
-    ever_live: bool = False
-
-    def live(self) -> set[str]:
-        return {s for s, t in self.tokens.items() if t.alive}
 
 
 class Mirror:

@@ -307,7 +307,9 @@ def make_app(session: zenoh.Session, accounts: Accounts | None, *, tls: bool = F
     app.state.attempts = Attempts()
     app.state.tls = tls
     app.state.catalogue = api.catalogue()
-    app.state.extras = extras.Extras(session, scenarios_dir, recordings_dir, connection or [])
+    app.state.extras = extras.Extras(
+        session, scenarios_dir, recordings_dir, connection or [],
+        live_rovers=lambda: [r for r in app.state.hub.mirror.rovers() if app.state.hub.mirror.services(r)])
     return Gate(app, accounts, app.state.sign_ins, set(hosts) if hosts is not None else set(LOCAL_NAMES))
 
 
