@@ -20,6 +20,7 @@ except ImportError:  # until common.messages has it (the harden-input branch)
         """A validation message in plain words: ``Expected `float` <= 1.0 - at `$.fraction```
         becomes ``fraction must be at most 1.0``."""
         words = {"<=": "at most", ">=": "at least", "<": "below", ">": "above"}
+        message = re.sub(r"got b'([^']*)'", r"got \1", message)  # bytes shown as Python writes them
         named = re.match(r"(\w+): (Expected .*)$", message)
         if named and re.search(r"- at `\$`$", message):  # a bare value of a named parameter
             message = named.group(2).replace("- at `$`", f"- at `$.{named.group(1)}`")
