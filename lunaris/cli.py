@@ -55,7 +55,11 @@ def main(argv: list[str] | None = None) -> int:
         p = sub.add_parser(name, help=help_text, description=help_text)
         if name == chosen:  # only the chosen command's module is imported
             importlib.import_module(module).add_arguments(p)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except BrokenPipeError:  # the help, read by a reader that went
+        _quiet_stdout()
+        return 0
     try:
         return int(importlib.import_module(COMMANDS[args.command][0]).main(args) or 0)
     except KeyboardInterrupt:

@@ -35,6 +35,7 @@ from lunaris.client import (
     humane,
     live_rovers,
     open_session,
+    unknown_rover,
 )
 
 __all__ = ["add_common_arguments", "confirm", "format_event", "plan", "print_answer", "send",
@@ -70,9 +71,7 @@ def writer_for(args: argparse.Namespace, rover: str) -> Iterator[Writer]:
         mirror.start(session)
         writer = Writer(session, mirror, "instructor", args.timeout)
         if not writer.ready(rover):
-            known = ", ".join(sorted(live_rovers(session))) or "none"
-            raise ToolError(f"unknown rover {rover!r}: no Lunaris service serves it (live rovers: "
-                            f"{known})")
+            raise ToolError(unknown_rover(rover, live_rovers(session)))
         yield writer
     finally:
         if writer is not None:

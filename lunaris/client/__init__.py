@@ -27,6 +27,7 @@ from lunaris.client.session import (
     live_rovers,
     open_session,
     require_rover,
+    unknown_rover,
 )
 from lunaris.client.words import humane
 from lunaris.client.writer import ANSWER_S, Accepted, Actor, Answer, NotApplied, Rejected, Writer, describe
@@ -58,4 +59,5 @@ __all__ = [
     "live_rovers",
     "open_session",
     "require_rover",
+    "unknown_rover",
 ]

@@ -38,7 +38,7 @@ from common.scenario_player import Player, StepWrite, describe_action, describe_
 from common.scenario_progress import ScenarioProgress, StepProgress
 from common.writes import Write, plan_write
 from lunaris.client.mirror import Change, Mirror
-from lunaris.client.session import ToolError
+from lunaris.client.session import ToolError, live_rovers, unknown_rover
 from lunaris.client.writer import ANSWER_S, Accepted, Answer, NotApplied, Pending, Rejected, Writer
 
 __all__ = ["PROGRESS_KEY", "Progress", "Runner"]
@@ -130,9 +130,7 @@ class Runner:
                 self.session, keys.under(self.rover, PROGRESS_KEY),
                 cache=zext.CacheConfig(max_samples=1), publisher_detection=True)
             if not self.writer.ready(self.rover):
-                known = ", ".join(r for r in self.mirror.sync()) or "none"
-                raise ToolError(f"unknown rover {self.rover!r}: no Lunaris service serves it (live "
-                                f"rovers: {known})")
+                raise ToolError(unknown_rover(self.rover, live_rovers(self.session)))
             first = self._first_tick()
             self._mark("start", f"started ({describe_start(sc.start)})")
             yield from self._start(first)

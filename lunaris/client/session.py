@@ -25,7 +25,7 @@ from common import keys
 from common.connection import CONFIG_ENV, DEFAULT_ENDPOINT, config_from_args
 
 __all__ = ["START_HINT", "ToolError", "close_session", "describe_endpoint", "ignored", "live_rovers",
-           "open_session", "require_rover"]
+           "open_session", "require_rover", "unknown_rover"]
 
 START_HINT = "start the twin with `make run` or `lunaris up` (or give --connect ENDPOINT)"
 
@@ -177,10 +177,17 @@ def live_rovers(session: zenoh.Session, timeout_s: float = 2.0) -> dict[str, set
     return out
 
 
+def unknown_rover(rover: str, live: dict[str, set[str]] | list[str]) -> str:
+    """Words for a rover no service serves, naming the live ones (or how to start the twin)."""
+    known = ", ".join(sorted(live))
+    return (f"unknown rover {rover!r}: no Lunaris service serves it (live rovers: {known})" if known
+            else f"unknown rover {rover!r}: no Lunaris service serves it (live rovers: none; "
+                 f"{START_HINT})")
+
+
 def require_rover(session: zenoh.Session, rover: str) -> set[str]:
     """The services live for ``rover``; :class:`ToolError` naming the live rovers if none."""
     live = live_rovers(session)
     if rover not in live:
-        known = ", ".join(sorted(live)) or "none"
-        raise ToolError(f"unknown rover {rover!r}: no Lunaris service serves it (live rovers: {known})")
+        raise ToolError(unknown_rover(rover, live))
     return live[rover]

@@ -174,3 +174,10 @@ def test_fault_list_names_the_owners_that_did_not_answer_and_exits_2(router):
         as_json = json.loads(run_tool("fault", "list", R, "--json", "--connect", router).stdout)
         assert as_json["missing"] == [missing] and len(as_json["active"]) == 1
         queryable.undeclare()
+
+
+def test_a_router_without_a_twin_is_said_with_how_to_start_one(router):
+    done = run_tool("rail", R, "12V", "off", "--connect", router)
+    assert done.returncode == 2
+    assert "unknown rover 'mapp-1': no Lunaris service serves it (live rovers: none; start the twin " \
+           "with `make run` or `lunaris up`" in done.stderr, done.stderr
