@@ -93,7 +93,7 @@ class Mirror:
         self._listeners: list[Callable[[Change], None]] = []
         self._keep: list[Any] = []
         self._last_sweep = clock()
-        self._forgotten: list[str] = []
+        self._forgotten: deque[str] = deque(maxlen=1024)  # told at the next sweep
         self.session: zenoh.Session | None = None
 
     # -- Zenoh ------------------------------------------------------------------------------
@@ -336,7 +336,8 @@ class Mirror:
         call (by this or by making room), each told to the listeners as a ``forget``."""
         with self._lock:
             self._sweep(self.clock())
-            gone, self._forgotten = self._forgotten, []
+            gone = list(self._forgotten)
+            self._forgotten.clear()
         for rover in gone:
             change = Change("forget", rover, keys.rover_prefix(rover), b"", None)
             for listener in self._listeners:

@@ -51,6 +51,7 @@ HISTORY = 900  # points of the plots' history per rover (one a second: 15 minute
 HISTORY_S = 1.0
 KEEPALIVE_S = 15.0
 LINKS_S = 0.5  # how often the router and the rovers' links are looked at
+RESTART_S = 5.0  # rovers forgotten: the pages start again from a snapshot at most this often
 PENDING_EVENTS = 2000  # events held for the next batch at most (a flood is cut, not kept)
 
 
@@ -77,6 +78,8 @@ class Hub:
         self._last_flush = 0.0
         self._changed = asyncio.Event()
         self._watch: asyncio.Task | None = None
+        self._restart_due = False
+        self._last_restart = 0.0
         self.closed = False
 
     # -- Zenoh ------------------------------------------------------------------------------
@@ -123,11 +126,16 @@ class Hub:
             else:  # forget: the pages start again from a snapshot without it
                 forgot = True
         if forgot:
+            self._restart_due = True
             self._restart()
         self._schedule()
 
     def _restart(self) -> None:
-        """Every page takes a new snapshot (a rover was forgotten)."""
+        """Every page takes a new snapshot (a rover was forgotten), at most every RESTART_S
+        (a flood of forged rovers, each making room for the next, costs the pages little)."""
+        if not self._restart_due or self.loop.time() - self._last_restart < RESTART_S:
+            return
+        self._restart_due, self._last_restart = False, self.loop.time()
         self.version += 1
         self._log.clear()
         self._pending_values, self._pending_services = {}, set()
@@ -151,6 +159,7 @@ class Hub:
                 self._pending_links.update(changed)
                 self._schedule()
             self.mirror.sweep()  # a rover forgotten comes to _hand, as every change
+            self._restart()  # one left waiting, if any
             await asyncio.sleep(LINKS_S)
 
     def _schedule(self) -> None:
