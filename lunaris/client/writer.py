@@ -259,8 +259,8 @@ class Writer:
             return  # said by the mirror, which reads the same keys
         if source_mismatch(parts, ev) is not None:
             return
-        with self._lock:
-            if not self._pending or not self._window.first(event_identity(rover, ev)):
+        with self._lock:  # every event is remembered: its copy on the journal's key is no answer
+            if not self._window.first(event_identity(rover, ev)) or not self._pending:
                 return
             match = next((p for p in self._pending if _answers(p.write, ev)), None)
             if match is None:
