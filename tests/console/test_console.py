@@ -359,7 +359,7 @@ def test_the_api_checks_every_write_with_the_twin_s_structs(live):
 
 # -- accounts: sign-in, observers refused by the server ------------------------------------------
 
-PASSWORDS = {"ana": ("instructor", "ana-instructor-pw"), "obi": ("observer", "obi-observer-pw")}
+PASSWORDS = {"ana": ("instructor", "crater-rim-instructor"), "obi": ("observer", "lander-side-observer")}
 
 
 @pytest.fixture(scope="module")
@@ -376,7 +376,7 @@ def guarded(live):
         assert f"{name} may sign in to the console as {role}" in done.stdout
     listed = run_tool("console", "users", "list", "--accounts", str(accounts))
     assert listed.stdout.split() == ["ana", "instructor", "obi", "observer"]
-    assert "argon2id" in accounts.read_text() and "obi-observer-pw" not in accounts.read_text()
+    assert "argon2id" in accounts.read_text() and "lander-side-observer" not in accounts.read_text()
     console = start_console(live.endpoint, live.folder / "guarded", "--accounts", str(accounts))
     try:
         yield console, accounts

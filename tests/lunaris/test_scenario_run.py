@@ -98,11 +98,11 @@ def test_a_scenario_plays_every_step_at_its_time_or_condition(live, tmp_path):
         after("lost the lander", "drive away", 3.6, ticks=2)
         outcomes = {label: (s["status"], s["outcome"]) for label, s in steps.items()}
         assert outcomes == {
-            "dust": ("fired", "accepted"), "sun ramp": ("done", "sent"),
+            "dust": ("fired", "accepted"), "sun ramp": ("done", "accepted"),
             "short once the sun is low": ("fired", "accepted"), "tripped": ("fired", "reached"),
             "clear the short": ("fired", "accepted"), "reset the channel": ("fired", "accepted"),
-            "faster clock": ("fired", "accepted"), "drive away": ("done", "sent"),
-            "lost the lander": ("fired", "accepted"), "plugged in": ("fired", "sent"),
+            "faster clock": ("fired", "accepted"), "drive away": ("done", "accepted"),
+            "lost the lander": ("fired", "accepted"), "plugged in": ("fired", "accepted"),
         }
 
         # the twin's own journal agrees with the player's times
@@ -158,6 +158,13 @@ steps:
     assert "no active fault umbilical/disconnect to clear" in summary["steps"][0]["detail"]
     assert "did not hold within 2 s" in summary["steps"][1]["detail"]
     assert "NOT every step played as planned" in done.stdout
+    # its progress, published as it played, for the console and any other tool
+    progress = live.probe.samples(keys.under(R, "scenario/progress"))
+    assert progress and progress[-1]["state"] == "ended" and progress[-1]["ok"] is False
+    assert progress[-1]["scenario"] == "rejected" and progress[-1]["actor"] == "scenario"
+    assert [(s["status"], s["outcome"]) for s in progress[-1]["steps"]] == [
+        ("fired", "rejected"), ("timed out", "")]
+    assert any(m["state"] == "playing" for m in progress)
 
 
 def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_path):
