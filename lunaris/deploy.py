@@ -64,6 +64,10 @@ REPO = Path(__file__).resolve().parent.parent
 ROUTER_FILE = REPO / "deploy" / "zenohd.json5"
 
 _TWIN = ["lunaris/**", "lunaris/**/@adv/**"]
+# Every key expression a subscriber may be declared on: `**` includes every one without a
+# verbatim chunk; those with one ('@adv', ROS 2 discovery, rmw_zenoh's caches) are listed.
+_EVERY_KEY = ["**", "**/@adv/**", "@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
+_ROS = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
 _READ_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
 _READ_OUT = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
 _WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
@@ -102,37 +106,50 @@ def _rule(rule_id: str, permission: str, flows: list[str], messages: list[str],
 
 
 def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
-    """The router's ``access_control`` section."""
+    """The router's ``access_control`` section.
+
+    Three verbs per identity: what it may *ask for* (ingress subscriber, query, liveliness
+    subscriber and query: wildcards included), what may *reach* it (egress put, delete,
+    reply, token, queryable: decided sample by sample), and what it may *send* (ingress
+    put, delete, reply, token, queryable). Every identity that sends is told of every
+    subscriber (``learn-subscribers``): Zenoh's clients send a declared publisher's samples
+    only to a router that told them of a subscriber, and the router tells them of it by the
+    subscriber's own key expression, which an allow rule must include (the header of the
+    generated file says how Zenoh matches)."""
     reads, writes = dashboard_keys(mf, fleet)
     hears = bridge_hears(mf, fleet)
     inbound = sorted({m.key.replace("{rover}", "*") for m in mf.mappings if m.direction == "in"})
     inbound = [re.sub(r"\{[a-z_]*\}", "*", k) for k in inbound]
-    ros = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
     dash_adv = [f"{k}/@adv/**" for k in reads]
     rules = [
         _rule("read-twin", "allow", ["ingress"], _READ_IN, _TWIN),
         _rule("deliver-twin", "allow", ["egress"], _READ_OUT, _TWIN),
+        # a writer learns of every subscriber, whatever its key expression (wildcards): what
+        # reaches the subscriber is still decided by the subscriber's own egress rules
+        _rule("learn-subscribers", "allow", ["egress"], ["declare_subscriber"], _EVERY_KEY),
         _rule("crew-hidden-deliver", "deny", ["egress"], ["put", "delete", "reply"], _CREW_HIDDEN),
         _rule("crew-hidden-ask", "deny", ["ingress"], ["query", "declare_subscriber"], _CREW_HIDDEN),
         _rule("instructor-write", "allow", ["ingress"], ["put", "delete"], _WRITABLE),
-        _rule("instructor-write-matching", "allow", ["egress"], ["declare_subscriber"], _WRITABLE),
-        _rule("dashboard-read", "allow", ["ingress"], _READ_IN, reads + dash_adv + ros),
-        _rule("dashboard-deliver", "allow", ["egress"], _READ_OUT, reads + dash_adv + ros),
-        _rule("dashboard-write", "allow", ["ingress"], ["put", "liveliness_token"], writes + ros[:1]),
-        # what the bridge hears them on (one key expression for the rovers of a bridge serving
-        # several): the dashboard's publishers must see that subscriber, or they never send
-        _rule("dashboard-write-matching", "allow", ["egress"], ["declare_subscriber"],
-              sorted(set(writes) | set(hears))),
+        # the dashboard may subscribe on any key expression (its topics of one rover, of
+        # several, under a wildcard): only the bridge's topics reach it (dashboard-deliver)
+        _rule("dashboard-listen", "allow", ["ingress"],
+              ["declare_subscriber", "declare_liveliness_subscriber"], _EVERY_KEY),
+        _rule("dashboard-read", "allow", ["ingress"], ["query", "liveliness_query"],
+              reads + dash_adv + _ROS),
+        _rule("dashboard-deliver", "allow", ["egress"], _READ_OUT, reads + dash_adv + _ROS),
+        _rule("dashboard-write", "allow", ["ingress"], ["put", "liveliness_token"],
+              writes + _ROS[:1]),
     ]
     subjects = [{"id": person, "usernames": [person]} for person in PEOPLE]
     policies = [
         {"id": "instructor", "subjects": ["instructor", "console"],
-         "rules": ["read-twin", "deliver-twin", "instructor-write", "instructor-write-matching"]},
+         "rules": ["read-twin", "deliver-twin", "learn-subscribers", "instructor-write"]},
         {"id": "debrief", "subjects": ["debrief"], "rules": ["read-twin", "deliver-twin"]},
         {"id": "observer", "subjects": ["observer"],
          "rules": ["read-twin", "deliver-twin", "crew-hidden-deliver", "crew-hidden-ask"]},
         {"id": "dashboard", "subjects": ["dashboard"],
-         "rules": ["dashboard-read", "dashboard-deliver", "dashboard-write", "dashboard-write-matching"]},
+         "rules": ["dashboard-listen", "dashboard-read", "dashboard-deliver", "dashboard-write",
+                   "learn-subscribers"]},
     ]
     for service in SERVICES:
         pub = _published(service)
@@ -144,7 +161,6 @@ def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
         r = f"svc-{service}"
         rules += [
             _rule(f"{r}-publish", "allow", ["ingress"], ["put", "delete"], pub + extra_pub),
-            _rule(f"{r}-matching", "allow", ["egress"], ["declare_subscriber"], pub + extra_pub),
             # A cache answers a late joiner with the samples themselves: replies on pub too.
             _rule(f"{r}-answer", "allow", ["ingress"], ["declare_queryable", "reply"],
                   answered + pub + adv + (reads + dash_adv if service == "bridge" else [])),
@@ -159,20 +175,23 @@ def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
         ]
         if service == "bridge":  # it hears the dashboard's inbound topics and ROS 2 discovery
             # (a bridge serving several rovers hears a topic of them all on one key expression)
-            rules += [_rule("svc-bridge-hear", "allow", ["ingress"], _READ_IN, hears + ros),
-                      _rule("svc-bridge-heard", "allow", ["egress"], _READ_OUT, writes + ros)]
+            rules += [_rule("svc-bridge-hear", "allow", ["ingress"], _READ_IN, hears + _ROS),
+                      _rule("svc-bridge-heard", "allow", ["egress"], _READ_OUT, writes + _ROS)]
         subjects.append({"id": f"lunaris-{service}", "usernames": [f"lunaris-{service}"]})
         policies.append({
             "id": f"service-{service}", "subjects": [f"lunaris-{service}"],
-            "rules": ["read-twin", "deliver-twin", f"{r}-publish", f"{r}-matching", f"{r}-answer",
-                      f"{r}-asked", f"{r}-announce"]
+            "rules": ["read-twin", "deliver-twin", "learn-subscribers", f"{r}-publish",
+                      f"{r}-answer", f"{r}-asked", f"{r}-announce"]
             + (["svc-bridge-hear", "svc-bridge-heard"] if service == "bridge" else []),
         })
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
             "policies": policies}
 
 
-def router_config(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
+def router_config(mf: MappingFile, fleet: list[RoverNames],
+                  secrets_dir: str = ROUTER_SECRETS) -> dict[str, Any]:
+    """The router's configuration; ``secrets_dir`` is where it finds the secrets (the
+    container's ``/etc/zenoh/secrets``, or a folder of the machine it runs on)."""
     return {
         "mode": "router",
         # Inside the container; docker-compose.yml decides which host address publishes it.
@@ -186,9 +205,9 @@ def router_config(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
         "routing": {"router": {"peers_failover_brokering": True}},
         "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
         "transport": {
-            "auth": {"usrpwd": {"dictionary_file": f"{ROUTER_SECRETS}/credentials.txt"}},
-            "link": {"tls": {"listen_certificate": f"{ROUTER_SECRETS}/tls/router.crt",
-                             "listen_private_key": f"{ROUTER_SECRETS}/tls/router.key"},
+            "auth": {"usrpwd": {"dictionary_file": f"{secrets_dir}/credentials.txt"}},
+            "link": {"tls": {"listen_certificate": f"{secrets_dir}/tls/router.crt",
+                             "listen_private_key": f"{secrets_dir}/tls/router.key"},
                      # what each Lunaris session queues: a fleet's tick, not dropped
                      "tx": {"queue": {"size": TX_QUEUE_SIZE}}},
         },
@@ -203,13 +222,22 @@ _HEADER = """\
 //
 // Identities (users of secrets/credentials.txt, made by `lunaris deploy secrets`):
 {identities}//
-// How zenoh 1.x applies these rules (checked with the embedded router in tests/deploy):
-// - "ingress" is a message arriving at the router from a client, "egress" one it sends
-//   to a client; a put from A to B needs ingress "put" for A and egress "put" for B.
-// - Anything no rule allows is denied (default_permission "deny"), and a deny rule wins
-//   over an allow rule: the observer reads the twin except what the crew must not see.
-// - A publisher sends only when it knows of a matching subscriber: a publisher needs
-//   egress "declare_subscriber" on its keys; a queryable needs egress "query".
+// How zenoh 1.10 applies these rules (its source: zenoh/src/net/routing/interceptor/
+// access_control.rs and authorization.rs; checked with the embedded router in tests/deploy):
+// - Every message is checked as it arrives from a client ("ingress", for its sender) and as
+//   the router sends it on to a client ("egress", for its receiver): a put from A to B needs
+//   ingress "put" for A and egress "put" for B, a subscriber of B reaches A's router only
+//   with ingress "declare_subscriber" for B and egress "declare_subscriber" for A.
+// - A rule applies to a message when one of its key expressions INCLUDES the message's key
+//   expression, for every kind of message: a rule on lunaris/*/faults/active/battery does
+//   not cover a subscriber declared on lunaris/*/faults/active/* (they only intersect).
+// - Anything no rule allows is denied (default_permission "deny"); a deny rule that includes
+//   the key wins over an allow rule. A deny covers only what it includes: the observer may
+//   subscribe to lunaris/**, and what it must not see is refused sample by sample (egress).
+// - A client sends a declared publisher's samples only once its router told it of a matching
+//   subscriber, by the subscriber's own key expression (egress "declare_subscriber"): every
+//   identity that writes may learn of every subscriber ("learn-subscribers"), or a wildcard
+//   subscriber gets the first sample and then nothing. (A plain put is always sent.)
 // - Wildcards never match a chunk starting with '@': the advanced publishers' caches and
 //   tokens ("<key>/@adv/...") and ROS 2 discovery ("@ros2_lv/...") are listed explicitly.
 """
@@ -221,12 +249,14 @@ def _compact(text: str) -> str:
                   lambda m: "[" + ", ".join(re.findall(r'"[^"]*"', m.group(1))) + "]", text)
 
 
-def render_router_config(mf: MappingFile, fleet: list[RoverNames] | None = None) -> str:
+def render_router_config(mf: MappingFile, fleet: list[RoverNames] | None = None,
+                         secrets_dir: str = ROUTER_SECRETS) -> str:
     fleet = fleet if fleet is not None else fleet_names()
     what = {i: PEOPLE.get(i, f"the {i.removeprefix('lunaris-')} service: its own keys only")
             for i in IDENTITIES}
     lines = "".join(f"//   {i:<18} {w}\n" for i, w in what.items())
-    return _HEADER.format(identities=lines) + _compact(json.dumps(router_config(mf, fleet), indent=2)) + "\n"
+    body = _compact(json.dumps(router_config(mf, fleet, secrets_dir), indent=2))
+    return _HEADER.format(identities=lines) + body + "\n"
 
 
 # -- secrets ---------------------------------------------------------------------------------
@@ -379,6 +409,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     a.add_argument("--rover", action="append", metavar="FILE",
                    help=f"the deployment's rovers, in order (default {' '.join(FLEET_FILES)})")
     a.add_argument("--output", metavar="FILE", default=str(ROUTER_FILE))
+    a.add_argument("--secrets-dir", metavar="DIR", default=ROUTER_SECRETS,
+                   help="where the router finds the secrets (default: the container's "
+                        f"{ROUTER_SECRETS}; a folder of this machine to run it outside Docker)")
     a.add_argument("--check", action="store_true", help="exit 1 if the file is not up to date")
     s = sub.add_parser("secrets", help="make passwords, client configurations and certificates")
     s.add_argument("dir", metavar="DIR", help="where to write them (deploy/secrets)")
@@ -398,7 +431,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     if args.action == "acl":
         mf = load_mapping(args.bridge_config or DEFAULT_MAPPING)
-        text = render_router_config(mf, fleet_names(args.rover or FLEET_FILES))
+        secrets_dir = args.secrets_dir
+        if secrets_dir != ROUTER_SECRETS:
+            secrets_dir = str(Path(secrets_dir).resolve())
+        text = render_router_config(mf, fleet_names(args.rover or FLEET_FILES), secrets_dir)
         out = Path(args.output)
         if args.check:
             if not out.is_file() or out.read_text() != text:

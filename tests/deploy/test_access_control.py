@@ -5,6 +5,11 @@ one goes the same way, and the test waits for the allowed one before it asserts 
 denied ones never arrived. A round trip of the denied client to the router (a query) sits
 in between, so the router has dealt with the denied message before the allowed one is
 even sent.
+
+Allowed writes go through declared publishers, as the services and the console send:
+Zenoh's client sends a declared publisher's samples only once the router told it of a
+matching subscriber, so a rule that hides a subscriber from the writer shows here (a plain
+``put`` is always sent and would hide it). Forged writes are plain puts: the worst case.
 """
 
 from __future__ import annotations
@@ -108,8 +113,10 @@ def test_no_identity_forges_another_services_telemetry_tokens_or_answers(router:
                     keys.snapshots_of(ROVER, service),
                     lambda q, who=who: q.reply(q.key_expr, json.dumps(f"forged by {who}"))))
         _barrier(session)
-    for key, owner in OWNED:
-        sessions[f"lunaris-{owner}"].put(key, f"from {owner}")
+    owners = [sessions[f"lunaris-{owner}"].declare_publisher(key) for key, owner in OWNED]
+    for pub, (_key, owner) in zip(owners, OWNED, strict=True):
+        _wait_subscribed(pub, f"{owner} to see the reader's subscriber on lunaris/{ROVER}/**")
+        pub.put(f"from {owner}")
     wait_for(lambda: len(_received(got)) >= len(OWNED), "every owner's sample")
     assert sorted(p.decode() for _, p in _received(got)) == sorted(f"from {o}" for _, o in OWNED)
     tokens_seen = [str(r.ok.key_expr) for r in reader.liveliness().get(
@@ -200,10 +207,14 @@ def test_the_crew_reads_effects_not_the_instructors_faults(router: Router) -> No
     faults.declare_queryable(keys.faults(ROVER), lambda q: q.reply(q.key_expr, b"[]"))
     for session in readers.values():
         _barrier(session)
-    instructor.put(keys.fault(ROVER, "battery", "heating"), b"40")
-    battery.put(keys.event(ROVER), b'{"kind": "fault_injected"}')
-    battery.put(keys.faults_active(ROVER, "battery"), b'{"faults": []}')
-    battery.put(keys.battery_state(ROVER), b'{"temperature_c": 30}')  # the effect
+    writes = [(instructor, keys.fault(ROVER, "battery", "heating"), b"40"),
+              (faults, keys.event(ROVER), b'{"kind": "fault_injected"}'),
+              (battery, keys.faults_active(ROVER, "battery"), b'{"faults": []}'),
+              (battery, keys.battery_state(ROVER), b'{"temperature_c": 30}')]  # the effect
+    pubs = [session.declare_publisher(key) for session, key, _ in writes]
+    for pub, (_, key, payload) in zip(pubs, writes, strict=True):
+        _wait_subscribed(pub, f"the writer of {key} to see the debrief's subscriber")
+        pub.put(payload)
     wait_for(lambda: len(seen["debrief"].items) >= 4, "the debrief identity's samples")
     wait_for(lambda: seen["observer"].items, "the observer's telemetry")
     assert [str(s.key_expr) for s in seen["observer"].items] == [keys.battery_state(ROVER)]
