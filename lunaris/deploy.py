@@ -73,8 +73,10 @@ _READ_OUT = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
 _WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
              "lunaris/*/clock/control", "lunaris/*/control/**"]
 # What the crew must discover from effects, not read: the instructor's puts, the journal,
-# the faults in effect, the events that name them, the session's snapshots.
-_CREW_HIDDEN = ["lunaris/*/fault/**", "lunaris/*/event", "lunaris/*/event/@adv/**",
+# the faults in effect, the events that name them (the journal's stream and each
+# service's own), the session's snapshots.
+_CREW_HIDDEN = ["lunaris/*/fault/**", "lunaris/*/event", "lunaris/*/event/**",
+                "lunaris/*/event/@adv/**", "lunaris/*/event/*/@adv/**",
                 "lunaris/*/faults", "lunaris/*/faults/**", "lunaris/*/control/**",
                 "lunaris/*/snapshots", "lunaris/*/snapshots/**"]
 
@@ -84,9 +86,13 @@ def _pattern(chunks: tuple[str, ...]) -> str:
 
 
 def _published(service: str) -> list[str]:
-    """The keys one service kind publishes: its families, its events, its faults in effect."""
+    """The keys one service kind publishes: its families, its faults in effect and its
+    events on its own key ``event/<service>`` (events are authenticated by their key: no
+    identity but the service's may put there). The faults service, the journal, also
+    relays every event it journals on the rover's ``event``: no one else may."""
     own = [_pattern(f.chunks) for f in keys.FAMILIES if f.owner == service and f.direction == "out"]
-    return own + ["lunaris/*/event", f"lunaris/*/faults/active/{service}"]
+    own += [f"lunaris/*/event/{service}", f"lunaris/*/faults/active/{service}"]
+    return own + (["lunaris/*/event"] if service == "faults" else [])
 
 
 def _answered(service: str) -> list[str]:
@@ -102,7 +108,7 @@ def _answered(service: str) -> list[str]:
 def _rule(rule_id: str, permission: str, flows: list[str], messages: list[str],
           key_exprs: list[str]) -> dict[str, Any]:
     return {"id": rule_id, "permission": permission, "flows": flows, "messages": messages,
-            "key_exprs": key_exprs}
+            "key_exprs": list(dict.fromkeys(key_exprs))}
 
 
 def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:

@@ -302,12 +302,12 @@ def test_services_run_with_their_own_identities(secrets) -> None:
             debrief = router.open("debrief")
             observer = router.open("observer")
             instructor = router.open("instructor")
-            state, events = Collector(), Collector()
+            state, active = Collector(), Collector()
             zext.declare_advanced_subscriber(
                 observer, keys.battery_state(ROVER), state,
                 history=zext.HistoryConfig(detect_late_publishers=True))
             zext.declare_advanced_subscriber(
-                debrief, keys.event(ROVER), events,
+                debrief, keys.faults_active(ROVER, "*"), active,
                 history=zext.HistoryConfig(detect_late_publishers=True))
 
             def running() -> list[str]:
@@ -320,11 +320,12 @@ def test_services_run_with_their_own_identities(secrets) -> None:
             _wait_subscribed(fault, "the battery service's fault subscriber")
             fault.put(b"40")
 
-            def event_keys() -> list[str]:
-                return [json.loads(s.payload.to_bytes())["key"] for s in events.items]
+            def in_effect() -> list[str]:
+                return [f["key"] for s in active.items
+                        for f in json.loads(s.payload.to_bytes())["faults"]]
 
-            wait_for(lambda: keys.fault(ROVER, "battery", "heating") in event_keys(),
-                     "the battery service's event for the instructor's fault")
+            wait_for(lambda: keys.fault(ROVER, "battery", "heating") in in_effect(),
+                     "the battery service's faults in effect to list the instructor's fault")
             (listed,) = [json.loads(r.ok.payload.to_bytes())
                          for r in debrief.get(keys.faults(ROVER), timeout=5.0) if r.ok is not None]
             assert [f["key"] for f in listed] == [keys.fault(ROVER, "battery", "heating")]
@@ -332,3 +333,44 @@ def test_services_run_with_their_own_identities(secrets) -> None:
             router.close_sessions()
             for proc in procs:
                 stop_process(proc)
+
+
+# -- events are authenticated by their key (DECISIONS D1) -----------------------------------
+
+
+@pytest.mark.timeout(60)
+def test_a_service_publishes_events_only_on_its_own_key_and_the_journal_relays_them(
+        router: Router) -> None:
+    """``lunaris-<service>`` puts its events on ``event/<service>`` only; only
+    ``lunaris-faults`` puts on the rover's ``event``. A forged event (the bridge's identity
+    claiming to be the battery, or writing the journal's stream) is refused by the router;
+    the crew's identities read neither stream."""
+    own, journal = f"{keys.event(ROVER)}/battery", keys.event(ROVER)
+    debrief = router.open("debrief")
+    got = Collector()
+    debrief.declare_subscriber(f"{journal}/**", got)  # `event` and every `event/<service>`
+    crew = {who: Collector() for who in ("observer", "dashboard")}
+    for who, seen in crew.items():
+        router.open(who).declare_subscriber("lunaris/**" if who == "observer" else "**", seen)
+    forgers = {who: router.open(who) for who in ("lunaris-bridge", "lunaris-battery", "instructor",
+                                                  "dashboard")}
+    for who, session in forgers.items():
+        if who != "lunaris-battery":
+            session.put(own, f"forged by {who}")
+        session.put(journal, f"forged by {who}")
+        session.put(f"{journal}/faults", f"forged by {who}")
+        _barrier(session)
+    battery = router.open("lunaris-battery").declare_publisher(own)
+    faults = router.open("lunaris-faults")
+    relay = faults.declare_publisher(journal)
+    faults_own = faults.declare_publisher(f"{journal}/faults")
+    for pub, payload in ((battery, b"battery's own"), (relay, b"relayed by the journal"),
+                         (faults_own, b"the journal's own")):
+        _wait_subscribed(pub, "the event's publisher to see the debrief's subscriber")
+        pub.put(payload)
+    wait_for(lambda: len(got.items) >= 3, "the three genuine events")
+    assert sorted((str(s.key_expr), s.payload.to_bytes()) for s in got.items) == sorted([
+        (own, b"battery's own"), (journal, b"relayed by the journal"),
+        (f"{journal}/faults", b"the journal's own")])
+    _barrier(debrief)
+    assert [str(s.key_expr) for c in crew.values() for s in c.items] == []

@@ -213,3 +213,33 @@ def test_forged_writes_are_refused(deployment: Deployment) -> None:
     assert [k for k, p, _ in got.samples() if b"forged" in p] == []
     assert 99 not in [_heat_w(p) for p in got.payloads(keys.faults_active(ROVER, "battery"))]
     del sub
+
+
+@pytest.mark.skipif(not hasattr(keys, "event_of"),
+                    reason="the services publish their events on event/<service> once the "
+                           "harden-input branch (DECISIONS D1) is merged")
+def test_events_travel_on_their_owners_keys_and_the_journal_relays_them(
+        deployment: Deployment) -> None:
+    """An instructor's fault: the battery's event on ``event/battery`` (the only key its
+    identity may put events on), relayed unchanged by the journal on ``event``; the debrief
+    reads both, the observer neither."""
+    dep = deployment
+    debrief, observer, instructor = (dep.open(i) for i in ("debrief", "observer", "instructor"))
+    got, crew = Tap(), Tap()
+    subs = [debrief.declare_subscriber(f"{keys.event(ROVER)}/**", got),
+            observer.declare_subscriber(f"lunaris/{ROVER}/**", crew)]
+    wait_until(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90, "every service live")
+    fault = instructor.declare_publisher(keys.fault(ROVER, "battery", "capacity_loss"))
+    fault.put(json.dumps({"fraction": 0.1}))
+
+    def about(key: str) -> list[dict]:
+        return [e for e in (json.loads(p) for p in got.payloads(key))
+                if e.get("key") == keys.fault(ROVER, "battery", "capacity_loss")]
+
+    own = wait_until(lambda: about(keys.event_of(ROVER, "battery")), STEP_S,
+                     "the battery's event on event/battery")
+    relayed = wait_until(lambda: about(keys.event(ROVER)), STEP_S, "the journal's relay on event")
+    assert own[0]["source"] == "battery" and relayed[0] == own[0]
+    fault.delete()
+    assert [k for k, _, _ in crew.samples() if "/event" in k] == []
+    del subs
