@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import base64
 import json
+import os
 import re
 import secrets as random_secrets
 import subprocess
@@ -31,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from common import keys
-from common.connection import TX_QUEUE_SIZE
+from common.connection import TX_QUEUE_SIZE, is_demo_password
 from lunaris.deploy_dashboard import (
     FLEET_FILES,
     bridge_hears,
@@ -57,8 +58,8 @@ PEOPLE = {
     "dashboard": "the crew's dashboard: reads only the bridge's topics, writes its inbound ones",
 }
 IDENTITIES = tuple(f"lunaris-{s}" for s in SERVICES) + tuple(PEOPLE)
-DEMO_MARK = "CHANGE-ME"
 MIN_PASSWORD_LEN = 16
+MIN_DISTINCT_CHARS = 8
 ROUTER_SECRETS = "/etc/zenoh/secrets"  # where the router container finds the secrets
 REPO = Path(__file__).resolve().parent.parent
 ROUTER_FILE = REPO / "deploy" / "zenohd.json5"
@@ -269,7 +270,27 @@ def render_router_config(mf: MappingFile, fleet: list[RoverNames] | None = None,
 
 
 def _password() -> str:
-    return random_secrets.token_urlsafe(24)
+    """24 random bytes, URL-safe; drawn again in the rare case the check would call it weak
+    (holding ``demo`` after a dash, say)."""
+    while True:
+        password = random_secrets.token_urlsafe(24)
+        if not password_problems("-", password):
+            return password
+
+
+def password_problems(user: str, password: str) -> list[str]:
+    """What makes a password unfit for a deployment, in words (empty: nothing)."""
+    if is_demo_password(password):
+        return [f"{user} still has a shipped demo password (marked demo or CHANGE-ME)"]
+    if len(password) < MIN_PASSWORD_LEN:
+        return [f"the password of {user} is shorter than {MIN_PASSWORD_LEN} characters"]
+    distinct = len(set(password))
+    if distinct == 1:
+        return [f"the password of {user} is one character repeated"]
+    if distinct < MIN_DISTINCT_CHARS:
+        return [f"the password of {user} uses only {distinct} different characters "
+                f"(at least {MIN_DISTINCT_CHARS}): make it with `lunaris deploy secrets --rotate`"]
+    return []
 
 
 def _read_credentials(path: Path) -> dict[str, str]:
@@ -301,9 +322,18 @@ def _openssl(*args: str, cwd: Path) -> None:
         raise RuntimeError(f"openssl {args[0]} failed: {out.stderr.strip()}")
 
 
+def _write_private(path: Path, text: str) -> None:
+    """Write a file only its owner may read, from its first byte (not chmod after)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w") as out:
+        out.write(text)
+    path.chmod(0o600)  # it may have existed with another mode
+
+
 def make_certificates(folder: Path, hosts: list[str]) -> None:
     """A certificate authority and the router's certificate for ``hosts`` (names or IPs)."""
-    folder.mkdir(parents=True, exist_ok=True)
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    folder.chmod(0o700)
     ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
     _openssl("req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.crt", "-days", "3650",
              "-subj", "/CN=Lunaris deployment CA", cwd=folder)
@@ -343,20 +373,17 @@ def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
         make_certificates(folder / "tls", hosts)
         written.append("tls/")
     ca = (folder / "tls" / "ca.crt").read_bytes() if tls else None
-    cred_path.write_text("".join(f"{u}:{p}\n" for u, p in creds.items()))
-    cred_path.chmod(0o600)
+    _write_private(cred_path, "".join(f"{u}:{p}\n" for u, p in creds.items()))
     written.append("credentials.txt")
     for user in IDENTITIES:
         if rotate is not None and user not in rotate:
             continue
         path = folder / f"client-{user}.json5"
-        path.write_text(json.dumps(client_config(user, creds[user], ca, connect), indent=2) + "\n")
-        path.chmod(0o600)
+        _write_private(path, json.dumps(client_config(user, creds[user], ca, connect), indent=2) + "\n")
         written.append(path.name)
     accounts = folder / "console-accounts.json"
     if not accounts.exists():  # people, not machines: made empty once, never overwritten
-        accounts.write_text('{"users": {}}\n')
-        accounts.chmod(0o600)
+        _write_private(accounts, '{"users": {}}\n')
         written.append(accounts.name)
     if rotate is None or "dashboard" in rotate:
         fleet = fleet if fleet is not None else fleet_names()
@@ -368,28 +395,55 @@ def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
         files["rmw-zenoh-dashboard.json5"] = rmw_zenoh_config(creds["dashboard"], ca, connect)
         for name, conf in files.items():
             path = folder / name
-            path.write_text(json.dumps(conf, indent=2) + "\n")
-            path.chmod(0o600)
+            _write_private(path, json.dumps(conf, indent=2) + "\n")
             written.append(path.name)
     return written
 
 
+def _open_to_others(folder: Path) -> list[str]:
+    """The folder, its subfolders and every file of it but the public certificates, when
+    its group or others may read, write or enter it: each named, with the command that
+    closes it."""
+    out = []
+    for path in [folder, *sorted(folder.rglob("*"))]:
+        mode = path.stat().st_mode & 0o777
+        if path.is_dir() and mode & 0o077:
+            out.append(f"{path}: the folder is open to others (mode {mode:o}, not 700): "
+                       f"chmod 700 {path}")
+        elif path.is_file() and path.suffix != ".crt" and mode & 0o077:
+            out.append(f"{path.relative_to(folder)}: readable by others (mode {mode:o}, "
+                       f"not 600): chmod 600 {path}")
+    return out
+
+
 def check_secrets(folder: Path, tls: bool = True) -> list[str]:
-    """Every reason the secrets in ``folder`` cannot be trusted (empty: they can)."""
-    problems = []
+    """Every reason the secrets in ``folder`` cannot be trusted (empty: they can): a file
+    missing, open to others, a weak or demo password, an identity the deployment does not
+    know (a line the router would let in), a client whose password is not the router's."""
     cred_path = folder / "credentials.txt"
     if not cred_path.is_file():
         return [f"{cred_path}: missing (make the secrets with `lunaris deploy secrets {folder}`)"]
+    problems = _open_to_others(folder)
     creds = _read_credentials(cred_path)
+    seen: set[str] = set()
+    for number, line in enumerate(cred_path.read_text().splitlines(), 1):
+        user, colon, _ = line.partition(":")
+        if not line.strip():
+            continue
+        if not colon:
+            problems.append(f"credentials.txt: line {number} is not user:password")
+        elif user not in IDENTITIES:
+            problems.append(f"credentials.txt: {user!r} (line {number}) is no identity of this "
+                            "deployment, and the router would let it in: remove its line")
+        elif user in seen:
+            problems.append(f"credentials.txt: {user} has more than one line (line {number})")
+        seen.add(user)
     for user in IDENTITIES:
         password = creds.get(user)
         if password is None:
             problems.append(f"credentials.txt: no password for {user}")
-        elif DEMO_MARK in password or password.startswith("demo"):
-            problems.append(f"credentials.txt: {user} still has a shipped demo password")
-        elif len(password) < MIN_PASSWORD_LEN:
-            problems.append(f"credentials.txt: the password of {user} is shorter than "
-                            f"{MIN_PASSWORD_LEN} characters")
+        else:
+            problems += [f"credentials.txt: {p}" for p in password_problems(user, password)]
     for user in IDENTITIES:
         path = folder / f"client-{user}.json5"
         if not path.is_file():
