@@ -43,7 +43,7 @@ from lunaris.deploy_dashboard import (
     ros2dds_config,
 )
 from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile, load_mapping
+from services.bridge.mapping import MappingFile, load_mapping, ros_name
 from services.bridge.service import DEFAULT_MAPPING
 
 __all__ = ["IDENTITIES", "SERVICES", "acl", "add_arguments", "check_secrets", "main",
@@ -205,11 +205,10 @@ def router_config(mf: MappingFile, fleet: list[RoverNames],
         "listen": {"endpoints": ["tls/0.0.0.0:7447"]},
         "connect": {"endpoints": []},
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-        # What ROS 2 nodes on rmw_zenoh need: rmw_zenoh's own router turns gossip on, so its
-        # peers find each other and connect directly; with gossip off (everywhere here) the
-        # router forwards between peers that are not connected to each other, and it stamps
-        # samples (rmw_zenoh's router and sessions enable timestamping).
-        "routing": {"router": {"peers_failover_brokering": True}},
+        # Samples stamped, as rmw_zenoh's router and sessions do (and the writes' age is
+        # judged by). Zenoh 1.10 forwards between a router's clients (the dashboard's
+        # rmw_zenoh session is one) but never from one of its peers to another: deploy/README
+        # §5b says what that means for ROS 2 nodes.
         "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
         "transport": {
             "auth": {"usrpwd": {"dictionary_file": f"{secrets_dir}/credentials.txt"}},
@@ -389,9 +388,12 @@ def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
         fleet = fleet if fleet is not None else fleet_names()
         mf = mf if mf is not None else load_mapping(DEFAULT_MAPPING)
         base = mf.bridge.outputs.ros2.domain_id or 0
+        several = len(fleet) > 1
         files = {f"zenoh-bridge-ros2dds-{r.id}.json5": ros2dds_config(
             creds["dashboard"], ca, r.id, mf.bridge.rover_domains.get(r.id, base + place),
-            inbound_regexes(mf)) for place, r in enumerate(fleet)}
+            inbound_regexes(mf),
+            mf.bridge.fleet_namespace.replace("{rover}", ros_name(r.id)) if several else None)
+            for place, r in enumerate(fleet)}
         files["rmw-zenoh-dashboard.json5"] = rmw_zenoh_config(creds["dashboard"], ca, connect)
         for name, conf in files.items():
             path = folder / name
@@ -483,6 +485,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--no-tls", action="store_true", help="plain TCP: no certificates")
     s.add_argument("--rotate", action="append", metavar="USER",
                    help="give only this identity a new password (repeat)")
+    s.add_argument("--rover", action="append", metavar="FILE",
+                   help="the deployment's rovers, in order: one zenoh-bridge-ros2dds file each "
+                        f"(default {' '.join(FLEET_FILES)})")
+    s.add_argument("--bridge-config", metavar="FILE", help="bridge mapping (default: the shipped one)")
     c = sub.add_parser("check", help="refuse secrets that cannot be trusted (exit 1)")
     c.add_argument("dir", metavar="DIR")
     c.add_argument("--no-tls", action="store_true")
@@ -507,7 +513,9 @@ def main(args: argparse.Namespace) -> int:
     if args.action == "secrets":
         hosts = args.host or ["router", "localhost", "127.0.0.1"]
         try:
-            written = make_secrets(Path(args.dir), hosts, args.connect, not args.no_tls, args.rotate)
+            written = make_secrets(Path(args.dir), hosts, args.connect, not args.no_tls, args.rotate,
+                                   fleet_names(args.rover or FLEET_FILES),
+                                   load_mapping(args.bridge_config or DEFAULT_MAPPING))
         except (ValueError, RuntimeError, OSError) as exc:
             print(f"lunaris deploy secrets: {exc}", file=sys.stderr)
             return 2

@@ -80,17 +80,21 @@ def bridge_hears(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
 
 
 def ros2dds_config(password: str, ca_pem: bytes | None, rover: str, domain: int,
-                   inbound: list[str]) -> dict[str, Any]:
+                   inbound: list[str], namespace: str | None) -> dict[str, Any]:
     """zenoh-bridge-ros2dds for the dashboard of one rover on DDS (the compose profile
     ``ros2dds``, one container per rover): the ``dashboard`` identity, host networking, so it
-    reaches the router on the host's port. Its namespace is the rover's (``/mapp_1``): the
-    bridge's ``mapp_1/battery_state`` is ``/battery_state`` in the rover's DDS domain, the
-    dashboard's plain name. Zenoh -> DDS: every topic of the rover; DDS -> Zenoh: only the
-    inbound topics (the router's access control enforces the same limit)."""
+    reaches the router on the host's port. In a fleet its namespace is the rover's
+    (``/mapp_1``, the mapping's ``fleet_namespace``): the bridge's ``mapp_1/battery_state``
+    is ``/battery_state`` in the rover's DDS domain, the dashboard's plain name; a fleet of
+    one rover has no namespace (the bridge's keys are the plain names). Zenoh -> DDS: every
+    topic of the rover; DDS -> Zenoh: only the inbound topics (the router's access control
+    enforces the same limit)."""
     conf = _client("dashboard", password, ca_pem, "tls/127.0.0.1:7447")
-    conf["plugins"] = {"ros2dds": {
-        "id": f"lunaris-{ros_name(rover)}", "namespace": f"/{ros_name(rover)}", "domain": domain,
-        "allow": {"publishers": inbound, "subscribers": [".*"]}}}
+    plugin: dict[str, Any] = {"id": f"lunaris-{ros_name(rover)}", "domain": domain,
+                              "allow": {"publishers": inbound, "subscribers": [".*"]}}
+    if namespace is not None:
+        plugin["namespace"] = namespace
+    conf["plugins"] = {"ros2dds": plugin}
     return conf
 
 

@@ -156,3 +156,22 @@ def test_every_client_refuses_a_demo_password(folder: Path, password: str) -> No
     with pytest.raises(ConnectionConfigError, match="demo password"):
         make_config(config_file=folder / "client-instructor.json5")
 
+
+
+def test_the_dashboards_files_are_for_the_deployments_rovers(tmp_path: Path) -> None:
+    one = tmp_path / "one"
+    out = lunaris("deploy", "secrets", str(one), "--rover", "config/rovers/ltv.yaml")
+    assert out.returncode == 0, out.stderr
+    assert sorted(p.name for p in one.glob("zenoh-bridge-ros2dds-*")) == ["zenoh-bridge-ros2dds-ltv-1.json5"]
+    plugin = json.loads((one / "zenoh-bridge-ros2dds-ltv-1.json5").read_text())["plugins"]["ros2dds"]
+    # a fleet of one: the bridge's keys are the plain topic names, no namespace; domain 0
+    assert plugin["domain"] == 0 and "namespace" not in plugin
+    two = tmp_path / "two"
+    out = lunaris("deploy", "secrets", str(two), "--rover", "config/rovers/ltv.yaml",
+                  "--rover", "config/rovers/mapp.yaml")
+    assert out.returncode == 0, out.stderr
+    plugins = {r: json.loads((two / f"zenoh-bridge-ros2dds-{r}.json5").read_text())["plugins"]["ros2dds"]
+               for r in ("ltv-1", "mapp-1")}
+    assert [(p["namespace"], p["domain"]) for p in plugins.values()] == [("/ltv_1", 0), ("/mapp_1", 1)]
+    bad = lunaris("deploy", "secrets", str(tmp_path / "bad"), "--rover", "no-such-rover.yaml")
+    assert bad.returncode == 2 and "no-such-rover.yaml" in bad.stderr
