@@ -10,6 +10,7 @@ own identity, with the publishers it really declares. ``prefix`` runs a command 
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -170,3 +171,74 @@ def changes(values: list[Any]) -> list[Any]:
         if not out or out[-1] != v:
             out.append(v)
     return out
+
+
+class Remote:
+    """A running ``tests/deploy/remote.py``: commands in, its answers and samples out, read
+    by a thread of ours as they come (see that module for the protocol)."""
+
+    def __init__(self, proc: subprocess.Popen, name: str = "remote"):
+        assert proc.stdin is not None and proc.stdout is not None
+        self.proc, self.name = proc, name
+        self._lock = threading.Lock()
+        self._lines: list[dict[str, Any]] = []
+        self._ids = iter(range(1, 1 << 30))
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+        self.wait(lambda m: m["op"] == "ready", 60, f"{name}'s session")
+
+    @staticmethod
+    def argv(config: Path, connect: str | None = None) -> list[str]:
+        return [sys.executable, "-m", "tests.deploy.remote", "--config", str(config),
+                *(["--connect", connect] if connect else [])]
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            try:
+                msg = json.loads(line)
+            except ValueError:
+                continue
+            with self._lock:
+                self._lines.append(msg)
+
+    def lines(self) -> list[dict[str, Any]]:
+        with self._lock:
+            return list(self._lines)
+
+    def send(self, **cmd: Any) -> None:
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps(cmd) + "\n")
+        self.proc.stdin.flush()
+
+    def wait(self, test: Callable[[dict[str, Any]], bool], timeout_s: float,
+             what: str | Callable[[], str]) -> dict[str, Any]:
+        def found() -> dict[str, Any] | None:
+            if self.proc.poll() is not None:
+                raise AssertionError(f"{self.name} stopped (exit {self.proc.returncode})")
+            return next((m for m in self.lines() if test(m)), None)
+        return wait_until(found, timeout_s, what)
+
+    def call(self, op: str, timeout_s: float = 30.0, **args: Any) -> dict[str, Any]:
+        """A command and its answer."""
+        n = next(self._ids)
+        self.send(op=op, id=n, **args)
+        return self.wait(lambda m: m.get("id") == n and m["op"] != op, timeout_s,
+                         f"{self.name}'s answer to {op} {args}")
+
+    def subscribe(self, sid: str, key: str, decode: str = "json") -> None:
+        self.send(op="sub", id=sid, key=key, decode=decode)
+        self.wait(lambda m: m["op"] == "subscribed" and m["id"] == sid, 30, f"{self.name}'s {key}")
+
+    def samples(self, sid: str, key: str | None = None) -> list[dict[str, Any]]:
+        return [m for m in self.lines() if m["op"] == "sample" and m["id"] == sid
+                and (key is None or m["key"] == key)]
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                self.send(op="quit")
+                self.proc.wait(10)
+            except (OSError, subprocess.TimeoutExpired):
+                self.proc.kill()
+                self.proc.wait(10)
