@@ -26,6 +26,8 @@ from services.bridge.mapping import MappingFile
 
 __all__ = ["REPO", "ROUTER_FILE", "ROUTER_SECRETS", "acl", "render_router_config", "router_config"]
 
+LINK_LEASE_MS = 3000  # a site's routers: a cut link closed within 3 s
+RETRY_MS = 1000  # ... and opened again within 1 s of the cable's return
 ROUTER_SECRETS = "/etc/zenoh/secrets"  # where the router container finds the secrets
 REPO = Path(__file__).resolve().parent.parent
 ROUTER_FILE = REPO / "deploy" / "zenohd.json5"
@@ -206,7 +208,10 @@ def router_config(mf: MappingFile, fleet: list[RoverNames], secrets_dir: str = R
     listen = [f"tls/0.0.0.0:{spec.client_port}"]
     if linked_from:
         listen.append(f"tls/0.0.0.0:{spec.router_port}#enable_mtls=true")
-    connect = [f"tls/{site.router(t).hosts[0]}:{site.router(t).router_port}#enable_mtls=true"
+    # A cut link is tried again every second at most, and caught up within one of the cable
+    # coming back (Zenoh's default backs off to 4 s).
+    connect = [f"tls/{site.router(t).hosts[0]}:{site.router(t).router_port}#enable_mtls=true;"
+               f"retry_period_init_ms={RETRY_MS // 2};retry_period_max_ms={RETRY_MS}"
                for t in spec.connect]
     tls = {"listen_certificate": f"{d}/tls/router.crt", "listen_private_key": f"{d}/tls/router.key"}
     auth: dict[str, Any] = {"dictionary_file": f"{d}/credentials.txt"}
@@ -218,6 +223,14 @@ def router_config(mf: MappingFile, fleet: list[RoverNames], secrets_dir: str = R
         tls |= {"connect_certificate": f"{d}/tls/router.crt",
                 "connect_private_key": f"{d}/tls/router.key"}
         auth |= {"user": spec.identity, "password": link_password}
+    link: dict[str, Any] = {"tls": tls,
+                            # what each Lunaris session queues: a fleet's tick, not dropped
+                            "tx": {"queue": {"size": TX_QUEUE_SIZE}}}
+    if linked_from or spec.connect:
+        # A link between machines can be cut: the routers close it within LINK_LEASE_MS (and
+        # the liveliness tokens of the machine behind it go), instead of Zenoh's 10 s, in
+        # which TCP's backoff holds everything sent meanwhile and may deliver it late.
+        link["tx"]["lease"] = LINK_LEASE_MS
     return {
         "mode": "router",
         # Inside the container; docker-compose.yml decides which host address publishes it.
@@ -231,9 +244,7 @@ def router_config(mf: MappingFile, fleet: list[RoverNames], secrets_dir: str = R
         "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
         "transport": {
             "auth": {"usrpwd": auth},
-            "link": {"tls": tls,
-                     # what each Lunaris session queues: a fleet's tick, not dropped
-                     "tx": {"queue": {"size": TX_QUEUE_SIZE}}},
+            "link": link,
         },
         "access_control": acl(mf, fleet, spec.clients, linked_from, spec.connect),
     }

@@ -100,6 +100,13 @@ class SiteOnMachines:
                                              str(self.secrets / machine / f"client-{identity}.json5")),
                             timeout_s=timeout_s, cwd=REPO, env=_env())
 
+    def lunaris_popen(self, machine: str, identity: str, *args: str) -> subprocess.Popen:
+        """The same, started: its output (stdout and stderr) kept in a pipe."""
+        return self.net.popen(machine, lunaris(*args, "--config",
+                                               str(self.secrets / machine / f"client-{identity}.json5")),
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
+                              env=_env())
+
     def close(self) -> None:
         for remote in self.remotes:
             remote.close()

@@ -61,8 +61,11 @@ def test_the_shipped_site_is_three_machines_whose_secrets_check(tmp_path: Path) 
     assert '"password"' not in ground  # it opens no link: no secret in its configuration
     crew = json.loads("\n".join(line for line in (folder / "crew" / "zenohd.json5").read_text()
                                 .splitlines() if not line.startswith("//")))
-    assert crew["connect"]["endpoints"] == ["tls/ground.lunaris.example:7448#enable_mtls=true",
-                                            "tls/mapp-1.lunaris.example:7448#enable_mtls=true"]
+    retry = "retry_period_init_ms=500;retry_period_max_ms=1000"
+    assert crew["connect"]["endpoints"] == [
+        f"tls/ground.lunaris.example:7448#enable_mtls=true;{retry}",
+        f"tls/mapp-1.lunaris.example:7448#enable_mtls=true;{retry}"]
+    assert crew["transport"]["link"]["tx"]["lease"] == 3000
     assert crew["transport"]["auth"]["usrpwd"]["user"] == "router-crew"
 
 
