@@ -68,6 +68,15 @@ def _finish(proc: subprocess.Popen, timeout_s: float = 60.0) -> tuple[int, str]:
     return proc.returncode, out
 
 
+def _listed_with_heating(partition: Partition, what: str) -> list[str]:
+    """The faults ``lunaris fault list`` gives, once every owner answers (the heating in it)."""
+    def listed() -> list[str] | None:
+        code, out = _finish(partition.cli("instructor", "fault", "list", ROVER, "--json"))
+        active = [f["key"] for f in json.loads(out)["active"]] if code == 0 else []
+        return active if HEATING in active else None
+    return wait_until(listed, 90, what)
+
+
 @pytest.fixture(scope="module")
 def partition(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Partition]:
     with SiteOnMachines(tmp_path_factory.mktemp("partition")) as m:
@@ -94,9 +103,7 @@ def partition(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Partition]:
 def test_a_write_during_a_cut_is_refused_said_and_never_applied_late(
         partition: Partition, cut_s: float) -> None:
     net = partition.m.net
-    listed = partition.cli("instructor", "fault", "list", ROVER)
-    code, out = _finish(listed)
-    assert code == 0 and "heating" in out, out  # linked: every owner answers
+    _listed_with_heating(partition, "linked, before the cut")  # every owner answers
 
     net.cut(ROVER)
     t_cut = time.monotonic()
@@ -122,11 +129,7 @@ def test_a_write_during_a_cut_is_refused_said_and_never_applied_late(
     assert LOST.search(watched), watched
 
     # back: every owner answers again, the heating is still listed, the late write is not
-    def relisted() -> list[str] | None:
-        code, out = _finish(partition.cli("instructor", "fault", "list", ROVER, "--json"))
-        active = [f["key"] for f in json.loads(out)["active"]] if code == 0 else []
-        return active if HEATING in active else None
-    active = wait_until(relisted, 90, f"the battery answering again after the {cut_s:g} s cut")
+    active = _listed_with_heating(partition, f"the battery answering again after the {cut_s:g} s cut")
     assert LATE not in active, active
     assert all(LATE not in faults for faults in partition.in_effect()), partition.in_effect()
     assert not LOST.search(_finish(partition.cli("debrief", "watch", "--once", "--rover", ROVER))[1])
