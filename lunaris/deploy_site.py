@@ -68,7 +68,8 @@ class RouterFile(Strict, frozen=True):
 
 class SiteFile(Strict, frozen=True):
     rovers: Annotated[list[str], doc("the deployment's rover files, in order (rover i has "
-                                     "ROS 2 domain i)")]
+                                     "ROS 2 domain i); relative to the repository, the "
+                                     "image's working directory")]
     routers: Annotated[list[RouterFile], doc("one per machine")]
     bridge_config: Annotated[str | None, doc("bridge mapping (default: the shipped one)")] = None
     client_port: Annotated[Port, doc("the clients' port of every router (TLS, user and "
