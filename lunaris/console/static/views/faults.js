@@ -109,7 +109,7 @@ export const faults = {
   /** @param {{rover: string, parts: Parts}} ctx */
   render: ({rover, parts}) => html`<div class="grid two"><div class="col"><section class="card"><h2>Inject or clear a fault</h2>
       <p class="help">Choose the part, the kind of fault and its value. The twin answers at once: accepted, or refused
-        with the reason.</p>${faultForm(rover, parts)}</section>
-      <section class="card"><h2>Every fault the twin knows</h2><div id="f-catalogue">${catalogueTable(store.cat)}</div></section></div>
-    <div class="col">${faultsCard(rover, clearFault)}${eventsCard(rover)}</div></div>`,
+        with the reason.</p>${faultForm(rover, parts)}</section>${faultsCard(rover, clearFault)}</div>
+    <div class="col">${eventsCard(rover)}<section class="card"><h2>Every fault the twin knows</h2>
+      <div id="f-catalogue">${catalogueTable(store.cat)}</div></section></div></div>`,
 };

@@ -133,7 +133,7 @@ function progress(playing) {
         <td class="num">${r.index + 1}</td>
         <td class="wrap">${r.label}<br><small>${triggerText(r.trigger)}</small>${said.has(r.index) && r.fired_t_s !== null
           ? html`<br><small class="note">${said.get(r.index)}</small>` : nothing}</td>
-        <td class=${stepClass(r.status, r.fired_t_s)}>${STATUS[r.status] ?? words(r.status)}${r.outcome
+        <td class="status ${stepClass(r.status, r.fired_t_s)}">${STATUS[r.status] ?? words(r.status)}${r.outcome
           ? html`<br><small>${OUTCOME[r.outcome] ?? words(r.outcome)}</small>` : nothing}</td>
         <td class="num">${r.fired_t_s === null ? "" : clockText(r.fired_t_s)}</td></tr>`)}</table>`;
 }

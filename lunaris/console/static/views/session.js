@@ -108,7 +108,7 @@ function snapshotList(res, r) {
   /** @param {string} name */
   const restore = (name) => () => confirm(`Restore the snapshot "${name}" of ${r}? The twin goes back to where it was when it was saved.`)
     && send("PUT", `control/restore/${name}`, "", r);
-  return html`<table><tr><th>name</th><th class="num">sim time</th><th>saved</th><th></th></tr>${res.data.map((s) => html`<tr>
+  return html`<table><tr><th>name</th><th class="num">sim time</th><th>saved on</th><th></th></tr>${res.data.map((s) => html`<tr>
     <td>${s.name}</td><td class="num">${clockText(s.t_s)}</td><td>${wallTime(s.saved_at)}</td>
     <td>${actionButton({action: "snapshot-restore", label: "Restore", rover: r, target: {snapshot: s.name},
                         run: restore(s.name)})}</td></tr>`)}</table>`;
