@@ -102,8 +102,7 @@ def test_the_page_shows_the_twin_live(live, page, artefacts):
     assert wait_text(page, "rail/12V/state", "voltage_v", r"\d") == f"{volts:.2f}"
     assert field(page, "radio/lander/link", "in_range").text in ("IN RANGE", "OUT OF RANGE")
     WebDriverWait(page, 15).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#charts .uplot"))
-    shoot(page, artefacts, "live")
-    shoot(page, artefacts, "live-tablet", 768, 1024)
+    shoot(page, artefacts, "live", doc=False)
 
 
 def _stream(page, message: dict) -> None:
@@ -153,7 +152,7 @@ def test_inject_and_clear_a_fault_from_the_page(live, page, artefacts):
     p.wait_value(keys.battery_state(R), lambda b: "heating" in b["faults"])  # on the twin's keys
     WebDriverWait(page, 10).until(lambda d: d.find_elements(
         By.CSS_SELECTOR, '#faults-list tr[data-fault="battery/heating"]'))  # on the page
-    shoot(page, artefacts, "faults")
+    shoot(page, artefacts, "faults", doc=False)
     view(page, "live")
     wait_text(page, "battery/state", "faults", "heating")
     click(page, '#faults-list [data-action="fault-clear"][data-component="battery"][data-kind="heating"]')
@@ -218,7 +217,7 @@ def test_reset_brings_the_charge_back_to_the_rover_file(live, page, artefacts):
     p.put(keys.fault(R, "battery", "capacity_loss"), 0.2)
     p.wait_value(keys.battery_state(R), lambda b: b["soc"] < initial - 0.01)
     view(page, "session")
-    shoot(page, artefacts, "session")
+    shoot(page, artefacts, "session", doc=False)
     seen = len(p.samples(keys.battery_state(R)))
     click(page, f'[data-action="reset"][data-rover="{R}"]')
     accept_dialog(page)
@@ -274,7 +273,7 @@ def test_inputs_from_the_page(live, page, artefacts):
     assert "sun angle 80 deg on panel left" in last_answer(page, "accepted")
     p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 80)
     assert p.value(keys.solar_power(R, "right"))["sun_angle_deg"] != 80
-    shoot(page, artefacts, "inputs")
+    shoot(page, artefacts, "inputs", doc=False)
     click(page, '[data-action="input-panel-sun-clear"][data-panel="left"]')
     last_answer(page, "accepted")
     p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 60)
@@ -290,12 +289,13 @@ def test_a_scenario_played_from_the_page(live, page, artefacts):
     p = live.probe
     view(page, "scenarios")
     click(page, '[data-play="short-drill.yaml"]')
+    accept_dialog(page)  # it starts from a reset
     assert "playing" in last_answer(page, "accepted")
     p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.25, timeout_s=30)
-    WebDriverWait(page, 60).until(lambda d: "ended" in d.find_element(By.ID, "sc-play").text)
+    WebDriverWait(page, 60).until(lambda d: "Finished" in d.find_element(By.ID, "sc-play").text)
     text = page.find_element(By.ID, "sc-play").text
     assert "every step has played" in text and "accepted" in text
-    shoot(page, artefacts, "scenarios")
+    shoot(page, artefacts, "short-drill", doc=False)
     marks = [e for e in p.samples(keys.event(R)) if e["kind"] == "scenario"]
     assert [e["params"]["what"] for e in marks][-4:] == ["start", "step", "step", "end"]
     p.wait_value(keys.clock(R), lambda c: c["time_scale"] == 1)  # the speed put back
@@ -319,7 +319,7 @@ def test_a_recording_and_its_report_from_the_page(live, page, artefacts):
     # the list is drawn again as the recorder reports, so the link is read inside the wait
     href = WebDriverWait(page, 10).until(
         lambda d: d.find_element(By.LINK_TEXT, "Open the report").get_attribute("href"))
-    shoot(page, artefacts, "recordings")
+    shoot(page, artefacts, "recordings", doc=False)
     page.get(href)
     WebDriverWait(page, 120).until(lambda d: "Events" in d.page_source)
     page.back()
