@@ -21,8 +21,7 @@ from common import keys
 from common.connection import TX_QUEUE_SIZE
 from lunaris.deploy_dashboard import bridge_hears, dashboard_keys, fleet_names
 from lunaris.deploy_site import DEFAULT_SITE, IDENTITIES, PEOPLE, SERVICES, Site, router_identity
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile
+from services.bridge import MappingFile, RoverNames
 
 __all__ = ["REPO", "ROUTER_FILE", "ROUTER_SECRETS", "acl", "render_router_config", "router_config"]
 

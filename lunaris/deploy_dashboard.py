@@ -13,8 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from common.config import load_rover
-from services.bridge.bindings import Binding, RoverNames, open_keyexpr, rover_names, zenoh_key
-from services.bridge.mapping import MappingFile, ros_name
+from services.bridge import Binding, MappingFile, RoverNames, open_keyexpr, ros_name, rover_names, zenoh_key
 
 __all__ = ["FLEET_FILES", "bridge_hears", "dashboard_files", "dashboard_keys", "fleet_names",
            "inbound_regexes",

@@ -46,9 +46,7 @@ from lunaris.deploy_secrets import (
     write_private,
 )
 from lunaris.deploy_site import SERVICES, RouterSpec, Site
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile, load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, MappingFile, RoverNames, load_mapping
 
 __all__ = ["check_router_folder", "check_site_secrets", "make_site_secrets", "site_fleet",
            "site_problems", "write_router_configs"]

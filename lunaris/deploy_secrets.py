@@ -28,9 +28,7 @@ from typing import Any
 from common.connection import is_demo_password
 from lunaris.deploy_dashboard import dashboard_files, fleet_names
 from lunaris.deploy_site import IDENTITIES
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile, load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, MappingFile, RoverNames, load_mapping
 
 __all__ = ["MIN_DISTINCT_CHARS", "MIN_PASSWORD_LEN", "check_secrets", "client_config",
            "credentials_problems", "make_ca", "make_certificate", "make_certificates",

@@ -24,8 +24,7 @@ import zenoh.ext as zext
 
 from common import keys
 from lunaris.deploy import IDENTITIES, SERVICES, render_router_config
-from services.bridge.mapping import load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, load_mapping
 from tests.deploy.conftest import (
     DEPLOY,
     REPO,
