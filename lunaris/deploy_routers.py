@@ -33,10 +33,11 @@ import subprocess
 from pathlib import Path
 
 from lunaris.deploy_acl import REPO, ROUTER_SECRETS, render_router_config
-from lunaris.deploy_dashboard import dashboard_files, fleet_names
+from lunaris.deploy_dashboard import fleet_names
 from lunaris.deploy_secrets import (
     client_config,
     credentials_problems,
+    dashboard_files,
     make_ca,
     make_certificate,
     new_password,
