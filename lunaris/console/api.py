@@ -61,7 +61,7 @@ def humane(message: str) -> str:
 
 
 def _params(struct: type) -> list[dict[str, Any]]:
-    if struct is NoParams:
+    if issubclass(struct, NoParams):
         return []
     info = mi.type_info(struct)
     assert isinstance(info, mi.StructType)

@@ -26,7 +26,7 @@ is what it draws over the next. Pure: no I/O, no clock, no Zenoh.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 from common.config import Drive
@@ -39,7 +39,6 @@ __all__ = [
     "capped_speed",
     "drive_power_w",
     "leg_energy_j",
-    "motors_powered",
     "tractive_force_n",
 ]
 
@@ -77,14 +76,6 @@ def leg_energy_j(force_n: float, distance_m: float, speed_m_per_s: float, effici
     """Energy drawn over a leg driven at a steady speed [J]: ``F d / eta + idle_w d / v``."""
     duration_s = distance_m / speed_m_per_s
     return drive_power_w(force_n, speed_m_per_s, efficiency, idle_w, regen_efficiency) * duration_s
-
-
-def motors_powered(load_on: bool, load_faults: Iterable[str]) -> bool:
-    """Whether the drive load supplies the motors: its rail is on and it is neither open nor
-    shorted (a ``stuck`` load misreports its power, the wheels still turn)."""
-    if not load_on:
-        return False
-    return not any(f == "open" or f == "short" for f in load_faults)
 
 
 class DriveReading(NamedTuple):
@@ -173,8 +164,9 @@ class DriveModel:
         return True
 
     def set_powered(self, powered: bool) -> bool:
-        """The drive load supplies the motors or not (see :func:`motors_powered`); True when
-        that changed. Without power the rover halts where it is and resumes when it returns."""
+        """The drive load supplies the motors or not (see
+        :func:`common.faults.supplies_device`); True when that changed. Without power the
+        rover halts where it is and resumes when it returns."""
         if powered == self.powered:
             return False
         self.powered = powered

@@ -18,7 +18,7 @@ from typing import Any
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey, Params
+from common.faults import Fault
 from common.messages import BadInput, DriveState, RadioLink, RadioPosition, decode, decode_input
 from common.runtime import Runtime, Sample
 from services.radio.model import RadioModel, relative_to_site
@@ -52,7 +52,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if force or prev is None or prev[0] != link.in_range or now - prev[1] >= HEARTBEAT_S:
             last[(rover, name)] = (link.in_range, now)
             rt.publish(keys.radio_link(rover, name), RadioLink(
-                t_s=rt.t_s[rover], faults=m.faults(), **link._asdict()), reliable=True)
+                t_s=rt.t_s[rover], **link._asdict()), reliable=True)  # a radio has no alarm
 
     def heartbeat() -> None:
         for rover, named in radios.items():
@@ -85,10 +85,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         for name in follow(s.rover, state.x_m, state.y_m):
             publish(s.rover, name)  # on a change of in_range at once, else with the heartbeat
 
-    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
-        assert fk.name is not None
-        radios[rover][fk.name].apply_fault(fk, params)
-        publish(rover, fk.name, force=True)
+    def apply_faults(rover: str, name: str | None, faults: tuple[Fault, ...]) -> None:
+        assert name is not None  # a radio fault names its radio
+        radios[rover][name].set_faults(faults)
+        publish(rover, name, force=True)
 
     def get_state(rover: str) -> dict[str, Any]:
         return {name: m.state() for name, m in radios[rover].items()}
@@ -108,7 +108,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     rt.subscribe(keys.input_radio_position("*", "*"), on_position)
     rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
-    rt.faults.own("radio", lambda rover: radios[rover], apply_fault)
+    rt.faults.own("radio", lambda rover: radios[rover], apply_faults)
     for rover in starts:
         follow(rover, *starts[rover])
     rt.own_state(get_state, set_state, reset, after=republish)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey, Params
+from common.faults import Fault
 from common.messages import (
     BARE_FIELD,
     BadInput,
@@ -31,9 +31,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def publish(rover: str) -> None:
         m = models[rover]
         t = rt.t_s[rover]
-        for name, power_w, dust, faults in m.panels():
+        for name, power_w, dust in m.panels():
             rt.publish(keys.solar_power(rover, name), SolarPower(
-                t_s=t, power_w=power_w, sun_angle_deg=m.angle_of(name), dust=dust, faults=faults))
+                t_s=t, power_w=power_w, sun_angle_deg=m.angle_of(name), dust=dust))
         rt.publish(keys.umbilical_state(rover), UmbilicalState(
             t_s=t, connected=m.umbilical_connected, power_w=m.umbilical_power_w))
 
@@ -78,8 +78,13 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.accepted_input(s.rover, s.key, "umbilical " + ("plugged in" if plugged else "unplugged"),
                           {"connected": plugged})
 
-    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
-        models[rover].apply_fault(fk, params)
+    def apply_panel_faults(rover: str, panel: str | None, faults: tuple[Fault, ...]) -> None:
+        assert panel is not None  # a solar fault names its panel
+        models[rover].set_panel_faults(panel, faults)
+        publish(rover)
+
+    def apply_umbilical_faults(rover: str, _: str | None, faults: tuple[Fault, ...]) -> None:
+        models[rover].set_umbilical_faults(faults)
         publish(rover)
 
     rt.on_tick(on_tick)
@@ -87,8 +92,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.input_panel_sun_angle("*", "*"), lambda s: panel_input(s, "sun_angle"))
     rt.subscribe(keys.input_umbilical("*"), on_umbilical)
     rt.subscribe(keys.input_solar_dust("*", "*"), lambda s: panel_input(s, "dust"))
-    rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_fault)
-    rt.faults.own("umbilical", None, apply_fault)
+    rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_panel_faults)
+    rt.faults.own("umbilical", None, apply_umbilical_faults)
     rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),
                  lambda rover: models[rover].reset(), after=publish)
     rt.faults.restore()

@@ -9,7 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import Rover, load_rover
-from common.faults import fault_of
+from common.faults import Short
 from common.messages import DriveTraverse, TraverseWaypoint
 from common.traverse import plan
 from services.composed import ComposedTwin, run_budget
@@ -58,7 +58,8 @@ def test_a_long_run_sheds_in_order_then_depletes(mapp):
 
 def test_a_short_trips_the_rail_and_darkens_its_loads(mapp):
     twin = ComposedTwin(mapp, seed=1)
-    twin.loads.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+    twin.set_faults("load", "nav_camera", [Short(resistance_ohm=0.05)])
+    assert twin.power.switches["5V_CH2"].tripped  # at once, as the services do
     twin.step()
     assert twin.power.switches["5V_CH2"].tripped
     assert twin.loads.power("hazard_cameras") == (0.0, False)
@@ -97,7 +98,7 @@ def test_the_drive_moves_and_sets_its_load_in_the_composed_twin(driving):
     assert twin.drive.y_m == pytest.approx(0.1)  # 10 ticks of 0.1 s at 0.1 m/s
     assert twin.loads.power("drive_motors") == (pytest.approx(9.5), True)
     # a short on the 12 V rail's heater trips it: the drive loses its power and halts
-    twin.loads.apply_fault(*fault_of("load/survival_heater/short", {"resistance_ohm": 0.05}))
+    twin.set_faults("load", "survival_heater", [Short(resistance_ohm=0.05)])
     twin.step()
     assert twin.power.switches["12V"].tripped
     y = twin.drive.y_m
@@ -169,10 +170,10 @@ def test_the_fast_path_computes_what_the_general_path_computes(mapp):
     for tick in range(4000):
         if tick == 500:
             for twin in (fast, general):
-                twin.loads.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+                twin.set_faults("load", "nav_camera", [Short(resistance_ohm=0.05)])
         if tick == 800:
             for twin in (fast, general):
-                twin.loads.apply_fault(*fault_of("load/nav_camera/short"))
+                twin.set_faults("load", "nav_camera", [])
                 twin.power.command("5V_CH2", reset=True)
         if tick == 1200:
             for twin in (fast, general):
@@ -184,3 +185,4 @@ def test_the_fast_path_computes_what_the_general_path_computes(mapp):
         assert fast.loads.rail_on == general.loads.rail_on, tick
     assert fast.battery.depleted or fast.battery.uv_cutoff  # the run went all the way down
     assert fast.power.state() == general.power.state()
+

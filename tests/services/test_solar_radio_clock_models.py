@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import Radio, load_rover
-from common.faults import fault_of
+from common.faults import Degraded, Disconnect, Dust, Failure, Short
 from services.clock.model import ClockModel
 from services.radio.model import RadioModel, in_range, position_xy
 from services.solar.model import SolarModel, panel_power
@@ -31,16 +31,25 @@ def test_panel_power_formula(angle, dust, degradation, expected):
 
 def test_panel_faults_and_umbilical():
     m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
-    m.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.3}))
-    m.apply_fault(*fault_of("solar/right/disconnect", {}))
-    powers = {name: p for name, p, _, _ in m.panels()}
-    assert_allclose(powers["left"], 1361 * 0.12 * 0.29 * 0.5 * 0.7)
-    assert powers["right"] == 0.0
+    m.set_panel_faults("left", [Dust(fraction=0.3)])
+    m.set_panel_faults("right", [Disconnect()])
+    panels = {name: (p, dust) for name, p, dust in m.panels()}
+    assert_allclose(panels["left"][0], 1361 * 0.12 * 0.29 * 0.5 * 0.7)
+    assert panels["left"][1] == 0.0  # the environment's dust: a dust fault shows as less power
+    assert panels["right"] == (0.0, 0.0)
     assert (m.umbilical_connected, m.umbilical_power_w) == (False, 0.0)
     m.umbilical_plugged = True
     assert m.umbilical_power_w == 120.0
-    m.apply_fault(*fault_of("umbilical/disconnect", {}))
-    assert m.umbilical_power_w == 0.0
+    m.set_umbilical_faults([Disconnect()])
+    assert m.umbilical_power_w == 0.0 and m.umbilical_plugged  # no supply, still plugged in
+    m.set_umbilical_faults([])
+    assert m.umbilical_power_w == 120.0
+    m.set_panel_faults("left", [Dust(fraction=0.0)])  # in effect, and changes nothing
+    assert_allclose(m.panels()[0][1], 1361 * 0.12 * 0.29 * 0.5)
+    with pytest.raises(ValueError, match="a panel has no fault kind 'short'"):
+        m.set_panel_faults("left", [Short()])
+    with pytest.raises(ValueError, match="the umbilical has no fault kind 'dust'"):
+        m.set_umbilical_faults([Dust(fraction=0.1)])
 
 
 # Ellipse a = 400, b = 250 centred at (100, -50).
@@ -67,14 +76,15 @@ def test_radio_faults():
     m = RadioModel(Radio(name="lander", a_m=400, b_m=250, offset_x_m=100, offset_y_m=0))
     m.distance_m, m.angle_deg = 450.0, 0.0      # ((450 - 100) / 400)^2 = 0.766: in range
     assert m.link().in_range
-    m.apply_fault(*fault_of("radio/lander/degraded", {"range_scale": 0.5}))  # ((350) / 200)^2 = 3.06: out
+    m.set_faults([Degraded(range_scale=0.5)])  # ((350) / 200)^2 = 3.06: out
     assert not m.link().in_range
-    m.apply_fault(*fault_of("radio/lander/degraded", {"range_scale": 0.0}))  # zero size holds nothing
+    m.set_faults([Degraded(range_scale=0.0)])  # zero size holds nothing
     m.distance_m = 100.0
     assert not m.link().in_range
-    m.apply_fault(*fault_of("radio/lander/degraded"))
-    m.apply_fault(*fault_of("radio/lander/failure", {}))
+    m.set_faults([Failure()])
     assert not m.link().in_range
+    m.set_faults([])
+    assert m.link().in_range
 
 
 def test_clock_ticks_scales_and_pauses():
@@ -92,17 +102,19 @@ def test_clock_ticks_scales_and_pauses():
 
 def test_dust_as_an_input_is_a_second_layer_over_the_dust_fault():
     m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
-    clean = {name: p for name, p, _, _ in m.panels()}["left"]
+    clean = {name: p for name, p, _ in m.panels()}["left"]
     m.set_input_dust("left", 0.5)
-    (name, power, dust, faults), _ = m.panels()
-    assert (name, dust, faults) == ("left", 0.5, [])  # exact with one layer
+    (name, power, dust), _ = m.panels()
+    assert (name, dust) == ("left", 0.5)  # exact with one layer
     assert_allclose(power, clean * 0.5)
-    m.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.3}))
-    _, power, dust, faults = m.panels()[0]
-    assert faults == ["dust"] and dust == pytest.approx(1 - 0.7 * 0.5)  # 0.65
-    assert_allclose(power, clean * 0.7 * 0.5)
+    m.set_panel_faults("left", [Dust(fraction=0.3)])
+    _, power, dust = m.panels()[0]
+    assert dust == 0.5  # the environment's, the input: never the fault's
+    assert_allclose(power, clean * 0.7 * 0.5)  # 1 - (1 - 0.3)(1 - 0.5) = 0.65 of it gone
     assert m.state()["input_dust"] == {"left": 0.5}  # kept across a restart
     m.set_input_dust("left", None)
-    assert m.panels()[0][2] == 0.3
+    assert m.panels()[0][2] == 0.0
+    assert_allclose(m.panels()[0][1], clean * 0.7)
     with pytest.raises(ValueError, match="no panel 'wing'"):
         m.set_input_dust("wing", 0.1)
+
