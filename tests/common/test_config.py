@@ -203,3 +203,28 @@ def test_any_value_anywhere_gives_problems_not_a_crash(path, value):
         parse_rover(yaml.safe_dump(data))
     except ConfigError as exc:
         assert exc.problems and all(isinstance(p, str) for p in exc.problems)
+
+
+def test_lunaris_check_names_every_problem_of_a_file_in_one_run(tmp_path):
+    """Issue 24: a missing field, a bad efficiency, a short curve and a load on an unknown
+    rail, all four in one run (the unknown rail used to show only once the others were fixed:
+    a rail that was not well formed hid every rail's name)."""
+    bad = tmp_path / "four.yaml"
+    bad.write_text(broken(
+        MAPP,
+        ("{name: 12V,     voltage_v: 12.0, current_limit_a: 10.0,", "{name: 12V,     voltage_v: 12.0,"),
+        ("current_limit_a: 5.0,  efficiency: 0.90, essential",
+         "current_limit_a: 5.0,  efficiency: 1.5, essential"),
+        ("4.11, 4.20]", "4.11]"),
+        ("rail: 5V_CH2,  nominal_w: 3.5", "rail: 5V_CH9,  nominal_w: 3.5"),
+    ))
+    run = subprocess.run(lunaris_cmd("check", str(bad)), capture_output=True, text=True,
+                         cwd=ROOT, timeout=60)
+    assert run.returncode == 1
+    assert "4 problem(s)" in run.stderr, run.stderr
+    for want in ("rails[0].current_limit_a: missing required field",
+                 "rails[1].efficiency: must be <= 1.0, got 1.5",
+                 "battery.ocv_curve.volts: expected 11 values, got 10",
+                 "loads[4].rail: no rail named '5V_CH9' (rails: 12V, 5V_CH1, 5V_CH2, 3V3_CH1, 3V3_CH2)"):
+        assert want in run.stderr, (want, run.stderr)
+
