@@ -83,10 +83,9 @@ class BatteryReading(NamedTuple):
 
 class BatteryModel:
     """One pack. ``demand_w`` (net, positive = discharge) is held until the next change;
-    :meth:`step` integrates it over ``dt``. The injected faults in effect on the pack (SPEC
-    §6) are given to :meth:`set_faults`, which applies them: ``resistance`` multiplies R0 and
-    every branch resistance. It keeps their effect, never a record of them (the fault book is
-    that), and reports only its own alarms (:meth:`derived_faults`)."""
+    :meth:`step` integrates it over ``dt``. :meth:`set_faults` applies the injected faults in
+    effect (SPEC §6; ``resistance`` multiplies R0 and every branch resistance), keeping their
+    effect, never a record; it reports only its own alarms (:meth:`derived_faults`)."""
 
     def __init__(self, cfg: BatteryConfig):
         self.cfg = cfg
@@ -107,8 +106,7 @@ class BatteryModel:
         self.demand_w = 0.0
         self.branch_v = [0.0] * len(self._cj)
         # what the injected faults do (and the capacity loss, a property)
-        self.resistance_factor = 1.0
-        self.injected_heat_w = 0.0
+        self.resistance_factor, self.injected_heat_w = 1.0, 0.0
         self.disconnected = False  # off the bus: its connection open
         # latched protections
         self.depleted = self.soc <= cfg.depleted_soc
