@@ -210,10 +210,20 @@ class Solar(Strict, frozen=True):
 
 
 class Umbilical(Strict, frozen=True):
-    """A wired supply from the lander or a charging station."""
+    """A wired supply from the lander or a charging station: a cable. A rover that drives
+    farther than cable_m from where it was plugged in pulls it out (the twin unplugs it, with
+    an event); a traverse does not start while it is plugged in, unless the cable follows the
+    rover (follows_rover)."""
 
     connected: Annotated[bool, doc("plugged in at the start")] = False
     power_w: Annotated[NonNegative, doc("what the connection can supply [W]")] = 0.0
+    cable_m: Annotated[NonNegative | None, doc(
+        "the cable's reach from where it was plugged in [m, straight line in the site frame]; "
+        "none: no slack, the rover cannot drive while plugged in")] = None
+    follows_rover: Annotated[bool, doc(
+        "the cable pays out behind the rover (a tether): a traverse may start while plugged "
+        "in, and the rover is unplugged once farther than cable_m from where it was plugged "
+        "in (needs cable_m); false: a traverse is refused while plugged in")] = False
 
 
 class RadioSite(Strict, frozen=True):
@@ -232,6 +242,10 @@ class Radio(Strict, frozen=True):
     b_m: Annotated[Positive, doc("ellipse semi-axis along y [m]")]
     offset_x_m: Annotated[float, doc("ellipse centre offset along x [m]")] = 0.0
     offset_y_m: Annotated[float, doc("ellipse centre offset along y [m]")] = 0.0
+    load: Annotated[Name | None, doc(
+        "the load that powers the rover's end of this link: while it has no power (its rail "
+        "off, tripped, failed or shed, or the load's circuit open) the radio is out of range; "
+        "none: always powered")] = None
     site: Annotated[RadioSite | None, doc(
         "where the radio stands in the site frame; on a rover with a drive section the radio "
         "then follows the rover's position (drive/state) and refuses the position input")] = None
@@ -368,6 +382,15 @@ def _semantic_problems(d: dict) -> list[str]:
     if solar is not None:
         _unique("solar.panels", [p.name for p in solar.panels], problems)
     _unique("radios", _names(d.get("radios")), problems)
+    for i, raw in enumerate(_list(d.get("radios"))):
+        load = raw.get("load") if isinstance(raw, dict) else None
+        if isinstance(load, str) and load not in load_names:
+            problems.append(f"radios[{i}].load: no load named {load!r} "
+                            f"(loads: {', '.join(load_names) or 'none'})")
+    umbilical = _typed(d.get("umbilical"), Umbilical)
+    if umbilical is not None and umbilical.follows_rover and umbilical.cable_m is None:
+        problems.append("umbilical.follows_rover: a cable that follows the rover needs its "
+                        "length, cable_m")
     drive = _typed(d.get("drive"), Drive)
     if drive is not None:
         loads = [x for x in (_typed(x, Load) for x in _list(d.get("loads"))) if x is not None]

@@ -279,6 +279,10 @@ DERIVED: dict[str, dict[str, str]] = {
     "load/<name>": {
         "over_current": "drawing more than its max_w (normally for a moment: its rail trips)",
     },
+    "radio/<name>": {
+        "unpowered": "the radio's load has no power (rail off, tripped, failed or shed, or the "
+                     "load's circuit open): never in range",
+    },
 }
 
 

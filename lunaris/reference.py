@@ -247,7 +247,7 @@ def faults_page() -> str:
             "event (`fault_raised`, `fault_resolved`) on a key such as "
             "`lunaris/<rover>/battery/over_temperature` or `lunaris/<rover>/rail/12V/tripped`. "
             "They are the alarms the telemetry carries (`battery/state.faults` and `fault_code`, "
-            "`load/<load>/power.faults`; panels and radios have none):\n\n"
+            "`load/<load>/power.faults`, `radio/<radio>/link.faults`; panels have none):\n\n"
             + _table(("component", "fault", "meaning"), [
                 (f"`{component}`", f"`{name}`", meaning)
                 for component, faults in DERIVED.items() for name, meaning in faults.items()])

@@ -6,8 +6,8 @@ draw new samples, the drive (of a rover that has one) moves over the tick and
 sets its load's power, solar and the PDM resolve rails (trips, shedding,
 protection) and the new net demand goes to the battery. Faults are given to the
 models as the services give them, typed (:data:`common.faults.Fault`), with
-:meth:`ComposedTwin.set_faults`: the faults in effect on one component at a time. No I/O, no
-clock, no Zenoh.
+:meth:`ComposedTwin.set_faults`: the faults in effect on one component at a time. The
+umbilical's cable follows the drive as the solar service makes it. No I/O, no clock, no Zenoh.
 """
 
 from __future__ import annotations
@@ -174,12 +174,15 @@ class ComposedTwin:
         self.summary = self._resolve()
 
     def _step_drive(self, drive: DriveModel) -> None:
-        """As the drive and loads services do: the drive moves over the tick if its load
-        supplies it, and sets its load's power for the next tick."""
+        """As the drive, loads and solar services do: the drive moves over the tick if its
+        load supplies it, and sets its load's power for the next tick; a rover that drives
+        past its umbilical's cable pulls it out."""
         loads, name = self.loads, self._drive_load
         drive.set_powered(loads.supplied(name))
         drive.step(self.dt_s)
         loads.driven_w[name] = drive.power_w
+        if self.solar.umbilical_plugged:
+            self.solar.move_rover(drive.x_m, drive.y_m, drive.z_m)
 
     def reading(self) -> BatteryReading:
         return self.battery.reading()

@@ -29,7 +29,7 @@ import math
 from collections.abc import Sequence
 from typing import Any, NamedTuple
 
-from common.config import Drive
+from common.config import Drive, Umbilical
 from common.messages import DriveStatus
 from common.traverse import Leg
 
@@ -40,6 +40,7 @@ __all__ = [
     "drive_power_w",
     "leg_energy_j",
     "tractive_force_n",
+    "umbilical_holds",
 ]
 
 _EPS_M = 1e-9  # legs shorter than this are arrived at at once
@@ -76,6 +77,17 @@ def leg_energy_j(force_n: float, distance_m: float, speed_m_per_s: float, effici
     """Energy drawn over a leg driven at a steady speed [J]: ``F d / eta + idle_w d / v``."""
     duration_s = distance_m / speed_m_per_s
     return drive_power_w(force_n, speed_m_per_s, efficiency, idle_w, regen_efficiency) * duration_s
+
+
+def umbilical_holds(umbilical: Umbilical, plugged: bool) -> str | None:
+    """Why a traverse cannot start now, or None: while the umbilical is plugged in the rover
+    stays put, unless its cable follows the rover (SPEC §12e)."""
+    if not plugged or umbilical.follows_rover:
+        return None
+    reach = ("it has no slack" if umbilical.cable_m is None
+             else f"its {umbilical.cable_m:g} m cable does not follow the rover")
+    return ("the umbilical is plugged in and " + reach + ": unplug it first "
+            "(input/umbilical false)")
 
 
 class DriveReading(NamedTuple):

@@ -9,6 +9,8 @@ waypoint, asks for more than the rover's maximum speed or a leg steeper than its
 ``drive/state`` (the loads service applies it); its ``load/<name>/power`` (``on``: its rail is
 on) and the loads' faults in effect (``faults/active/loads``, the fault book's record) tell this
 service whether the motors are supplied (a rail off, an open or shorted load halt the rover).
+A traverse is refused while the umbilical is plugged in (``umbilical/state``), unless its cable
+follows the rover (SPEC §12e; the solar service unplugs a rover that drives past its cable).
 """
 
 from __future__ import annotations
@@ -26,12 +28,13 @@ from common.messages import (
     DriveState,
     DriveTraverse,
     LoadPower,
+    UmbilicalState,
     decode,
     decode_input,
 )
 from common.runtime import Runtime, Sample
 from common.traverse import length_and_duration, plan
-from services.drive.model import DriveModel
+from services.drive.model import DriveModel, umbilical_holds
 
 __all__ = ["serve", "serves"]
 
@@ -50,6 +53,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         models[rover_id] = DriveModel(r.drive, max_w)
     load_on = dict.fromkeys(models, True)  # the drive load's rail is on (load/<load>/power)
     load_faults: dict[str, list[ActiveFault]] = {}  # the loads' faults in effect, per rover
+    plugged = {r: configs[r].umbilical.connected for r in models}  # umbilical/state
 
     def publish(rover: str) -> None:
         if rover in models:
@@ -71,6 +75,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                      f"odometer {m.odometer_m:.1f} m")
             return
         cmd = decode_input(s.payload, DriveTraverse)
+        held = umbilical_holds(configs[s.rover].umbilical, plugged[s.rover])
+        if held is not None:
+            raise BadInput(held)
         start = (m.x_m, m.y_m, m.z_m)
         legs, problems = plan(cmd, m.cfg, start)
         if problems:
@@ -101,6 +108,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             load_faults[s.rover] = decode(s.payload, ActiveFaults).faults
             power(s.rover)
 
+    def on_umbilical(s: Sample) -> None:
+        if not s.deleted and s.rover in models:
+            plugged[s.rover] = decode(s.payload, UmbilicalState).connected
+
     def get_state(rover: str) -> dict[str, Any]:
         return models[rover].state() if rover in models else {}
 
@@ -111,6 +122,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def reset(rover: str) -> None:
         if rover in models:
             models[rover].reset()
+            plugged[rover] = configs[rover].umbilical.connected
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.input_drive_traverse("*"), on_traverse)
@@ -119,6 +131,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load, telemetry=True)
     if models:
         rt.subscribe(keys.faults_active("*", "loads"), on_load_faults, history=True)
+        rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
     rt.own_state(get_state, set_state, reset, after=publish)
     for rover in models:
         publish(rover)

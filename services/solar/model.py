@@ -8,8 +8,12 @@ until it is deleted). Dust is the environment's, ``input/solar/<panel>/dust`` (w
 ``1 - (1 - fault) * (1 - input)``, computed as ``fault + input - fault * input`` (exact with
 one layer). The model is given the faults in effect on each panel and on the umbilical
 (:meth:`SolarModel.set_panel_faults`, :meth:`SolarModel.set_umbilical_faults`) and keeps
-what they do, never a record of them: the panels have no alarms of their own. The
-umbilical, when connected, can supply up to its ``power_w``.
+what they do, never a record of them: the panels have no alarms of their own.
+
+The umbilical, when plugged in, can supply up to its ``power_w``. It is a cable of
+``umbilical.cable_m`` (none: no slack at all): a rover that drives farther than that from
+where it was plugged in pulls it out (:meth:`SolarModel.move_rover`). Distances are straight
+lines in the site frame, from the rover's position when it was plugged in.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ from common.faults import Disconnect, Dust, FaultParams, kind_of
 
 __all__ = ["SolarModel", "panel_power"]
 
+Point = tuple[float, float, float]
+
 
 def panel_power(irradiance_w_per_m2: float, area_m2: float, efficiency: float,
                 sun_angle_deg: float, dust: float = 0.0, degradation: float = 0.0) -> float:
@@ -35,6 +41,10 @@ class SolarModel:
     def __init__(self, rover: Rover):
         self.cfg = rover.solar
         self.umbilical_cfg = rover.umbilical
+        d = rover.drive
+        self.start_m: Point = (d.start.x_m, d.start.y_m, d.start.z_m) if d is not None else (
+            0.0, 0.0, 0.0)
+        self.rover_m: Point = self.start_m  # where the rover is (drive/state)
         self.sun_angle_deg = rover.solar.sun_angle_deg
         self.panel_angle_deg: dict[str, float] = {}  # panels with their own sun angle
         self.input_dust: dict[str, float] = {}  # dust set as an input (the environment's)
@@ -43,10 +53,12 @@ class SolarModel:
         self.dark: set[str] = set()  # panels disconnected
         self.umbilical_cut = False  # no supply through the umbilical
         self.umbilical_plugged = rover.umbilical.connected
+        self.plugged_at_m: Point | None = self.start_m if self.umbilical_plugged else None
 
     def state(self) -> dict[str, Any]:
         """The inputs that evolve (the panels' faults are re-applied by their owner)."""
         return {"sun_angle_deg": self.sun_angle_deg, "umbilical_plugged": self.umbilical_plugged,
+                "plugged_at_m": None if self.plugged_at_m is None else list(self.plugged_at_m),
                 "panel_angle_deg": dict(self.panel_angle_deg), "input_dust": dict(self.input_dust)}
 
     def set_state(self, state: dict) -> None:
@@ -54,7 +66,12 @@ class SolarModel:
         names = set(self.fault_dust)
         self.panel_angle_deg = {n: float(a) for n, a in (state.get("panel_angle_deg") or {}).items()
                                 if n in names}
-        self.umbilical_plugged = bool(state.get("umbilical_plugged", self.umbilical_cfg.connected))
+        self.rover_m = self.start_m  # until the drive says where the rover is
+        plugged = bool(state.get("umbilical_plugged", self.umbilical_cfg.connected))
+        at = state.get("plugged_at_m")
+        self.umbilical_plugged = plugged
+        self.plugged_at_m = (tuple(float(v) for v in at) if isinstance(at, list) and len(at) == 3
+                             else self.start_m) if plugged else None  # type: ignore[assignment]
         self.input_dust = {k: float(v) for k, v in state.get("input_dust", {}).items() if k in names}
 
     def set_input_dust(self, panel: str, fraction: float | None) -> None:
@@ -102,6 +119,32 @@ class SolarModel:
                 case _:
                     raise ValueError(f"the umbilical has no fault kind {kind_of(fault)!r}")
         self.umbilical_cut = cut
+
+    # -- the umbilical's cable ----------------------------------------------------------------
+
+    def plug(self, plugged: bool) -> None:
+        """Plug the umbilical in where the rover is now, or pull it out."""
+        self.umbilical_plugged = plugged
+        self.plugged_at_m = self.rover_m if plugged else None
+
+    @property
+    def cable_m(self) -> float:
+        """How far the rover may go from where it was plugged in [m] (no cable_m: 0)."""
+        return self.umbilical_cfg.cable_m or 0.0
+
+    def move_rover(self, x_m: float, y_m: float, z_m: float) -> float | None:
+        """The rover is at (x, y, z) in the site frame: when that is farther than the cable
+        from where the umbilical was plugged in, it is pulled out, and the distance [m] is
+        returned (None otherwise)."""
+        self.rover_m = (x_m, y_m, z_m)
+        at = self.plugged_at_m
+        if at is None or not self.umbilical_plugged:
+            return None
+        distance_m = math.dist(at, self.rover_m)
+        if distance_m <= self.cable_m:
+            return None
+        self.plug(False)
+        return distance_m
 
     # -- what it reads --------------------------------------------------------------------------
 

@@ -228,3 +228,26 @@ def test_lunaris_check_names_every_problem_of_a_file_in_one_run(tmp_path):
                  "loads[4].rail: no rail named '5V_CH9' (rails: 12V, 5V_CH1, 5V_CH2, 3V3_CH1, 3V3_CH2)"):
         assert want in run.stderr, (want, run.stderr)
 
+
+def test_a_radio_s_load_and_the_umbilical_s_cable():
+    mapp = load_rover(ROVERS / "mapp.yaml")
+    assert mapp.radios[0].load == "uhf_radio"
+    assert (mapp.umbilical.cable_m, mapp.umbilical.follows_rover) == (10.0, False)
+    ltv = load_rover(ROVERS / "ltv.yaml")
+    assert [r.load for r in ltv.radios] == ["s_band_radio", "s_band_radio"]
+    with pytest.raises(ConfigError) as info:
+        parse_rover(broken(MAPP, ("load: uhf_radio}", "load: walkie_talkie}"),
+                           ("  cable_m: 10 ", "  follows_rover: true\n  #"),
+                           ("rail: 5V_CH1,  nominal_w: 4.0,  max_w: 8.0,  std_w: 0.6}",
+                            "rail: 5V_CH1,  nominal_w: -4.0,  max_w: 8.0,  std_w: 0.6}")))
+    assert sorted(info.value.problems) == sorted([
+        "loads[3].nominal_w: must be >= 0.0, got -4.0",  # not well formed: its name still counts
+        "radios[0].load: no load named 'walkie_talkie' (loads: drive_motors, survival_heater, "
+        "flight_computer, uhf_radio, nav_camera, hazard_cameras, imu, sun_sensor, "
+        "nir_spectrometer, thermal_imager)",
+        "umbilical.follows_rover: a cable that follows the rover needs its length, cable_m",
+    ])
+    minimal = broken(MAPP, (", site: {x_m: 0, y_m: 0},\n     load: uhf_radio}", ", site: {x_m: 0, y_m: 0}}"),
+                     ("  cable_m: 10 ", "  #"))
+    r = parse_rover(minimal)
+    assert r.radios[0].load is None and r.umbilical.cable_m is None  # always powered; no slack
