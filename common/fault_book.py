@@ -206,10 +206,6 @@ class FaultBook:
     def _message(self, rover: str) -> ActiveFaults:
         return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover))
 
-    def publish_all(self) -> None:
-        for rover in sorted(self.injected):
-            self._publish(rover)
-
     def _declare(self) -> None:
         if self._declared:
             return
