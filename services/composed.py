@@ -68,7 +68,7 @@ class ComposedTwin:
         if rover.drive is not None:
             load = next(ld for ld in rover.loads if ld.name == rover.drive.load)
             self.drive = DriveModel(rover.drive, load.max_w)
-            self._drive_load = load.name
+            self._drive_load, self._drive_rail = load.name, load.rail
             k = self.loads.index[load.name]
             self._drive_col = self._rail_names.index(load.rail)
             self._rail_loads = [[i for i in members if i != k] for members in self._rail_loads]
@@ -178,7 +178,8 @@ class ComposedTwin:
         load supplies it, and sets its load's power for the next tick; a rover that drives
         past its umbilical's cable pulls it out."""
         loads, name = self.loads, self._drive_load
-        drive.set_powered(loads.supplied(name))
+        # loads.supplied(name), without the call: this runs every tick
+        drive.set_powered(loads.rail_on.get(self._drive_rail, False) and name not in loads.unsupplied)
         drive.step(self.dt_s)
         loads.driven_w[name] = drive.power_w
         if self.solar.umbilical_plugged:
