@@ -102,7 +102,14 @@ class BatteryState(_Msg):
     time_to_empty_s: float | None  # null while charging or idle
     heat_w: float = 0.0
     polarisation_v: list[float] = []  # the equivalent circuit's branch voltages (rc_pairs)
-
+    depleted_soc: Annotated[float, msgspec.Meta(description=(
+        "the state of charge at which the pack counts as empty and goes off line (0..1, the "
+        "rover file's depleted_soc): time_to_empty_s is the time to reach it at the present "
+        "draw"))] = 0.0
+    cutoff_v: Annotated[float | None, msgspec.Meta(description=(
+        "the BMS cut-off [V] (cells_series * cutoff_cell_v): when the terminal voltage under "
+        "load falls below it the pack stops supplying, which a heavy draw can bring before "
+        "depleted_soc; null when the rover file sets none"))] = None
 
 class Percentiles(msgspec.Struct, omit_defaults=False):
     """The 5th, 50th and 95th percentiles of a Monte Carlo outcome; null where not reached."""

@@ -349,6 +349,9 @@ def test_a_snapshot_restores_the_position_and_the_traverse(probe):
 def test_a_map_reads_the_twins_own_numbers(probe):
     """Issue 26.3: what a map draws, from the twin's keys (figures from the rover files)."""
     p = probe
+    # the cut-off in numbers: MAPP 4 cells x 3.2 V; empty at 0 % charge
+    battery = p.wait_value(keys.battery_state(R), lambda b: "cutoff_v" in b)
+    assert battery["depleted_soc"] == 0.0 and battery["cutoff_v"] == pytest.approx(12.8)
     # the radios: where they stand, their nominal footprints, whether the drive moves them
     link = p.wait_value(keys.radio_link(R, "lander"), lambda v: "site" in v)
     assert (link["site"], link["a_m"], link["b_m"], link["offset_x_m"], link["offset_y_m"],
