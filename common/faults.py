@@ -14,14 +14,21 @@ components, which the model applies with ``match`` (``case Dust(fraction=f): ...
 
 On the wire a fault's parameters are a JSON object without the tag (``{"fraction": 0.3}``,
 ``msgspec.structs.asdict``): the kind is the last chunk of its key.
+
+The catalogue speaks two ways: to engineers (each kind's ``description``, the model's own
+terms, in the reference) and to instructors (each kind's plain ``name`` and ``effect``; each
+parameter's ``label``, ``unit`` and ``hint``, carried by the field itself as msgspec metadata:
+``title``, ``extra={"unit": ...}`` and ``description``). :func:`parameters` reads a kind's
+parameters with their words and limits, for the console's forms and the CLI's help.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import Annotated, NamedTuple, TypeAlias
+from typing import Annotated, Any, NamedTuple, TypeAlias
 
 import msgspec
+import msgspec.inspect as mi
 
 from common import keys
 from common.messages import ActiveFault, BadInput, decode_input
@@ -45,6 +52,7 @@ __all__ = [
     "KindSpec",
     "NoParams",
     "Open",
+    "Parameter",
     "Resistance",
     "Short",
     "Stuck",
@@ -54,6 +62,7 @@ __all__ = [
     "kind_of",
     "params_from_dict",
     "parse_fault_key",
+    "parameters",
     "parse_params",
     "supplies_device",
 ]
@@ -67,16 +76,26 @@ class NoParams(FaultParams, frozen=True):
     """Base of the kinds that take no parameters."""
 
 
+def _words(label: str, unit: str, hint: str) -> msgspec.Meta:
+    """A parameter in an instructor's words: its label, the unit it is typed in, and a hint
+    on what it means (read back by :func:`parameters`)."""
+    return msgspec.Meta(title=label, description=hint, extra={"unit": unit})
+
+
 class CapacityLoss(FaultParams, frozen=True, tag="capacity_loss"):
-    fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+    fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0), _words(
+        "Capacity lost", "fraction", "0 to 1: 0.2 takes a fifth of the capacity away")]
 
 
 class Resistance(FaultParams, frozen=True, tag="resistance"):
-    factor: Annotated[float, msgspec.Meta(ge=1.0, le=1e6)]
+    factor: Annotated[float, msgspec.Meta(ge=1.0, le=1e6), _words(
+        "Internal resistance times", "×", "1 is as new, 3 triples it: the voltage sags more "
+        "under load")]
 
 
 class Heating(FaultParams, frozen=True, tag="heating"):
-    heat_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+    heat_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9), _words(
+        "Extra heat", "W", "what the failed thermal control adds, 0 or more")]
 
 
 class Disconnect(NoParams, frozen=True, tag="disconnect"):
@@ -84,7 +103,9 @@ class Disconnect(NoParams, frozen=True, tag="disconnect"):
 
 
 class Short(FaultParams, frozen=True, tag="short"):
-    resistance_ohm: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)] = 0.05
+    resistance_ohm: Annotated[float, msgspec.Meta(gt=0.0, le=1e9), _words(
+        "Resistance of the short", "Ω", "above 0: the smaller, the larger the current "
+        "(0.05 if not given)")] = 0.05
 
 
 class Open(NoParams, frozen=True, tag="open"):
@@ -92,7 +113,8 @@ class Open(NoParams, frozen=True, tag="open"):
 
 
 class Stuck(FaultParams, frozen=True, tag="stuck"):
-    power_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+    power_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9), _words(
+        "Power drawn", "W", "0 or more: drawn whatever the load is told")]
 
 
 class Fail(NoParams, frozen=True, tag="fail"):
@@ -100,7 +122,8 @@ class Fail(NoParams, frozen=True, tag="fail"):
 
 
 class Dust(FaultParams, frozen=True, tag="dust"):
-    fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+    fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0), _words(
+        "Dust cover", "fraction", "0 to 1: 0.25 takes a quarter of the panel's output away")]
 
 
 class Failure(NoParams, frozen=True, tag="failure"):
@@ -108,7 +131,8 @@ class Failure(NoParams, frozen=True, tag="failure"):
 
 
 class Degraded(FaultParams, frozen=True, tag="degraded"):
-    range_scale: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+    range_scale: Annotated[float, msgspec.Meta(ge=0.0, le=1.0), _words(
+        "Range kept", "fraction", "0 to 1: 0.5 leaves half the usual range")]
 
 
 # Every fault of the catalogue: what the fault book keeps and the models match on.
@@ -119,7 +143,9 @@ Fault: TypeAlias = (CapacityLoss | Resistance | Heating | Disconnect | Short | O
 class KindSpec(NamedTuple):
     params: type[FaultParams]
     bare: str | None  # the field a bare JSON number stands for
-    description: str
+    description: str  # what the model does, in its own terms (the reference)
+    name: str  # what an instructor calls it: "Short circuit"
+    effect: str  # what it does, in an instructor's words, one line
 
     @property
     def kind(self) -> str:
@@ -140,27 +166,73 @@ def _kinds(*specs: KindSpec) -> dict[str, KindSpec]:
 
 CATALOGUE: dict[str, dict[str, KindSpec]] = {
     "battery": _kinds(
-        KindSpec(CapacityLoss, "fraction", "usable capacity shrinks"),
-        KindSpec(Resistance, "factor", "internal resistance multiplied"),
-        KindSpec(Heating, "heat_w", "extra internal heat"),
-        KindSpec(Disconnect, None, "pack off the bus"),
+        KindSpec(CapacityLoss, "fraction", "usable capacity shrinks",
+                 "Capacity loss", "part of the pack's capacity is gone: it holds less energy"),
+        KindSpec(Resistance, "factor", "internal resistance multiplied",
+                 "High internal resistance",
+                 "the pack's voltage sags more under load and it warms more (age, cold)"),
+        KindSpec(Heating, "heat_w", "extra internal heat",
+                 "Overheating", "extra heat in the pack, as from a failed thermal control: it "
+                 "warms up and, too hot, switches itself off"),
+        KindSpec(Disconnect, None, "pack off the bus",
+                 "Disconnected", "the pack is off the power bus: nothing runs on the battery"),
     ),
     "load": _kinds(
-        KindSpec(Short, "resistance_ohm", "draws V_rail^2 / R (the device behind it gets nothing)"),
-        KindSpec(Open, None, "draws nothing (the device behind it gets nothing)"),
-        KindSpec(Stuck, "power_w", "draws a constant power"),
+        KindSpec(Short, "resistance_ohm", "draws V_rail^2 / R (the device behind it gets nothing)",
+                 "Short circuit", "draws far more than it should: normally trips its rail"),
+        KindSpec(Open, None, "draws nothing (the device behind it gets nothing)",
+                 "Open circuit", "a broken wire: the load draws nothing and stops working"),
+        KindSpec(Stuck, "power_w", "draws a constant power",
+                 "Stuck power draw", "the load draws a fixed power, whatever it is told"),
     ),
-    "rail": _kinds(KindSpec(Fail, None, "converter dead")),
+    "rail": _kinds(KindSpec(Fail, None, "converter dead",
+                            "Converter failure", "the rail and everything on it go off")),
     "solar": _kinds(
-        KindSpec(Dust, "fraction", "output scaled by 1 - fraction"),
-        KindSpec(Disconnect, None, "no output"),
+        KindSpec(Dust, "fraction", "output scaled by 1 - fraction",
+                 "Dust", "the panel's output drops by the share the dust covers"),
+        KindSpec(Disconnect, None, "no output", "Disconnected", "the panel gives no power"),
     ),
-    "umbilical": _kinds(KindSpec(Disconnect, None, "no supply")),
+    "umbilical": _kinds(KindSpec(Disconnect, None, "no supply",
+                                 "No supply", "the umbilical supplies nothing, plugged in or not")),
     "radio": _kinds(
-        KindSpec(Failure, None, "never in range"),
-        KindSpec(Degraded, "range_scale", "ellipse axes scaled"),
+        KindSpec(Failure, None, "never in range",
+                 "Failure", "the link is lost wherever the rover is"),
+        KindSpec(Degraded, "range_scale", "ellipse axes scaled",
+                 "Reduced range", "the radio reaches less far: the link is lost sooner"),
     ),
 }
+
+
+class Parameter(NamedTuple):
+    """One parameter of a fault kind: its field, its words, and the limits it is checked
+    against (``ge``, ``gt``, ``le``, ``lt``)."""
+
+    name: str  # the payload's field: heat_w
+    label: str  # "Extra heat"
+    unit: str  # "W"
+    hint: str  # "what the failed thermal control adds, 0 or more"
+    limits: dict[str, float]
+    default: float | None  # None: required
+
+
+def parameters(params: type[FaultParams]) -> list[Parameter]:
+    """The parameters of a fault kind (its Struct), with their words and limits; none for the
+    kinds that take none."""
+    info = mi.type_info(params)
+    assert isinstance(info, mi.StructType)  # a FaultParams is a Struct
+    out = []
+    for f in info.fields:
+        t: Any = f.type
+        words: dict[str, Any] = {}
+        extra: dict[str, Any] = {}
+        if isinstance(t, mi.Metadata):
+            words, extra, t = t.extra_json_schema or {}, t.extra or {}, t.type
+        limits = {k: getattr(t, k) for k in ("ge", "gt", "le", "lt") if getattr(t, k, None) is not None}
+        out.append(Parameter(f.name, words.get("title", ""), extra.get("unit", ""),
+                             words.get("description", ""), limits,
+                             None if f.default is mi.NODEFAULT else f.default))
+    return out
+
 
 NAMED_COMPONENTS = frozenset({"load", "rail", "solar", "radio"})
 

@@ -36,6 +36,7 @@ __all__ = [
     "control_restore",
     "control_scenario",
     "control_snapshot",
+    "drive_route",
     "drive_state",
     "event",
     "families",
@@ -120,6 +121,11 @@ def radio_link(rover: str, radio: str) -> str:
 
 def drive_state(rover: str) -> str:
     return f"{ROOT}/{rover}/drive/state"
+
+
+def drive_route(rover: str) -> str:
+    """The traverse the rover follows (published on change, for a map)."""
+    return f"{ROOT}/{rover}/drive/route"
 
 
 def input_drive_traverse(rover: str) -> str:
@@ -276,6 +282,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("umbilical/state", m.UmbilicalState, "solar"),
     _f("radio/{radio}/link", m.RadioLink, "radio"),
     _f("drive/state", m.DriveState, "drive"),
+    _f("drive/route", m.DriveRoute, "drive"),
     _f("event", m.Event, "*"),
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),

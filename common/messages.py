@@ -28,6 +28,7 @@ __all__ = [
     "BatteryState",
     "Clock",
     "ClockControl",
+    "DriveRoute",
     "DriveState",
     "DriveStatus",
     "DriveTraverse",
@@ -45,7 +46,10 @@ __all__ = [
     "RadioPosition",
     "RailCommand",
     "RailState",
+    "RouteWaypoint",
     "ScenarioMark",
+    "SiteXY",
+    "SiteXYZ",
     "SolarPower",
     "SunAngle",
     "TraverseWaypoint",
@@ -98,7 +102,14 @@ class BatteryState(_Msg):
     time_to_empty_s: float | None  # null while charging or idle
     heat_w: float = 0.0
     polarisation_v: list[float] = []  # the equivalent circuit's branch voltages (rc_pairs)
-
+    depleted_soc: Annotated[float, msgspec.Meta(description=(
+        "the state of charge at which the pack counts as empty and goes off line (0..1, the "
+        "rover file's depleted_soc): time_to_empty_s is the time to reach it at the present "
+        "draw"))] = 0.0
+    cutoff_v: Annotated[float | None, msgspec.Meta(description=(
+        "the BMS cut-off [V] (cells_series * cutoff_cell_v): when the terminal voltage under "
+        "load falls below it the pack stops supplying, which a heavy draw can bring before "
+        "depleted_soc; null when the rover file sets none"))] = None
 
 class Percentiles(msgspec.Struct, omit_defaults=False):
     """The 5th, 50th and 95th percentiles of a Monte Carlo outcome; null where not reached."""
@@ -157,18 +168,61 @@ class SolarPower(_Msg):
     faults: list[str] = []
 
 
+class SiteXY(_Msg):
+    """A point on the site's map [m]: x east, y north of the site origin."""
+
+    x_m: float
+    y_m: float
+
+
+class SiteXYZ(_Msg):
+    """A point in the site frame [m]: x east, y north of the site origin, z up."""
+
+    x_m: float
+    y_m: float
+    z_m: float
+
+
 class UmbilicalState(_Msg):
+    """``umbilical/state``: whether the umbilical supplies the rover, and where its cable was
+    plugged in (for a map)."""
+
     t_s: float
     connected: bool
     power_w: float
+    plugged_at: Annotated[SiteXYZ | None, msgspec.Meta(description=(
+        "where the rover was when the umbilical was plugged in (site frame) [m]; null while "
+        "it is not connected"))] = None
+    cable_m: Annotated[float | None, msgspec.Meta(description=(
+        "how far the rover may drive from where it was plugged in before it pulls the plug "
+        "out [m] (the rover file's umbilical.cable_m); null: no slack"))] = None
 
 
 class RadioLink(_Msg):
+    """``radio/<radio>/link``: whether the rover is in range of the radio, the rover's offset
+    from the radio (``x_m`` east, ``y_m`` north [m]), and, for a map, where the radio stands
+    and its footprint as the rover file gives it: the link is in range inside
+    ``((x - offset_x_m) / a_m)^2 + ((y - offset_y_m) / b_m)^2 <= 1``. The footprint is the
+    nominal one: an injected degradation shows only as a link lost sooner."""
+
     t_s: float
     in_range: bool
     x_m: float
     y_m: float
     faults: list[str] = []
+    site: Annotated[SiteXY | None, msgspec.Meta(description=(
+        "where the radio stands (site frame) [m]; null when the rover file gives it no site"))] = None
+    a_m: Annotated[float, msgspec.Meta(description=(
+        "the footprint's semi-axis east-west [m], nominal"))] = 0.0
+    b_m: Annotated[float, msgspec.Meta(description=(
+        "the footprint's semi-axis north-south [m], nominal"))] = 0.0
+    offset_x_m: Annotated[float, msgspec.Meta(description=(
+        "the footprint's centre east of the radio [m]"))] = 0.0
+    offset_y_m: Annotated[float, msgspec.Meta(description=(
+        "the footprint's centre north of the radio [m]"))] = 0.0
+    follows_drive: Annotated[bool, msgspec.Meta(description=(
+        "the rover's position comes from its drive (drive/state): the position input "
+        "input/radio/<radio>/position is refused"))] = False
 
 
 DriveStatus = Literal["parked", "driving", "power_limited", "unpowered", "arrived"]
@@ -197,6 +251,33 @@ class DriveState(_Msg):
     waypoints: int = 0  # in the traverse being driven (or the last one)
     remaining_m: float = 0.0  # along the traverse, to its last waypoint
     energy_j: float = 0.0  # drawn by the drive since the start (or the last reset)
+
+
+class RouteWaypoint(_Msg):
+    """A waypoint of the traverse being driven, site frame [m], with the speed of the leg
+    that ends there [m/s]."""
+
+    x_m: float
+    y_m: float
+    z_m: float
+    speed_m_per_s: float
+
+
+class DriveRoute(_Msg):
+    """``drive/route``: the traverse the rover follows, for a map. Published when it changes
+    (a traverse accepted, replaced or stopped, a reset, a restore) and cached for late
+    joiners, never every tick: where the rover is along it is ``drive/state`` (``waypoint``,
+    ``status``). Empty (``start`` null, no waypoints) when the rover is parked; kept once it
+    has arrived."""
+
+    t_s: float
+    start: Annotated[SiteXYZ | None, msgspec.Meta(description=(
+        "where the rover was when the traverse began (site frame) [m]; null when parked or "
+        "not known (a snapshot older than this field)"))]
+    waypoints: Annotated[list[RouteWaypoint], msgspec.Meta(description=(
+        "in the order they are driven through; empty when parked"))]
+    return_to_start: Annotated[bool, msgspec.Meta(description=(
+        "after the last waypoint the rover comes back through them to start"))]
 
 
 # What an event says happened: a refused input, a fault's life, an accepted command or

@@ -18,18 +18,38 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import textwrap
 
 import zenoh
 
 from common import keys
 from common.connection import add_connection_args
-from common.faults import CATALOGUE
+from common.faults import CATALOGUE, NAMED_COMPONENTS, parameters
 from common.messages import BadInput
 from common.writes import Write, answer_of
 from lunaris.client import ANSWER_S, Mirror, ToolError, close_session, humane, open_session
 from lunaris.confirm import confirm, plan, tool_main
 
-__all__ = ["add_arguments", "main", "parse_value"]
+__all__ = ["add_arguments", "catalogue_help", "main", "parse_value"]
+
+
+def catalogue_help(width: int = 79) -> str:
+    """Every fault kind in an instructor's words, for ``inject --help``: what to type, what
+    it does, and what its value means, from the catalogue (:mod:`common.faults`)."""
+    out = ["faults (COMPONENT KIND, then VALUE where the kind takes one):"]
+    wrap = textwrap.TextWrapper(width=width, initial_indent="      ", subsequent_indent="      ")
+    for component, kinds in CATALOGUE.items():
+        part = f"{component}/<{'panel' if component == 'solar' else 'name'}>" \
+            if component in NAMED_COMPONENTS else component
+        for kind, spec in kinds.items():
+            params = parameters(spec.params)
+            value = "" if not params else " VALUE" if params[0].default is None else " [VALUE]"
+            out.append(f"  {part} {kind}{value}")
+            out.append(wrap.fill(f"{spec.name}: {spec.effect}."))
+            out += [wrap.fill(f"{'VALUE' if len(params) == 1 else p.name}: {p.label} "
+                              f"[{p.unit}] - {p.hint}") for p in params]
+    out.append("\nexample: lunaris fault inject mapp-1 battery heating 40")
+    return "\n".join(out)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,10 +62,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         help="how long to wait for a router that does not answer (default 10 s)")
     sub = p.add_subparsers(dest="action", required=True, metavar="ACTION")
     components = "battery, umbilical, load/<name>, rail/<name>, solar/<panel> or radio/<name>"
-    kinds = "; ".join(f"{c}: {', '.join(k)}" for c, k in CATALOGUE.items())
-
     inject = sub.add_parser("inject", parents=[common], help="inject a fault",
-                            description=f"Inject a fault. Kinds - {kinds}.")
+                            description="Inject a fault: one of those listed below, on a "
+                                        "component of the rover.", epilog=catalogue_help(),
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
     inject.add_argument("rover", help="rover id, e.g. mapp-1")
     inject.add_argument("component", help=components)
     inject.add_argument("kind", help="fault kind")

@@ -26,14 +26,13 @@ import math
 import re
 from typing import Any
 
-import msgspec.inspect as mi
 import zenoh
 from starlette.requests import ClientDisconnect, Request
 from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
 from common import keys
-from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, NoParams
+from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, parameters
 from common.messages import MAX_INPUT_BYTES, BadInput
 from common.writes import plan_write
 from lunaris.client import Accepted, NotApplied, Rejected, describe, humane
@@ -63,25 +62,16 @@ async def read_body(request: Request, limit: int) -> bytes:
     return bytes(data)
 
 
-def _params(struct: type) -> list[dict[str, Any]]:
-    if issubclass(struct, NoParams):
-        return []
-    info = mi.type_info(struct)
-    assert isinstance(info, mi.StructType)
-    out = []
-    for f in info.fields:
-        t = f.type
-        limits = {k: getattr(t, k) for k in ("ge", "le", "gt", "lt") if getattr(t, k, None) is not None}
-        out.append({"name": f.name, "type": "number", **limits,
-                    "default": None if f.default is mi.NODEFAULT else f.default})
-    return out
-
-
 def catalogue() -> dict[str, Any]:
-    """The fault catalogue as the page builds its forms from it."""
+    """The fault catalogue as the page builds its forms from it: per kind its plain ``name``
+    and ``effect`` (and the model's own ``description``), per parameter its ``label``,
+    ``unit`` and ``hint`` beside its limits (:func:`common.faults.parameters`)."""
     return {
         "components": {c: {"named": c in NAMED_COMPONENTS, "kinds": {
-            k: {"description": spec.description, "params": _params(spec.params)}
+            k: {"name": spec.name, "effect": spec.effect, "description": spec.description,
+                "params": [{"name": p.name, "type": "number", **p.limits, "default": p.default,
+                            "label": p.label, "unit": p.unit, "hint": p.hint}
+                           for p in parameters(spec.params)]}
             for k, spec in kinds.items()}} for c, kinds in CATALOGUE.items()},
         "derived": DERIVED,
     }

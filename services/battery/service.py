@@ -15,25 +15,41 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 from common import keys
+from common.config import Battery as BatteryConfig
 from common.config import Rover
 from common.faults import Fault, battery_fault_code
 from common.messages import BatteryState, Clock, PowerSummary, decode
 from common.runtime import Runtime, Sample
+from services.battery.circuit import circuit_tables
 from services.battery.model import BatteryModel
 from services.battery.query import PredictionQueries
 
-__all__ = ["serve"]
+__all__ = ["Limits", "limits", "serve"]
 
 PERSIST_S = 0.2  # wall time between saves: what a killed battery service can lose
 HOLD_S = 0.04  # the longest a tick's state waits for the PDM's summary [s of wall time]
 PDM_HEARD_S = 1.0  # a summary within this long: the PDM is running [s of wall time]
 
 
+class Limits(NamedTuple):
+    """Where a pack stops: ``depleted_soc``, the charge at which it is empty (0..1), and
+    ``cutoff_v``, the BMS cut-off ``cells_series * cutoff_cell_v`` [V] (None without one)."""
+
+    depleted_soc: float
+    cutoff_v: float | None
+
+
+def limits(cfg: BatteryConfig) -> Limits:
+    """The :class:`Limits` of a pack design, as ``battery/state`` publishes them."""
+    return Limits(cfg.depleted_soc, circuit_tables(cfg).cutoff_v)
+
+
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     config = {r.id: r.battery for r in rovers}
+    empty = {r.id: limits(r.battery) for r in rovers}
     packs = {r.id: BatteryModel(r.battery) for r in rovers}
     stepped_t: dict[str, float] = dict.fromkeys(packs, 0.0)  # sim time each pack has reached
     generation: dict[str, float] = {}  # the last generation each rover's PDM reported
@@ -44,6 +60,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.faults.sync_derived(rover, "battery", pack.derived_faults())
         rt.publish(keys.battery_state(rover), BatteryState(
             t_s=rt.t_s[rover] if t_s is None else t_s, fault_code=battery_fault_code(r.faults),
+            depleted_soc=empty[rover].depleted_soc, cutoff_v=empty[rover].cutoff_v,
             **r._asdict()))
 
     # One sample per tick: while the PDM is heard from, a tick's state waits for the PDM's

@@ -81,7 +81,7 @@ def run_traverse(rover: Rover, traverse: DriveTraverse, reserve_soc: float = 0.2
         raise ValueError("; ".join(problems))
     length, duration = length_and_duration(start, legs)
     limit_s = (max_hours * 3600.0) if max_hours is not None else 3.0 * duration + 3600.0
-    drive.start(legs)
+    drive.start(legs, traverse.return_to_start)
     battery = twin.battery
     e0, e_drive0 = battery.energy_j, drive.energy_j
     min_soc = battery.soc

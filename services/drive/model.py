@@ -21,6 +21,10 @@ A leg's energy is therefore ``F d / eta + idle_w t`` (``t = d / v``). Position, 
 energy are integrated exactly within a step, across the waypoints it passes; the reading
 (speed, force, power ...) is that of the leg the rover is on at the end of the step, which
 is what it draws over the next. Pure: no I/O, no clock, no Zenoh.
+
+:meth:`DriveModel.route` is the traverse being followed as a map draws it: where it began, the
+waypoints as listed (each with the speed of its leg) and whether it comes back; empty when
+parked, kept once arrived.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from common.traverse import Leg
 __all__ = [
     "DriveModel",
     "DriveReading",
+    "Route",
     "capped_speed",
     "drive_power_w",
     "leg_energy_j",
@@ -111,6 +116,15 @@ class DriveReading(NamedTuple):
     energy_j: float
 
 
+class Route(NamedTuple):
+    """The traverse a rover follows: where it began (None when parked or not known), the
+    listed waypoints as the legs that end at them, and whether it then comes back."""
+
+    start: tuple[float, float, float] | None
+    waypoints: list[Leg]
+    return_to_start: bool
+
+
 class DriveModel:
     """One rover's drive. ``max_w`` is the drive load's ``max_w``."""
 
@@ -133,6 +147,8 @@ class DriveModel:
         self.legs: list[Leg] = []
         self.leg = 0
         self.status: DriveStatus = "parked"
+        self.origin: tuple[float, float, float] | None = None  # where the traverse began
+        self.returning = False  # the traverse comes back to its origin
         self._suffix: list[float] = [0.0]
         self._idle()
 
@@ -140,7 +156,9 @@ class DriveModel:
         return {"x_m": self.x_m, "y_m": self.y_m, "z_m": self.z_m, "heading_deg": self.heading_deg,
                 "grade_deg": self.grade_deg, "odometer_m": self.odometer_m, "energy_j": self.energy_j,
                 "legs": [list(leg) for leg in self.legs], "leg": self.leg,
-                "arrived": self.status == "arrived"}
+                "arrived": self.status == "arrived",
+                "origin": None if self.origin is None else list(self.origin),
+                "return_to_start": self.returning}
 
     def set_state(self, state: dict[str, Any]) -> None:
         self.reset()
@@ -154,6 +172,10 @@ class DriveModel:
         legs = [Leg(float(x), float(y), float(z), float(v), int(wp))
                 for x, y, z, v, wp in state.get("legs", [])]
         leg = int(state.get("leg", 0))
+        origin = state.get("origin")  # absent in a snapshot older than the route
+        if legs and isinstance(origin, list) and len(origin) == 3:
+            self.origin = (float(origin[0]), float(origin[1]), float(origin[2]))
+        self.returning = bool(legs) and bool(state.get("return_to_start", False))
         if state.get("arrived") and legs:
             self.legs, self.leg, self.status = legs, len(legs), "arrived"
         elif legs and 0 <= leg < len(legs):
@@ -161,9 +183,11 @@ class DriveModel:
 
     # -- commands -----------------------------------------------------------------------------
 
-    def start(self, legs: Sequence[Leg]) -> None:
+    def start(self, legs: Sequence[Leg], return_to_start: bool = False) -> None:
         """Follow these legs from where the rover is (a traverse already being driven is
-        replaced)."""
+        replaced); ``return_to_start``: the legs are the waypoints' and then the same legs
+        back, as :func:`common.traverse.plan` makes them."""
+        self.origin, self.returning = (self.x_m, self.y_m, self.z_m), return_to_start
         self._follow(list(legs), 0)
 
     def stop(self) -> bool:
@@ -171,6 +195,7 @@ class DriveModel:
         if not self.active:
             return False
         self.legs, self.leg, self.status = [], 0, "parked"
+        self.origin, self.returning = None, False
         self._suffix = [0.0]
         self._idle()
         return True
@@ -240,6 +265,13 @@ class DriveModel:
             self.legs[self.leg].waypoint if self.active else None, moving, self.status,
             len(self.legs), self._to_go + self._suffix[min(self.leg + 1, len(self._suffix) - 1)]
             if self.active else 0.0, self.energy_j)
+
+    def route(self) -> Route:
+        """The traverse being followed (kept once arrived); empty when parked."""
+        if not self.legs:
+            return Route(None, [], False)
+        listed = self.legs[: len(self.legs) // 2] if self.returning else self.legs
+        return Route(self.origin, list(listed), self.returning)
 
     # -- inside ---------------------------------------------------------------------------------
 

@@ -11,6 +11,10 @@ on) and the loads' faults in effect (``faults/active/loads``, the fault book's r
 service whether the motors are supplied (a rail off, an open or shorted load halt the rover).
 A traverse is refused while the umbilical is plugged in (``umbilical/state``), unless its cable
 follows the rover (SPEC §12e; the solar service unplugs a rover that drives past its cable).
+
+``drive/route`` is the traverse being followed, for a map (:meth:`DriveModel.route`): published
+when it changes (a traverse accepted or stopped, a reset, a restore) and at start, cached for
+late joiners, never with every tick.
 """
 
 from __future__ import annotations
@@ -25,9 +29,12 @@ from common.messages import (
     ActiveFaults,
     BadInput,
     Clock,
+    DriveRoute,
     DriveState,
     DriveTraverse,
     LoadPower,
+    RouteWaypoint,
+    SiteXYZ,
     UmbilicalState,
     decode,
     decode_input,
@@ -59,6 +66,15 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if rover in models:
             rt.publish(keys.drive_state(rover), DriveState(rt.t_s[rover], *models[rover].reading()))
 
+    def publish_route(rover: str) -> None:
+        if rover in models:
+            route = models[rover].route()
+            rt.publish(keys.drive_route(rover), DriveRoute(
+                t_s=rt.t_s[rover], start=None if route.start is None else SiteXYZ(*route.start),
+                waypoints=[RouteWaypoint(w.x_m, w.y_m, w.z_m, w.speed_m_per_s)
+                           for w in route.waypoints],
+                return_to_start=route.return_to_start), reliable=True)  # rare: never dropped
+
     def on_tick(rover: str, tick: Clock) -> None:
         if rover in models:
             models[rover].step(tick.dt_s)
@@ -71,6 +87,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             if not m.stop():
                 raise BadInput(f"no traverse to stop: the rover is {m.status} at {where}")
             publish(s.rover)
+            publish_route(s.rover)
             rt.event(s.rover, "info", "input", s.key, f"traverse stopped at {where}, "
                      f"odometer {m.odometer_m:.1f} m")
             return
@@ -83,8 +100,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if problems:
             raise BadInput("; ".join(problems))
         replaced = m.active
-        m.start(legs)
+        m.start(legs, cmd.return_to_start)
         publish(s.rover)
+        publish_route(s.rover)
         length, duration = length_and_duration(start, legs)
         rt.event(s.rover, "info", "input", s.key,
                  f"{'traverse replaced' if replaced else 'traverse'}: {len(legs)} waypoint(s), "
@@ -132,6 +150,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     if models:
         rt.subscribe(keys.faults_active("*", "loads"), on_load_faults, history=True)
         rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
-    rt.own_state(get_state, set_state, reset, after=publish)
-    for rover in models:
+    def republish(rover: str) -> None:
         publish(rover)
+        publish_route(rover)
+
+    rt.own_state(get_state, set_state, reset, after=republish)
+    for rover in models:
+        republish(rover)

@@ -11,6 +11,10 @@ out of range, and its one alarm is ``unpowered``.
 A radio with a ``site`` on a rover that drives takes the distance and angle from its site
 to the rover's site position instead (:func:`relative_to_site`): the same convention, so
 ``x`` and ``y`` are the rover's offsets east and north of the radio.
+
+For a map, :attr:`RadioModel.footprint` is the ellipse as the rover file gives it, never
+scaled by a ``degraded`` fault: what the crew reads must not tell it which fault an
+instructor injected (SPEC §12b); the degradation shows only as a link lost sooner.
 """
 
 from __future__ import annotations
@@ -22,13 +26,23 @@ from typing import NamedTuple
 from common.config import Radio
 from common.faults import Degraded, Failure, FaultParams, kind_of
 
-__all__ = ["Link", "RadioModel", "in_range", "position_xy", "relative_to_site"]
+__all__ = ["Footprint", "Link", "RadioModel", "in_range", "position_xy", "relative_to_site"]
 
 
 class Link(NamedTuple):
     in_range: bool
     x_m: float
     y_m: float
+
+
+class Footprint(NamedTuple):
+    """The ellipse a radio reaches, around the radio [m]: semi-axes east-west and
+    north-south, and its centre's offset east and north of the radio."""
+
+    a_m: float
+    b_m: float
+    offset_x_m: float
+    offset_y_m: float
 
 
 def position_xy(distance_m: float, angle_deg: float) -> tuple[float, float]:
@@ -89,6 +103,12 @@ class RadioModel:
         changed = powered != self.powered
         self.powered = powered
         return changed
+
+    @property
+    def footprint(self) -> Footprint:
+        """The nominal ellipse (the rover file's), whatever faults are in effect."""
+        c = self.cfg
+        return Footprint(c.a_m, c.b_m, c.offset_x_m, c.offset_y_m)
 
     def alarms(self) -> list[str]:
         """The radio's own alarms: ``unpowered`` while its load has no power."""

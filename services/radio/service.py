@@ -10,6 +10,9 @@ rover, with the distance and bearing from its site to the position ``drive/state
 (the rover file's ``drive.start`` until the drive says otherwise). Its position input is
 refused then, with the reason: two sources of one position would contradict each other.
 
+Each link sample also carries what a map draws: the radio's ``site`` (null without one), its
+nominal footprint (never scaled by an injected degradation) and ``follows_drive``.
+
 A radio with a ``load`` needs it powered (SPEC §12e): this service follows that load's
 ``load/<load>/power`` (``on``: its rail is on) and the loads' faults in effect
 (``faults/active/loads``, the fault book's record: an open or shorted load powers nothing);
@@ -32,6 +35,7 @@ from common.messages import (
     LoadPower,
     RadioLink,
     RadioPosition,
+    SiteXY,
     decode,
     decode_input,
 )
@@ -49,6 +53,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     # rover -> the radios that follow its drive, and where the rover starts
     following = {r.id: [c for c in r.radios if c.site is not None] for r in rovers if r.drive is not None}
     starts = {r.id: (r.drive.start.x_m, r.drive.start.y_m) for r in rovers if r.drive is not None}
+    # (rover, radio) -> where a map draws it, and whether the drive moves the rover for it
+    placed = {(r.id, c.name): (None if c.site is None else SiteXY(c.site.x_m, c.site.y_m),
+                               any(f.name == c.name for f in following.get(r.id, [])))
+              for r in rovers for c in r.radios}
     # rover -> load -> the radios it powers; whether each load's rail is on (as the file
     # starts it until the loads service says); the loads' faults in effect
     powering: dict[str, dict[str, list[str]]] = {}
@@ -87,8 +95,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if force or prev is None or prev[0] != link.in_range or now - prev[1] >= HEARTBEAT_S:
             last[(rover, name)] = (link.in_range, now)
             alarms = m.alarms()
+            site, follows = placed[(rover, name)]
             rt.publish(keys.radio_link(rover, name), RadioLink(
-                t_s=rt.t_s[rover], faults=alarms, **link._asdict()), reliable=True)
+                t_s=rt.t_s[rover], faults=alarms, **link._asdict(), site=site,
+                follows_drive=follows, **m.footprint._asdict()), reliable=True)
             if alarmed.get((rover, name), []) != alarms:
                 alarmed[(rover, name)] = alarms
                 rt.faults.sync_derived(rover, f"radio/{name}", {a: (

@@ -13,7 +13,10 @@ what they do, never a record of them: the panels have no alarms of their own.
 The umbilical, when plugged in, can supply up to its ``power_w``. It is a cable of
 ``umbilical.cable_m`` (none: no slack at all): a rover that drives farther than that from
 where it was plugged in pulls it out (:meth:`SolarModel.move_rover`). Distances are straight
-lines in the site frame, from the rover's position when it was plugged in.
+lines in the site frame, from the rover's position when it was plugged in. For a map,
+:attr:`SolarModel.umbilical_plugged_at` says where that was while the umbilical is connected:
+while a ``disconnect`` fault cuts it, it reads as unplugged, as ``connected`` does, so that
+what the crew reads never tells a fault from an unplugged cable (SPEC §12b).
 """
 
 from __future__ import annotations
@@ -182,6 +185,11 @@ class SolarModel:
     @property
     def umbilical_connected(self) -> bool:
         return self.umbilical_plugged and not self.umbilical_cut
+
+    @property
+    def umbilical_plugged_at(self) -> Point | None:
+        """Where the umbilical was plugged in (site frame) [m]; None while not connected."""
+        return self.plugged_at_m if self.umbilical_connected else None
 
     @property
     def umbilical_power_w(self) -> float:

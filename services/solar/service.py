@@ -5,7 +5,9 @@ on one (the dashboard's, besides the instructor's dust fault; until deleted),
 
 The umbilical is a cable (SPEC §12e): for a rover that drives, this service follows
 ``drive/state``, and a rover that goes farther than ``umbilical.cable_m`` from where it was
-plugged in pulls it out, which the twin journals as an ``input`` event of its own."""
+plugged in pulls it out, which the twin journals as an ``input`` event of its own.
+``umbilical/state`` says, for a map, where it was plugged in (while connected) and its
+``cable_m``."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from common.messages import (
     Clock,
     DriveState,
     DustInput,
+    SiteXYZ,
     SolarPower,
     SunAngle,
     UmbilicalInput,
@@ -40,8 +43,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         for name, power_w, dust in m.panels():
             rt.publish(keys.solar_power(rover, name), SolarPower(
                 t_s=t, power_w=power_w, sun_angle_deg=m.angle_of(name), dust=dust))
+        at = m.umbilical_plugged_at
         rt.publish(keys.umbilical_state(rover), UmbilicalState(
-            t_s=t, connected=m.umbilical_connected, power_w=m.umbilical_power_w))
+            t_s=t, connected=m.umbilical_connected, power_w=m.umbilical_power_w,
+            plugged_at=None if at is None else SiteXYZ(*at), cable_m=m.umbilical_cfg.cable_m))
 
     def on_tick(rover: str, tick: Clock) -> None:
         publish(rover)

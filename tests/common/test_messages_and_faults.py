@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import msgspec
 import pytest
 
@@ -25,6 +27,7 @@ from common.faults import (
     battery_fault_code,
     injected,
     kind_of,
+    parameters,
     parse_fault_key,
     parse_params,
     supplies_device,
@@ -114,6 +117,51 @@ def test_the_catalogue_names_each_kind_by_its_struct():
     for kinds in CATALOGUE.values():
         for kind, spec in kinds.items():
             assert kind_of(spec.params) == kind
+
+
+# Words an instructor does not use: model symbols, field names, JSON paths.
+_TECHNICAL = re.compile(r"[_^$={}]|V_rail|\bR\b")
+
+
+def test_the_catalogue_speaks_plainly_of_every_kind_and_parameter():
+    """Issue 26.5: a plain name and effect per kind, a label, unit and hint per parameter, in
+    words without model symbols or field names; the limits are the ones the decoder checks."""
+    for component, kinds in CATALOGUE.items():
+        for kind, spec in kinds.items():
+            where = f"{component}/{kind}"
+            assert spec.name and spec.name[0].isupper() and not _TECHNICAL.search(spec.name), where
+            assert spec.effect and not _TECHNICAL.search(spec.effect), where
+            fields = [f.name for f in msgspec.structs.fields(spec.params)]
+            params = parameters(spec.params)
+            assert [p.name for p in params] == fields, where
+            for p in params:
+                assert p.label and p.unit and p.hint, f"{where}/{p.name}"
+                assert not _TECHNICAL.search(p.label + p.hint), f"{where}/{p.name}"
+    assert CATALOGUE["load"]["short"][3:] == (
+        "Short circuit", "draws far more than it should: normally trips its rail")
+    heat, = parameters(Heating)
+    assert heat == ("heat_w", "Extra heat", "W", "what the failed thermal control adds, 0 or more",
+                    {"ge": 0.0, "le": 1e9}, None)
+    short, = parameters(Short)
+    assert (short.unit, short.limits, short.default) == ("Ω", {"gt": 0.0, "le": 1e9}, 0.05)
+    assert parameters(Disconnect) == []
+    with pytest.raises(BadInput, match="heat_w"):  # the words change nothing of the checks
+        parse_params(parse_fault_key(["battery", "heating"]), b"-1")
+
+
+def test_the_console_and_the_cli_show_the_plain_catalogue():
+    from lunaris.console.api import catalogue
+    from lunaris.fault import catalogue_help
+    short = catalogue()["components"]["load"]["kinds"]["short"]
+    assert (short["name"], short["effect"]) == ("Short circuit", CATALOGUE["load"]["short"].effect)
+    assert short["params"] == [{"name": "resistance_ohm", "type": "number", "gt": 0.0, "le": 1e9,
+                                "default": 0.05, "label": "Resistance of the short", "unit": "Ω",
+                                "hint": parameters(Short)[0].hint}]
+    text = catalogue_help()
+    assert "  battery heating VALUE\n      Overheating: extra heat in the pack" in text
+    assert "VALUE: Extra heat [W] - what the failed thermal control adds" in text
+    assert "  load/<name> short [VALUE]\n      Short circuit: draws far more" in text
+    assert all(len(line) <= 79 for line in text.splitlines())
 
 
 def test_injected_reads_a_record_of_faults_in_effect_typed():

@@ -20,6 +20,7 @@ import subprocess
 import pytest
 
 from common import keys
+from lunaris.client import Mirror
 from tests.harness import (
     ROOT,
     ROVERS,
@@ -343,3 +344,58 @@ def test_a_snapshot_restores_the_position_and_the_traverse(probe):
         saved["x_m"], saved["y_m"], saved["odometer_m"], 0, 2)
     p.put(keys.clock_control(R), {"paused": False})
     p.wait_value(STATE, lambda s: s["odometer_m"] > saved["odometer_m"])
+
+
+def test_a_map_reads_the_twins_own_numbers(probe):
+    """Issue 26.3: what a map draws, from the twin's keys (figures from the rover files)."""
+    p = probe
+    # the cut-off in numbers: MAPP 4 cells x 3.2 V; empty at 0 % charge
+    battery = p.wait_value(keys.battery_state(R), lambda b: "cutoff_v" in b)
+    assert battery["depleted_soc"] == 0.0 and battery["cutoff_v"] == pytest.approx(12.8)
+    # the radios: where they stand, their nominal footprints, whether the drive moves them
+    link = p.wait_value(keys.radio_link(R, "lander"), lambda v: "site" in v)
+    assert (link["site"], link["a_m"], link["b_m"], link["offset_x_m"], link["offset_y_m"],
+            link["follows_drive"]) == ({"x_m": 0.0, "y_m": 0.0}, 400.0, 250.0, 0.0, 0.0, True)
+    relay = p.wait_value(keys.radio_link(NO_DRIVE, "hls_relay"), lambda v: "site" in v)
+    assert (relay["site"], relay["a_m"], relay["b_m"], relay["offset_x_m"], relay["offset_y_m"],
+            relay["follows_drive"]) == ({"x_m": -1500.0, "y_m": 1000.0}, 4000.0, 4000.0, 2500.0,
+                                        -1500.0, False)
+    # a degraded radio keeps its nominal footprint in what the crew reads
+    degraded = keys.fault(R, "radio/lander", "degraded")
+    seen = len(p.samples(keys.radio_link(R, "lander")))
+    p.put(degraded, 0.5)
+    p.wait_event(R, lambda e: e["key"] == degraded and e["kind"] == "fault_injected")
+    wait_for(lambda: len(p.samples(keys.radio_link(R, "lander"))) > seen + 1, 5, "link samples")
+    after = p.samples(keys.radio_link(R, "lander"))[seen:]
+    assert {(s["a_m"], s["b_m"]) for s in after} == {(400.0, 250.0)}
+    p.delete(degraded)
+    # the umbilical: its cable, and where it was plugged in while it is
+    cable = p.wait_value(keys.umbilical_state(R))
+    assert (cable["connected"], cable["plugged_at"], cable["cable_m"]) == (False, None, 10.0)
+    p.put(keys.input_umbilical(R), True)
+    plugged = p.wait_value(keys.umbilical_state(R), lambda u: u["connected"])
+    assert plugged["plugged_at"] == {"x_m": 5.0, "y_m": 0.0, "z_m": 0.0}
+    p.put(keys.input_umbilical(R), False)
+    p.wait_value(keys.umbilical_state(R), lambda u: u["plugged_at"] is None)
+    # the route: empty when parked, the traverse as sent once accepted, empty again when stopped
+    route = keys.drive_route(R)
+    assert p.wait_value(route) == {"t_s": p.value(route)["t_s"], "start": None, "waypoints": [],
+                                   "return_to_start": False}
+    sent = [{"x_m": 5.0, "y_m": 10.0, "z_m": 0.0},
+            {"x_m": 5.0, "y_m": 20.0, "z_m": 0.0, "speed_m_per_s": 0.05}]
+    assert answer(p, R, TRAVERSE, {"waypoints": sent, "return_to_start": True})["kind"] == "input"
+    driven = p.wait_value(route, lambda r: r["waypoints"])
+    expected = {"start": {"x_m": 5.0, "y_m": 0.0, "z_m": 0.0}, "return_to_start": True,
+                "waypoints": [{**sent[0], "speed_m_per_s": 0.1}, sent[1]]}  # 0.1: the max
+    assert {k: v for k, v in driven.items() if k != "t_s"} == expected
+    ticks = len(p.samples(STATE))
+    wait_for(lambda: len(p.samples(STATE)) > ticks + 10, 10, "ten drive/state ticks")
+    assert len(p.samples(route)) <= 3  # on change only: the reset's, the traverse's
+    late = Mirror(R, families=["drive/route"], events=False).start(p.session)  # joins late
+    try:
+        wait_for(lambda: late.value(route) is not None, 5, "the cached route")
+        assert late.value(route).waypoints[1].speed_m_per_s == 0.05
+    finally:
+        late.close()
+    answer(p, R, TRAVERSE, None, delete=True)
+    assert p.wait_value(route, lambda r: not r["waypoints"])["start"] is None

@@ -304,3 +304,16 @@ def test_every_derived_fault_is_in_the_catalogue_of_derived_faults():
     pack._update_latches()
     pack.set_demand(1e6)
     assert set(pack.derived_faults()) <= set(DERIVED["battery"])
+
+
+# -- what "empty" means in numbers (issue 26.5) -----------------------------------------------
+
+
+def test_battery_state_says_where_the_pack_stops():
+    from services.battery.service import limits
+    # MAPP: 4 cells in series cut off at 3.2 V each: 12.8 V; empty at 0 % charge
+    assert limits(load_rover(ROVERS / "mapp.yaml").battery) == pytest.approx((0.0, 12.8))
+    # LTV: 96 cells at 3.2 V: 307.2 V; a 5 % reserve counts as empty
+    assert limits(load_rover(ROVERS / "ltv.yaml").battery) == pytest.approx((0.05, 307.2))
+    # no cut-off in the file: null, never 0 V
+    assert limits(battery_cfg(depleted_soc=0.1)) == (0.1, None)

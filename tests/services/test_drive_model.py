@@ -273,3 +273,46 @@ def test_any_traverse_ends_at_its_last_waypoint_with_consistent_books(points, sp
     r = m.reading()
     assert r.status == "arrived" and (r.x_m, r.y_m, r.z_m) == points[-1]
     assert r.odometer_m == pytest.approx(total, abs=1e-6)
+
+
+# -- the route a map draws (issue 26.3) ----------------------------------------------------------
+
+
+def test_the_route_is_the_traverse_as_listed_from_where_it_began():
+    m = model(REF)
+    assert m.route() == ((None, [], False))  # parked: no route
+    m.x_m, m.y_m = 1.0, 2.0
+    cmd = DriveTraverse([TraverseWaypoint(3.0, 4.0, 0.0),
+                         TraverseWaypoint(3.0, 14.0, 1.0, speed_m_per_s=0.05)], 0.1,
+                        return_to_start=True)
+    legs, problems = plan(cmd, REF, (1.0, 2.0, 0.0))
+    assert problems == [] and len(legs) == 4  # out and back
+    m.start(legs, cmd.return_to_start)
+    route = m.route()
+    assert route.start == (1.0, 2.0, 0.0) and route.return_to_start
+    assert [(w.x_m, w.y_m, w.z_m, w.speed_m_per_s) for w in route.waypoints] == [
+        (3.0, 4.0, 0.0, 0.1), (3.0, 14.0, 1.0, 0.05)]  # the listed waypoints, not the way back
+    run(m, 30.0)  # under way: the route does not move with the rover
+    assert m.route() == route
+    copy = model(REF)
+    copy.set_state(m.state())
+    assert copy.route() == route  # kept by a snapshot and a restart
+    run(m, 2000.0)
+    assert m.reading().status == "arrived" and m.route() == route  # kept once arrived
+    m.start(legs_of((1.0, 0.0, 0.0)))  # replaced: from where the rover is, one way
+    assert m.route().start == pytest.approx((1.0, 2.0, 0.0)) and not m.route().return_to_start
+    assert len(m.route().waypoints) == 1
+    assert m.stop() and m.route() == (None, [], False)
+    m.start(legs_of((1.0, 0.0, 0.0)))
+    m.reset()
+    assert m.route() == (None, [], False)
+
+
+def test_a_snapshot_older_than_the_route_has_no_start():
+    m = model(REF)
+    m.start(legs_of((0.0, 10.0, 0.0)))
+    old = {k: v for k, v in m.state().items() if k not in ("origin", "return_to_start")}
+    copy = model(REF)
+    copy.set_state(old)
+    route = copy.route()
+    assert route.start is None and [(w.x_m, w.y_m) for w in route.waypoints] == [(0.0, 10.0)]

@@ -165,3 +165,37 @@ def test_without_a_cable_length_any_move_pulls_it_out_and_state_keeps_the_plug()
     assert m.umbilical_plugged and m.plugged_at_m == (5.0, 0.0, 0.0)
     m.reset()  # the rover file: plugged in at the drive's start
     assert m.umbilical_plugged and m.plugged_at_m == (5.0, 0.0, 0.0)
+
+
+# -- what a map draws (issue 26.3) -------------------------------------------------------------
+
+
+def test_the_radio_footprint_is_the_rover_files_whatever_the_faults():
+    # The crew reads the footprint: a degradation must show only as a link lost sooner.
+    m = RadioModel(Radio(name="lander", a_m=400, b_m=250, offset_x_m=100, offset_y_m=-20))
+    assert m.footprint == (400.0, 250.0, 100.0, -20.0)
+    m.set_position(450.0, 0.0)
+    m.set_faults([Degraded(range_scale=0.5)])
+    assert not m.link().in_range  # ((450 - 100) / 200)^2 = 3.06: the scaled ellipse is applied
+    assert m.footprint == (400.0, 250.0, 100.0, -20.0)
+    m.set_faults([Failure()])
+    assert m.footprint._asdict() == {"a_m": 400.0, "b_m": 250.0, "offset_x_m": 100.0,
+                                     "offset_y_m": -20.0}
+
+
+def test_where_the_umbilical_was_plugged_in_reads_as_connected_does():
+    m = cabled(10.0, follows=True)
+    assert m.umbilical_cfg.cable_m == 10.0 and m.umbilical_plugged_at == (5.0, 0.0, 0.0)
+    # a disconnect fault cuts the supply: the cable reads as unplugged, as connected does, so
+    # the crew cannot tell the fault from a plug pulled out
+    m.set_umbilical_faults([Disconnect()])
+    assert not m.umbilical_connected and m.umbilical_plugged_at is None
+    m.set_umbilical_faults([])
+    assert m.umbilical_plugged_at == (5.0, 0.0, 0.0)
+    m.move_rover(8.0, 4.0, 0.0)  # 5 m away: still plugged in where it was
+    assert m.umbilical_plugged_at == (5.0, 0.0, 0.0)
+    m.move_rover(20.0, 0.0, 0.0)  # 15 m: pulled out
+    assert m.umbilical_plugged_at is None
+    m.plug(True)
+    assert m.umbilical_plugged_at == (20.0, 0.0, 0.0)
+    assert cabled(None).umbilical_cfg.cable_m is None  # no slack: null, not 0

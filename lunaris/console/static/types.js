@@ -36,6 +36,8 @@
  * @property {number | null} time_to_empty_s
  * @property {number} [heat_w]
  * @property {Array<number>} [polarisation_v]
+ * @property {number} [depleted_soc] - the state of charge at which the pack counts as empty and goes off line (0..1, the rover file's depleted_soc): time_to_empty_s is the time to reach it at the present draw
+ * @property {number | null} [cutoff_v] - the BMS cut-off [V] (cells_series * cutoff_cell_v): when the terminal voltage under load falls below it the pack stops supplying, which a heavy draw can bring before depleted_soc; null when the rover file sets none
  */
 /**
  * @typedef {Object} Clock
@@ -46,6 +48,18 @@
  * @property {boolean} paused
  * @property {number} [epoch]
  * @property {string} [cause]
+ */
+/**
+ * ``drive/route``: the traverse the rover follows, for a map. Published when it changes
+ * (a traverse accepted, replaced or stopped, a reset, a restore) and cached for late
+ * joiners, never every tick: where the rover is along it is ``drive/state`` (``waypoint``,
+ * ``status``). Empty (``start`` null, no waypoints) when the rover is parked; kept once it
+ * has arrived.
+ * @typedef {Object} DriveRoute
+ * @property {number} t_s
+ * @property {SiteXYZ | null} start - where the rover was when the traverse began (site frame) [m]; null when parked or not known (a snapshot older than this field)
+ * @property {Array<RouteWaypoint>} waypoints - in the order they are driven through; empty when parked
+ * @property {boolean} return_to_start - after the last waypoint the rover comes back through them to start
  */
 /**
  * ``drive/state``: where the rover is in the site frame (x east, y north, z up) and what
@@ -121,12 +135,23 @@
  * @property {Array<string>} [notes]
  */
 /**
+ * ``radio/<radio>/link``: whether the rover is in range of the radio, the rover's offset
+ * from the radio (``x_m`` east, ``y_m`` north [m]), and, for a map, where the radio stands
+ * and its footprint as the rover file gives it: the link is in range inside
+ * ``((x - offset_x_m) / a_m)^2 + ((y - offset_y_m) / b_m)^2 <= 1``. The footprint is the
+ * nominal one: an injected degradation shows only as a link lost sooner.
  * @typedef {Object} RadioLink
  * @property {number} t_s
  * @property {boolean} in_range
  * @property {number} x_m
  * @property {number} y_m
  * @property {Array<string>} [faults]
+ * @property {SiteXY | null} [site] - where the radio stands (site frame) [m]; null when the rover file gives it no site
+ * @property {number} [a_m] - the footprint's semi-axis east-west [m], nominal
+ * @property {number} [b_m] - the footprint's semi-axis north-south [m], nominal
+ * @property {number} [offset_x_m] - the footprint's centre east of the radio [m]
+ * @property {number} [offset_y_m] - the footprint's centre north of the radio [m]
+ * @property {boolean} [follows_drive] - the rover's position comes from its drive (drive/state): the position input input/radio/<radio>/position is refused
  */
 /**
  * @typedef {Object} RailState
@@ -137,6 +162,43 @@
  * @property {number | null} current_limit_a
  * @property {"failed" | "off" | "on" | "shed" | "tripped"} state
  * @property {string} [reason]
+ */
+/**
+ * A waypoint of the traverse being driven, site frame [m], with the speed of the leg
+ * that ends there [m/s].
+ * @typedef {Object} RouteWaypoint
+ * @property {number} x_m
+ * @property {number} y_m
+ * @property {number} z_m
+ * @property {number} speed_m_per_s
+ */
+/**
+ * A scenario as it plays on one rover.
+ * @typedef {Object} ScenarioProgress
+ * @property {number} t_s
+ * @property {string} scenario
+ * @property {string} rover
+ * @property {"ended" | "playing" | "starting"} state
+ * @property {number} t_rel_s
+ * @property {string} waiting
+ * @property {string} message
+ * @property {Array<StepProgress>} steps
+ * @property {string} [end_reason]
+ * @property {boolean | null} [ok]
+ * @property {string} [actor]
+ */
+/**
+ * A point on the site's map [m]: x east, y north of the site origin.
+ * @typedef {Object} SiteXY
+ * @property {number} x_m
+ * @property {number} y_m
+ */
+/**
+ * A point in the site frame [m]: x east, y north of the site origin, z up.
+ * @typedef {Object} SiteXYZ
+ * @property {number} x_m
+ * @property {number} y_m
+ * @property {number} z_m
  */
 /**
  * One saved snapshot of a rover, as ``get lunaris/<rover>/snapshots`` lists it.
@@ -155,10 +217,27 @@
  * @property {Array<string>} [faults]
  */
 /**
+ * One step of the scenario: what it does, when, and what became of it.
+ * @typedef {Object} StepProgress
+ * @property {number} index
+ * @property {string} label
+ * @property {string} trigger
+ * @property {string} action
+ * @property {string} status
+ * @property {string} [outcome]
+ * @property {string} [detail]
+ * @property {number | null} [armed_t_s]
+ * @property {number | null} [fired_t_s]
+ */
+/**
+ * ``umbilical/state``: whether the umbilical supplies the rover, and where its cable was
+ * plugged in (for a map).
  * @typedef {Object} UmbilicalState
  * @property {number} t_s
  * @property {boolean} connected
  * @property {number} power_w
+ * @property {SiteXYZ | null} [plugged_at] - where the rover was when the umbilical was plugged in (site frame) [m]; null while it is not connected
+ * @property {number | null} [cable_m] - how far the rover may drive from where it was plugged in before it pulls the plug out [m] (the rover file's umbilical.cable_m); null: no slack
  */
 /**
  * The payload of each key the twin publishes, by its key under lunaris/<rover>/:
@@ -174,8 +253,10 @@
  *   K extends `umbilical/state` ? UmbilicalState :
  *   K extends `radio/${string}/link` ? RadioLink :
  *   K extends `drive/state` ? DriveState :
+ *   K extends `drive/route` ? DriveRoute :
  *   K extends `event` ? Event :
  *   K extends `faults/active/${string}` ? ActiveFaults :
+ *   K extends `scenario/progress` ? ScenarioProgress :
  *   never)} Payload
  */
 
