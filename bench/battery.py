@@ -28,7 +28,7 @@ from benchlib import ROOT, machine
 from common.config import Rover, load_rover
 from services.battery.prediction import percentiles, predict, start_of
 from services.composed import ComposedTwin, run_budget
-from tests import progpy_cell as pc
+from testbed import progpy_cell as pc
 
 
 def progpy_comparison() -> None:

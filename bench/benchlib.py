@@ -13,7 +13,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from tests.harness import (  # noqa: E402
+from testbed.twin import (  # noqa: E402
     ALL_SERVICES,
     Probe,
     Twin,

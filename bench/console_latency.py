@@ -29,8 +29,8 @@ import urllib.request
 from benchlib import ROOT, machine, percentiles, running_twin
 
 from common import keys
-from tests.console.browser import available, open_browser
-from tests.harness import lunaris_cmd, static_rover, wait_for
+from testbed.browser import available, open_browser
+from testbed.twin import lunaris_cmd, static_rover, wait_for
 
 R = "mapp-1"
 SHORT = keys.fault(R, "load/nav_camera", "short")

@@ -26,7 +26,7 @@ import zenoh
 from benchlib import machine
 
 from common.connection import make_config
-from tests.harness import free_endpoint
+from testbed.twin import free_endpoint
 
 ROVERS, LOADS = 100, 12
 FAMILIES = ("load/*/power", "rail/*/state", "battery/state", "power/summary", "radio/*/link",

@@ -3,7 +3,8 @@
 The same runs as ``fault_latency.py`` (a load short on mapp-1's nav_camera, cleared and the
 rail reset between runs, the clock paused), with the bridge running and these end points
 added to its :data:`~fault_latency.END_POINTS`, each timed to the first sample that shows the
-effect, read back with the independent decoder of tests/rosmsg.py:
+effect, read back with the bridge's own CDR codec (rosbags, ``services/bridge/cdr.py``: the
+tests check it against an independent decoder; here it only has to be read):
 
 - ``bridge diagnostics <flavour>`` for ros2dds, rmw_zenoh and json: a DiagnosticArray,
   stamped after the put, whose ``<rover>/load/nav_camera`` status lists the ``short``;
@@ -33,23 +34,15 @@ from typing import Any
 import fault_latency as fl
 from benchlib import ROOT, machine, percentiles
 
+from services.bridge.cdr import decode_cdr
 from services.bridge.rmw_zenoh import rmw_topic_key
-from tests import rosmsg
 
 DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
 NAV_CAMERA = f"{fl.R}/load/nav_camera"
 
 
 def _decode(flavour: str, payload: bytes, typename: str) -> dict:
-    if flavour == "json":
-        return json.loads(payload)
-    msg = rosmsg.decode(typename, payload)
-    if typename == DIAGNOSTICS:
-        return {"header": {"stamp": {"sec": msg.header.stamp.sec,
-                                     "nanosec": msg.header.stamp.nanosec}},
-                "status": [{"name": s.name, "level": s.level,
-                            "values": [{"key": v.key} for v in s.values]} for s in msg.status]}
-    return {"data": msg.data}
+    return json.loads(payload) if flavour == "json" else decode_cdr(typename, payload)
 
 
 def _shows_short(flavour: str) -> Callable[[bytes | None], Callable[[bytes], bool]]:

@@ -48,23 +48,12 @@ from benchlib import ROOT, machine, percentiles, running_twin
 from common import keys
 from common.connection import write
 from common.messages import BatteryState, Clock, PowerSummary, RadioLink
+from services.bridge.cdr import decode_cdr
 from services.bridge.mapping import load_mapping
-from tests import rosmsg
-from tests.harness import mapp_fleet
+from testbed.procfs import cpu_s, rss_kib
+from testbed.twin import mapp_fleet
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
-
-
-def cpu_s(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return 0.0
 
 
 def topic_rates() -> dict[str, float | None]:
@@ -93,9 +82,9 @@ def fault_latencies(probe, n: int, last_tick: Callable[[], float]) -> list[tuple
     def on_diag(s) -> None:
         if not armed:
             return
-        msg = rosmsg.decode("diagnostic_msgs/msg/DiagnosticArray", s.payload.to_bytes())
-        if any(st.name == f"{rover}/load/nav_camera" and "short" in [v.key for v in st.values]
-               for st in msg.status):
+        msg = decode_cdr("diagnostic_msgs/msg/DiagnosticArray", s.payload.to_bytes())
+        if any(st["name"] == f"{rover}/load/nav_camera" and "short" in [v["key"] for v in st["values"]]
+               for st in msg["status"]):
             out.append(((time.perf_counter() - armed.pop()) * 1e3, phase[0]))
             done.set()
 
@@ -219,7 +208,7 @@ def main() -> None:
             wall = time.monotonic() - w0
             me = (time.process_time() - me0) / wall * 100
             cpu1 = {s: cpu_s(p.pid) for s, p in procs.items()}
-            rss = {s: rss_mb(p.pid) for s, p in procs.items()}
+            rss = {s: rss_kib(p.pid) / 1024 for s, p in procs.items()}
             with lock:
                 snap = {k: dict(v) for k, v in counts.items()}
                 sim_advance = [latest_t.get(("clock", r), 0.0) - t0 for r, t0 in t_clock0.items()]

@@ -27,7 +27,7 @@ from common.config import Rover, load_rover
 from common.messages import LoadPower, PowerSummary, RailState, encode
 from services.loads.model import LoadsFleet, LoadsModel
 from services.power.model import PowerModel
-from tests.harness import copies_of, static_rover
+from testbed.twin import copies_of, static_rover
 
 TICKS = 20  # ticks of every rover per run
 REPEATS = 5

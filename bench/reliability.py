@@ -2,7 +2,7 @@
 
     python bench/reliability.py [--fuzz 10000] [--burst 5000]
 
-- fuzz: bad payloads (tests/reliability/fuzz.py) on every writable key of MAPP: rejections,
+- fuzz: bad payloads (testbed/fuzz.py) on every writable key of MAPP: rejections,
   internal errors, services lost, and the time it took;
 - burst: injections written as fast as possible, with Zenoh's default congestion control
   (drop) and with Lunaris' (block): how many were answered;
@@ -28,12 +28,22 @@ from benchlib import ROOT, machine
 from common import keys
 from common.config import load_rover
 from common.connection import write
-from tests.harness import Probe, Twin, free_endpoint, lunaris_cmd, open_router, static_rover, wait_for
-from tests.reliability.conftest import WITH_BRIDGE, rss_kib
-from tests.reliability.fuzz import bad_payloads, writable_keys
+from testbed.fuzz import bad_payloads, writable_keys
+from testbed.procfs import rss_kib
+from testbed.twin import (
+    ALL_SERVICES,
+    Probe,
+    Twin,
+    free_endpoint,
+    lunaris_cmd,
+    open_router,
+    static_rover,
+    wait_for,
+)
 
 R = "mapp-1"
 MAPP = static_rover("mapp.yaml")
+WITH_BRIDGE = (*ALL_SERVICES, "bridge")
 
 
 def count(p: Probe, kind: str, key: str | None = None) -> int:

@@ -5,12 +5,12 @@ never share the cores), each process under its own identity, TLS and access cont
 
 - ``one router``: ``lunaris deploy secrets`` + ``deploy acl --secrets-dir``, ``lunaris router
   --config`` on 127.0.0.1, the nine services, an instructor and the crew's dashboard;
-- ``three machines``: deploy/site.yaml on network namespaces (tests/netns.py): ground (router,
+- ``three machines``: deploy/site.yaml on network namespaces (testbed/netns.py): ground (router,
   faults, the instructor), mapp-1 (router, the models), crew (router, the bridge, the
   dashboard), mutual TLS between the routers.
 
 The instructor and the dashboard are clients in processes of their own
-(tests/deploy/remote.py), each on its machine; the time from the instructor's put of a load
+(testbed/remote.py), each on its machine; the time from the instructor's put of a load
 short on mapp-1's nav_camera to the dashboard's sample is measured on ``time.monotonic()``,
 one clock for every process of the host. Two end points, in the ros2dds flavour read
 through Zenoh as the ``dashboard`` identity:
@@ -38,17 +38,10 @@ from pathlib import Path
 
 from benchlib import ROOT, machine, percentiles
 
-from tests import netns
-from tests.deploy.deployment import (
-    SERVICES,
-    Processes,
-    Remote,
-    run_lunaris,
-    start_router,
-    start_service,
-    wait_until,
-)
-from tests.deploy.machines import SiteOnMachines
+from lunaris.processes import wait_for
+from testbed import netns
+from testbed.deployment import SERVICES, Processes, Remote, run_lunaris, start_router, start_service
+from testbed.machines import SiteOnMachines
 
 ROVER, RAIL, LOAD = "mapp-1", "5V_CH2", "nav_camera"
 MAPP = ROOT / "config" / "rovers" / "mapp.yaml"
@@ -102,21 +95,21 @@ def _levels(sample: dict) -> dict[str, int]:
 def _first_after(dashboard: Remote, t0: float, test: Callable[[dict[str, int]], bool],
                  what: str) -> dict:
     """The dashboard's first /diagnostics received after ``t0`` whose levels pass ``test``."""
-    return wait_until(lambda: next((m for m in dashboard.samples("diag")
+    return wait_for(lambda: next((m for m in dashboard.samples("diag")
                                     if m["t"] > t0 and test(_levels(m))), None),
                       30, f"{what} on the dashboard")
 
 
 def measure(instructor: Remote, dashboard: Remote, n: int) -> dict[str, list[float]]:
     dashboard.subscribe("diag", "diagnostics", decode="diagnostics")
-    wait_until(lambda: dashboard.samples("diag"), 120, "the dashboard's /diagnostics")
+    wait_for(lambda: dashboard.samples("diag"), 120, "the dashboard's /diagnostics")
     instructor.call("pub", key=SHORT)
-    wait_until(lambda: instructor.call("matching", key=SHORT)["matching"], 60,
+    wait_for(lambda: instructor.call("matching", key=SHORT)["matching"], 60,
                "the instructor's publisher to learn of the loads service")
     got: dict[str, list[float]] = {"first sign": [], "rail ERROR": []}
     for _ in range(n):
         seen = len(dashboard.samples("diag"))
-        wait_until(lambda s=seen: any(set(_levels(m).values()) == {0}
+        wait_for(lambda s=seen: any(set(_levels(m).values()) == {0}
                                       for m in dashboard.samples("diag")[s:]), 30,
                    "the dashboard's /diagnostics all OK before the put")
         t0 = instructor.call("put", key=SHORT, payload=json.dumps({"resistance_ohm": 0.05}))["t"]

@@ -24,9 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _check_bridge(mapping: str, rovers: list[tuple[str, Rover]]) -> int:
     # The bridge's modules are imported only when asked for: lunaris check stays light.
-    from services.bridge.bindings import expand, rover_names
-    from services.bridge.mapping import load_mapping
-    from services.bridge.service import resolve_mapping
+    from services.bridge import expand, load_mapping, resolve_mapping, rover_names
 
     path = resolve_mapping(mapping)
     try:

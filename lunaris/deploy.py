@@ -27,8 +27,7 @@ from lunaris.deploy_secrets import (
     password_problems,
 )
 from lunaris.deploy_site import IDENTITIES, SERVICES
-from services.bridge.mapping import load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, load_mapping
 
 __all__ = ["IDENTITIES", "MIN_PASSWORD_LEN", "SERVICES", "acl", "add_arguments", "check_secrets",
            "client_config", "main", "make_secrets", "password_problems", "render_router_config",

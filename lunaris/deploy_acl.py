@@ -21,8 +21,7 @@ from common import keys
 from common.connection import TX_QUEUE_SIZE
 from lunaris.deploy_dashboard import bridge_hears, dashboard_keys, fleet_names
 from lunaris.deploy_site import DEFAULT_SITE, IDENTITIES, PEOPLE, SERVICES, Site, router_identity
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile
+from services.bridge import MappingFile, RoverNames
 
 __all__ = ["REPO", "ROUTER_FILE", "ROUTER_SECRETS", "acl", "render_router_config", "router_config"]
 
@@ -43,13 +42,19 @@ _READ_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liv
 _READ_OUT = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
 _WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
              "lunaris/*/clock/control", "lunaris/*/control/**"]
+# A scenario's progress: put by the scenario runner of the instructor's tools and of the
+# console (keys.FAMILIES: scenario/progress), with an advanced publisher: its cache answers a
+# late joiner (a queryable on its '@adv' key, replies on the key itself) and its token says it
+# is there.
+_PROGRESS = [keys.under("*", "scenario/progress"), keys.under("*", "scenario/progress/@adv/**")]
 # What the crew must discover from effects, not read: the instructor's puts, the journal,
 # the faults in effect, the events that name them (the journal's stream and each
-# service's own), the session's snapshots.
+# service's own), the session's snapshots, and a scenario's progress (what the drill does
+# next).
 _CREW_HIDDEN = ["lunaris/*/fault/**", "lunaris/*/event", "lunaris/*/event/**",
                 "lunaris/*/event/@adv/**", "lunaris/*/event/*/@adv/**",
                 "lunaris/*/faults", "lunaris/*/faults/**", "lunaris/*/control/**",
-                "lunaris/*/snapshots", "lunaris/*/snapshots/**"]
+                "lunaris/*/snapshots", "lunaris/*/snapshots/**", *_PROGRESS]
 
 
 def _pattern(chunks: tuple[str, ...]) -> str:
@@ -112,6 +117,10 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
         _rule("crew-hidden-deliver", "deny", ["egress"], ["put", "delete", "reply"], _CREW_HIDDEN),
         _rule("crew-hidden-ask", "deny", ["ingress"], ["query", "declare_subscriber"], _CREW_HIDDEN),
         _rule("instructor-write", "allow", ["ingress"], ["put", "delete"], _WRITABLE),
+        _rule("scenario-progress-publish", "allow", ["ingress"],
+              ["put", "delete", "declare_queryable", "reply", "liveliness_token"], _PROGRESS),
+        # a late joiner's question reaches the publisher's cache
+        _rule("scenario-progress-asked", "allow", ["egress"], ["query"], _PROGRESS),
         # the dashboard may subscribe on any key expression (its topics of one rover, of
         # several, under a wildcard): only the bridge's topics reach it (dashboard-deliver)
         _rule("dashboard-listen", "allow", ["ingress"],
@@ -125,7 +134,8 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
     subjects = [{"id": person, "usernames": [person]} for person in PEOPLE]
     policies = [
         {"id": "instructor", "subjects": ["instructor", "console"],
-         "rules": ["read-twin", "deliver-twin", "learn-subscribers", "instructor-write"]},
+         "rules": ["read-twin", "deliver-twin", "learn-subscribers", "instructor-write",
+                   "scenario-progress-publish", "scenario-progress-asked"]},
         {"id": "debrief", "subjects": ["debrief"], "rules": ["read-twin", "deliver-twin"]},
         {"id": "observer", "subjects": ["observer"],
          "rules": ["read-twin", "deliver-twin", "crew-hidden-deliver", "crew-hidden-ask"]},

@@ -33,10 +33,11 @@ import subprocess
 from pathlib import Path
 
 from lunaris.deploy_acl import REPO, ROUTER_SECRETS, render_router_config
-from lunaris.deploy_dashboard import dashboard_files, fleet_names
+from lunaris.deploy_dashboard import fleet_names
 from lunaris.deploy_secrets import (
     client_config,
     credentials_problems,
+    dashboard_files,
     make_ca,
     make_certificate,
     new_password,
@@ -46,9 +47,7 @@ from lunaris.deploy_secrets import (
     write_private,
 )
 from lunaris.deploy_site import SERVICES, RouterSpec, Site
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile, load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, MappingFile, RoverNames, load_mapping
 
 __all__ = ["check_router_folder", "check_site_secrets", "make_site_secrets", "site_fleet",
            "site_problems", "write_router_configs"]

@@ -3,8 +3,10 @@
 
 - ``secrets DIR`` makes what a deployment must not share with anyone: a random password
   for every identity (``credentials.txt``, the router's dictionary), one client
-  configuration per identity (``client-<identity>.json5``, TLS with the CA inlined) and a
-  certificate authority with the router's certificate (``tls/``, by ``openssl``).
+  configuration per identity (``client-<identity>.json5``, TLS with the CA inlined), the
+  dashboard's own client files (a ``zenoh-bridge-ros2dds`` per rover, the rmw_zenoh session:
+  :func:`dashboard_files`) and a certificate authority with the router's certificate
+  (``tls/``, by ``openssl``).
   ``--rotate USER`` gives one identity a new password and leaves the others. It also makes
   the console's accounts file, empty (``lunaris console users add`` fills it), and never
   overwrites it. Every file is its owner's only, from its first byte.
@@ -26,16 +28,14 @@ from pathlib import Path
 from typing import Any
 
 from common.connection import is_demo_password
-from lunaris.deploy_dashboard import dashboard_files, fleet_names
+from lunaris.deploy_dashboard import fleet_names, inbound_regexes
 from lunaris.deploy_site import IDENTITIES
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile, load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, MappingFile, RoverNames, load_mapping, ros_name
 
 __all__ = ["MIN_DISTINCT_CHARS", "MIN_PASSWORD_LEN", "check_secrets", "client_config",
-           "credentials_problems", "make_ca", "make_certificate", "make_certificates",
+           "credentials_problems", "dashboard_files", "make_ca", "make_certificate", "make_certificates",
            "make_secrets", "new_password", "open_to_others", "password_problems",
-           "read_credentials", "write_private"]
+           "read_credentials", "rmw_zenoh_config", "ros2dds_config", "write_private"]
 
 MIN_PASSWORD_LEN = 16
 MIN_DISTINCT_CHARS = 8
@@ -146,6 +146,51 @@ def make_certificates(folder: Path, hosts: list[str]) -> None:
     in one folder: the one-router deployment's ``tls/``."""
     make_ca(folder)
     make_certificate(folder, folder, hosts[0], hosts)
+
+
+def ros2dds_config(password: str, ca_pem: bytes | None, rover: str, domain: int,
+                   inbound: list[str], namespace: str | None,
+                   connect: str = "tls/127.0.0.1:7447") -> dict[str, Any]:
+    """zenoh-bridge-ros2dds for the dashboard of one rover on DDS (the compose profile
+    ``ros2dds``, one container per rover): the ``dashboard`` identity, host networking, so it
+    reaches the router on the host's port (``connect``). In a fleet its namespace is the rover's
+    (``/mapp_1``, the mapping's ``fleet_namespace``): the bridge's ``mapp_1/battery_state``
+    is ``/battery_state`` in the rover's DDS domain, the dashboard's plain name; a fleet of
+    one rover has no namespace (the bridge's keys are the plain names). Zenoh -> DDS: every
+    topic of the rover; DDS -> Zenoh: only the inbound topics (the router's access control
+    enforces the same limit)."""
+    conf = client_config("dashboard", password, ca_pem, connect)
+    plugin: dict[str, Any] = {"id": f"lunaris-{ros_name(rover)}", "domain": domain,
+                              "allow": {"publishers": inbound, "subscribers": [".*"]}}
+    if namespace is not None:
+        plugin["namespace"] = namespace
+    conf["plugins"] = {"ros2dds": plugin}
+    return conf
+
+
+def rmw_zenoh_config(password: str, ca_pem: bytes | None, connect: str) -> dict[str, Any]:
+    """The Zenoh session of a dashboard on rmw_zenoh (``ZENOH_SESSION_CONFIG_URI``): a client of
+    the deployment's router as ``dashboard``, timestamping on as rmw_zenoh's own sessions."""
+    conf = client_config("dashboard", password, ca_pem, connect)
+    conf["timestamping"] = {"enabled": {"router": True, "peer": True, "client": True}}
+    return conf
+
+
+def dashboard_files(password: str, ca_pem: bytes | None, mf: MappingFile,
+                    fleet: list[RoverNames], connect: str,
+                    local: str = "tls/127.0.0.1:7447") -> dict[str, dict[str, Any]]:
+    """The dashboards' configurations, by file name: a ``zenoh-bridge-ros2dds`` per rover of
+    the fleet (reaching the router at ``local``, its host's port) and the rmw_zenoh session
+    (at ``connect``)."""
+    base = mf.bridge.outputs.ros2.domain_id or 0
+    several = len(fleet) > 1
+    files = {f"zenoh-bridge-ros2dds-{r.id}.json5": ros2dds_config(
+        password, ca_pem, r.id, mf.bridge.rover_domains.get(r.id, base + place),
+        inbound_regexes(mf),
+        mf.bridge.fleet_namespace.replace("{rover}", ros_name(r.id)) if several else None, local)
+        for place, r in enumerate(fleet)}
+    files["rmw-zenoh-dashboard.json5"] = rmw_zenoh_config(password, ca_pem, connect)
+    return files
 
 
 def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,

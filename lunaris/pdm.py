@@ -25,10 +25,16 @@ from common import keys
 from common.config import ConfigError
 from common.connection import add_connection_args
 from lunaris.client import START_HINT, Change, Mirror, ToolError, close_session, live_rovers, open_session
-from services.bridge.bindings import Binding, RoverNames, expand
-from services.bridge.convert import out_value
-from services.bridge.mapping import PLACEHOLDERS, MappingFile, load_mapping
-from services.bridge.service import resolve_mapping
+from services.bridge import (
+    PLACEHOLDERS,
+    Binding,
+    MappingFile,
+    RoverNames,
+    expand,
+    load_mapping,
+    out_value,
+    resolve_mapping,
+)
 
 __all__ = ["PdmView", "add_arguments", "main", "pdm_mappings", "render"]
 

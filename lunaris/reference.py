@@ -30,7 +30,7 @@ from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RET
 from common.messages import Prediction, PredictionRequest
 from common.scenario import Scenario
 from common.traverse import TraverseFile
-from services.bridge.mapping import CONVERTERS, MappingFile
+from services.bridge import CONVERTERS, MappingFile
 
 __all__ = ["DOCS", "main", "pages"]
 

@@ -26,6 +26,7 @@ import zenoh
 from common import keys
 from common.connection import DEFAULT_ENDPOINT, make_config
 from common.messages import BatteryState, RailState, decode
+from lunaris.processes import lunaris_cmd, run_args, stop_processes
 from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV, load_rovers, served
 
 __all__ = ["ROVERS_PER_BRIDGE", "Supervisor", "add_arguments", "default_bridges", "main"]
@@ -102,23 +103,19 @@ class Supervisor:
         """Supervise another ``lunaris`` command (the console) like a service."""
         self.services.append(name)
         self.restarts[name] = 0
-        self.commands[name] = [sys.executable, "-m", "lunaris.cli", *args]
+        self.commands[name] = lunaris_cmd(*args)
 
     def command(self, service: str) -> list[str]:
         if service in self.commands:
             return self.commands[service]
         kind, _, shard = service.partition("-")
-        cmd = [sys.executable, "-m", "lunaris.cli", "run", kind, "--connect", self.endpoint,
-               "--state-dir", str(self.state_dir)]
-        for f in self.rover_files:
-            cmd += ["--rover", f]
-        if self.seed is not None:
-            cmd += ["--seed", str(self.seed)]
+        extra = []
         if kind == "bridge" and self.bridge_config is not None:
-            cmd += ["--bridge-config", self.bridge_config]
+            extra += ["--bridge-config", self.bridge_config]
         if shard:
-            cmd += ["--shard", f"{shard}/{self.bridges}"]
-        return cmd
+            extra += ["--shard", f"{shard}/{self.bridges}"]
+        return lunaris_cmd(*run_args(service, self.rover_files, self.state_dir,
+                                     connect=self.endpoint, seed=self.seed, extra=extra))
 
     def log_path(self, service: str) -> Path:
         return self.state_dir / "logs" / f"{service}.log"
@@ -175,16 +172,7 @@ class Supervisor:
                 self.start(service)
 
     def stop_all(self, timeout_s: float = 5.0) -> None:
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        deadline = time.monotonic() + timeout_s
-        for proc in self.procs.values():
-            try:
-                proc.wait(max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        stop_processes(self.procs.values(), timeout_s)
 
 
 class _Status:

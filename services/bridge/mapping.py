@@ -1,9 +1,14 @@
-"""The bridge's mapping file: its format, its validation, and its expansion over rovers.
+"""The bridge's mapping file: its format, its validation, where the shipped one is.
 
 :func:`parse_mapping` validates a whole mapping file and names every problem
 (``mappings[3].field: BatteryState has no field 'volts'``) as rover definitions do;
 the twin keys a mapping may name are the families of :mod:`common.keys`.
-:mod:`services.bridge.bindings` expands a mapping over the rovers it serves.
+:mod:`services.bridge.bindings` expands a mapping over the rovers it serves. The CLI and the
+deployment use all this through the bridge's public face, :mod:`services.bridge`.
+
+The shipped mapping, ``config/bridge/default.yaml``, is package data of ``services.bridge``
+(``services/bridge/default.yaml``, in the source tree a link to that one file), so an
+installed Lunaris finds it wherever it runs: :data:`DEFAULT_MAPPING`, :func:`resolve_mapping`.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from common.datafile import ConfigError, Strict, doc, field_kind, parse_yaml, re
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants, typestore
 
 __all__ = [
+    "DEFAULT_MAPPING",
     "MAX_DOMAIN",
     "JOINT_STATE",
     "OTHERWISE",
@@ -32,12 +38,16 @@ __all__ = [
     "MappingFile",
     "load_mapping",
     "parse_mapping",
+    "resolve_mapping",
     "ros_name",
 ]
 
 FLAVOURS = ("ros2dds", "rmw_zenoh", "json", "ros2")
 PLACEHOLDERS = keys.PLACEHOLDERS  # component placeholders; {rover} is always there
 _PLACEHOLDER = re.compile(r"\{([a-z_]*)\}")
+REPO = Path(__file__).resolve().parents[2]  # the source tree (an installed package: site-packages)
+# The shipped mapping, package data: in the source tree the link resolves to config/bridge/.
+DEFAULT_MAPPING = Path(__file__).with_name("default.yaml").resolve()
 
 
 # == the mapping file ========================================================================
@@ -186,6 +196,20 @@ def ros_name(value: str) -> str:
     """A twin name made fit for a ROS 2 topic: every character but letters, digits and ``_``
     becomes ``_`` (``mapp-1`` -> ``mapp_1``)."""
     return re.sub(r"[^A-Za-z0-9_]", "_", value)
+
+
+def resolve_mapping(mapping_file: str | None) -> Path:
+    """The mapping file: the default one (``config/bridge/default.yaml`` of the working
+    directory, as in the container image, where an operator may mount a mapping of their own;
+    else the shipped one, :data:`DEFAULT_MAPPING`), or a path as given (relative to the working
+    directory) or, failing that, relative to the source tree."""
+    if mapping_file is None:
+        local = Path("config/bridge/default.yaml")
+        return local.resolve() if local.is_file() else DEFAULT_MAPPING
+    path = Path(mapping_file)
+    if not path.is_absolute() and not path.exists() and (REPO / path).exists():
+        return REPO / path
+    return path
 
 
 def load_mapping(path: str | Path) -> MappingFile:

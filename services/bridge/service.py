@@ -22,7 +22,6 @@ from __future__ import annotations
 import heapq
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -47,31 +46,16 @@ from services.bridge.convert import (
     odometry_message,
     out_message,
 )
-from services.bridge.mapping import load_mapping
+from services.bridge.mapping import load_mapping, resolve_mapping
 from services.bridge.outlets import Feed, Outlet, Shared
 from services.bridge.rmw_zenoh import entity_token, node_token, qos_keyexpr
 from services.bridge.ros2_node import Ros2Graph, Ros2Unavailable
 
-__all__ = ["DEFAULT_MAPPING", "resolve_mapping", "serve"]
+__all__ = ["serve"]
 
-REPO = Path(__file__).resolve().parents[2]
-DEFAULT_MAPPING = REPO / "config" / "bridge" / "default.yaml"
 SUBSCRIPTION_DEPTH = 10
 RATE_TIMER_S = 0.02  # how often the samples held back by a rate are looked at
 DIAG_SLOT_S = 0.02  # the shortest step of the periodic diagnostics spread over a period
-
-
-def resolve_mapping(mapping_file: str | None) -> Path:
-    """The mapping file: the default one (``config/bridge/default.yaml`` of the working
-    directory, as in the container image, else of the source tree), or a path as given
-    (relative to the working directory) or, failing that, relative to the repository."""
-    if mapping_file is None:
-        local = Path("config/bridge/default.yaml")
-        return local.resolve() if local.is_file() else DEFAULT_MAPPING
-    path = Path(mapping_file)
-    if not path.is_absolute() and not path.exists() and (REPO / path).exists():
-        return REPO / path
-    return path
 
 
 def _family(key_template: str) -> keys.Family:

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from common import keys
-from tests.console.browser import available, open_browser, size_viewport
+from testbed.browser import available, open_browser, size_viewport
 from tests.harness import (
     ALL_SERVICES,
     ROOT,

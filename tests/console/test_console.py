@@ -21,7 +21,7 @@ from selenium.webdriver.support.ui import WebDriverWait as _Wait
 
 from common import keys
 from common.config import load_rover
-from tests.console.browser import open_browser
+from testbed.browser import open_browser
 from tests.console.conftest import MAPP, R, shoot
 from tests.harness import ROOT, lunaris_cmd, stop_process, wait_for
 

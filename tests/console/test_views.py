@@ -29,7 +29,7 @@ from selenium.webdriver.support import expected_conditions as ec
 from selenium.webdriver.support.ui import WebDriverWait as _Wait
 
 from common import keys
-from tests.console.browser import open_browser, size_viewport
+from testbed.browser import open_browser, size_viewport
 from tests.console.conftest import Live, save_shot, settle, shoot, start_console
 from tests.console.page_checks import COVERED, LAYOUT, TEXT, TOUCH, TOUCH_PX, field_names, vocabulary
 from tests.harness import (

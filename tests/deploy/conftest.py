@@ -26,6 +26,10 @@ from typing import Any
 import pytest
 import zenoh
 
+from lunaris import processes
+from lunaris.deploy_secrets import read_credentials as read_credentials  # the tests read them
+from lunaris.processes import stop_process as stop_process  # the tests stop with it
+
 REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
 ROUTER_CONFIG = DEPLOY / "zenohd.json5"
@@ -66,36 +70,9 @@ def make_test_secrets(folder: Path) -> Path:
     return folder
 
 
-def read_credentials(path: Path) -> dict[str, str]:
-    """The ``user:password`` dictionary zenohd reads (the password may contain ':')."""
-    users = {}
-    for line in path.read_text().splitlines():
-        if line.strip():
-            user, _, password = line.partition(":")
-            users[user] = password
-    return users
-
-
 def wait_for(condition: Callable[[], Any], what: str, timeout_s: float = 10.0) -> Any:
-    """Poll ``condition`` until it returns something truthy; fail naming ``what``."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        result = condition()
-        if result:
-            return result
-        if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.02)
-
-
-def stop_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=timeout_s)
+    """:func:`lunaris.processes.wait_for`, ``what`` first as these tests write it."""
+    return processes.wait_for(condition, timeout_s, what, poll_s=0.02)
 
 
 class Router:

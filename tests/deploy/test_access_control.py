@@ -24,8 +24,7 @@ import zenoh.ext as zext
 
 from common import keys
 from lunaris.deploy import IDENTITIES, SERVICES, render_router_config
-from services.bridge.mapping import load_mapping
-from services.bridge.service import DEFAULT_MAPPING
+from services.bridge import DEFAULT_MAPPING, load_mapping
 from tests.deploy.conftest import (
     DEPLOY,
     REPO,
@@ -222,6 +221,58 @@ def test_the_crew_reads_effects_not_the_instructors_faults(router: Router) -> No
     asked = {who: [r.ok for r in s.get(keys.faults(ROVER), timeout=2.0) if r.ok is not None]
              for who, s in readers.items()}
     assert asked["observer"] == [] and asked["dashboard"] == [] and len(asked["debrief"]) == 1
+
+
+@pytest.mark.timeout(90)
+def test_a_scenarios_progress_is_the_instructors_and_hidden_from_the_crew(router: Router) -> None:
+    """The scenario runner of the instructor's tools and of the console publishes
+    ``scenario/progress`` with an advanced publisher; whoever reads the instructor's keys
+    (debrief, the services) has it live and as a late joiner, from the publisher's cache; the
+    crew (observer, dashboard) neither receives it nor gets it by asking: it tells what the
+    drill does next; no one else may publish it."""
+    key = keys.under(ROVER, "scenario/progress")
+    battery, bridge = router.open("lunaris-battery"), router.open("lunaris-bridge")
+    crew = {"observer": router.open("observer"), "dashboard": router.open("dashboard")}
+    crew_got = {who: Collector() for who in crew}
+    zext.declare_advanced_subscriber(crew["observer"], keys.under(ROVER), crew_got["observer"],
+                                     history=zext.HistoryConfig(detect_late_publishers=True))
+    crew["dashboard"].declare_subscriber("**", crew_got["dashboard"])
+    for writer in ("instructor", "console"):
+        session = router.open(writer)
+        pub = zext.declare_advanced_publisher(session, key, cache=zext.CacheConfig(max_samples=1),
+                                              publisher_detection=True)
+        pub.put(f"{writer}: step 1".encode())
+        # joined after the put: the sample comes from the writer's cache
+        late = {who: Collector() for who in ("debrief", "lunaris-faults")}
+        for who, got in late.items():
+            zext.declare_advanced_subscriber(router.open(who), key, got,
+                                             history=zext.HistoryConfig(detect_late_publishers=True))
+        for who, got in late.items():
+            wait_for(lambda g=got, w=writer: f"{w}: step 1".encode() in [p for _, p in _received(g)],
+                     f"{who}, a late joiner, to have the {writer}'s progress")
+        for intruder in ("observer", "dashboard", "debrief", "lunaris-battery"):
+            forger = router.open(intruder)
+            forger.put(key, b"forged")
+            _barrier(forger)
+        pub.put(f"{writer}: step 2".encode())
+        for who, got in late.items():
+            wait_for(lambda g=got, w=writer: f"{w}: step 2".encode() in [p for _, p in _received(g)],
+                     f"{who} to have the {writer}'s progress live")
+            assert b"forged" not in [p for _, p in _received(got)]
+    # positive controls: each of the crew receives what it may, sent after the progress
+    telemetry = battery.declare_publisher(keys.battery_state(ROVER))
+    topic = bridge.declare_publisher("mapp_1/final_comms_radio_bool")
+    _wait_subscribed(telemetry, "the battery to see the observer's subscriber")
+    _wait_subscribed(topic, "the bridge to see the dashboard's subscriber")
+    telemetry.put(b'{"soc": 0.5}')
+    topic.put(b"\x00\x01\x00\x00\x01")
+    wait_for(lambda: crew_got["observer"].items and crew_got["dashboard"].items, "the crew's own samples")
+    assert [str(s.key_expr) for s in crew_got["observer"].items] == [keys.battery_state(ROVER)]
+    assert [str(s.key_expr) for s in crew_got["dashboard"].items] == ["mapp_1/final_comms_radio_bool"]
+    for who, session in crew.items():
+        asked = [r.ok for sel in (key, f"{key}/@adv/**")
+                 for r in session.get(sel, timeout=2.0) if r.ok is not None]
+        assert asked == [], f"the {who} got the progress by asking"
 
 
 @pytest.mark.timeout(60)

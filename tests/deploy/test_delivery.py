@@ -24,9 +24,8 @@ import pytest
 import zenoh
 
 from common import keys
-from tests import rosmsg
-from tests.deploy.conftest import free_port
-from tests.deploy.deployment import (
+from lunaris.processes import wait_for
+from testbed.deployment import (
     REPO,
     SERVICES,
     Processes,
@@ -37,8 +36,9 @@ from tests.deploy.deployment import (
     run_lunaris,
     start_router,
     start_service,
-    wait_until,
 )
+from tests import rosmsg
+from tests.deploy.conftest import free_port
 
 pytestmark = pytest.mark.timeout(240)
 
@@ -131,11 +131,11 @@ def test_every_change_reaches_every_allowed_wildcard_subscriber(deployment: Depl
         observer.declare_subscriber(f"lunaris/{ROVER}/**", seen["observer-all"]),
         dashboard.declare_subscriber("**", seen["dashboard"]),
     ]
-    wait_until(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90,
+    wait_for(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90,
                lambda: f"every service live (live: {sorted(live_services(debrief, ROVER))})"
                f"\n{dep.procs.tails()}")
-    wait_until(lambda: _rail_levels(seen["dashboard"]), STEP_S, "the dashboard's /diagnostics")
-    wait_until(lambda: _rail_states(seen["observer"]), STEP_S, "the observer's rail telemetry")
+    wait_for(lambda: _rail_levels(seen["dashboard"]), STEP_S, "the dashboard's /diagnostics")
+    wait_for(lambda: _rail_states(seen["observer"]), STEP_S, "the observer's rail telemetry")
 
     heating = instructor.declare_publisher(keys.fault(ROVER, "battery", "heating"))
     short = instructor.declare_publisher(keys.fault(ROVER, f"load/{LOAD}", "short"))
@@ -145,7 +145,7 @@ def test_every_change_reaches_every_allowed_wildcard_subscriber(deployment: Depl
     # ten changes of a fault: the debrief's wildcard subscriber sees each one
     for heat_w in range(11, 21):
         heating.put(json.dumps({"heat_w": heat_w}))
-        wait_until(lambda h=heat_w: [_heat_w(p) for p in seen["debrief"].payloads(active)][-1:] == [h],
+        wait_for(lambda h=heat_w: [_heat_w(p) for p in seen["debrief"].payloads(active)][-1:] == [h],
                    STEP_S, lambda h=heat_w: f"heating {h} W in the debrief's faults/active/battery "
                    f"(seen {[_heat_w(p) for p in seen['debrief'].payloads(active)]})")
     heating.delete()
@@ -177,9 +177,9 @@ def test_every_change_reaches_every_allowed_wildcard_subscriber(deployment: Depl
 
 def _wait_rail(seen: dict[str, Tap], state: str, level: int) -> None:
     for who in ("debrief-rails", "observer"):
-        wait_until(lambda w=who: _rail_states(seen[w])[-1:] == [state], STEP_S,
+        wait_for(lambda w=who: _rail_states(seen[w])[-1:] == [state], STEP_S,
                    lambda w=who: f"{RAIL} {state} for the {w} (seen {changes(_rail_states(seen[w]))})")
-    wait_until(lambda: _rail_levels(seen["dashboard"])[-1:] == [level], STEP_S,
+    wait_for(lambda: _rail_levels(seen["dashboard"])[-1:] == [level], STEP_S,
                lambda: f"{RAIL} at level {level} in the dashboard's /diagnostics "
                f"(seen {changes(_rail_levels(seen['dashboard']))})")
 
@@ -194,8 +194,8 @@ def test_forged_writes_are_refused(deployment: Deployment) -> None:
     instructor = dep.open("instructor")
     got = Tap()
     sub = debrief.declare_subscriber(f"lunaris/{ROVER}/**", got)
-    wait_until(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90, "every service live")
-    wait_until(lambda: _rail_states(got), STEP_S, "the rail's telemetry")
+    wait_for(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90, "every service live")
+    wait_for(lambda: _rail_states(got), STEP_S, "the rail's telemetry")
     dashboard.put(keys.cmd_rail(ROVER, RAIL), json.dumps({"on": False}))
     dashboard.put(keys.fault(ROVER, "battery", "heating"), json.dumps({"heat_w": 99}))
     bridge.put(keys.rail_state(ROVER, RAIL), b'{"forged": "by lunaris-bridge"}')
@@ -204,10 +204,10 @@ def test_forged_writes_are_refused(deployment: Deployment) -> None:
         live_services(session, ROVER)
     control = keys.rail_state(ROVER, "3V3_CH2")
     instructor.put(keys.cmd_rail(ROVER, "3V3_CH2"), json.dumps({"on": False}))
-    wait_until(lambda: [json.loads(p)["state"] for p in got.payloads(control)][-1:] == ["off"],
+    wait_for(lambda: [json.loads(p)["state"] for p in got.payloads(control)][-1:] == ["off"],
                STEP_S, "the instructor's command (the control)")
     after = len(_rail_states(got))
-    wait_until(lambda: len(_rail_states(got)) >= after + 3, STEP_S, "three more ticks of the rail")
+    wait_for(lambda: len(_rail_states(got)) >= after + 3, STEP_S, "three more ticks of the rail")
     instructor.put(keys.cmd_rail(ROVER, "3V3_CH2"), json.dumps({"on": True}))
     assert set(_rail_states(got)) == {"on"}, changes(_rail_states(got))
     assert [k for k, p, _ in got.samples() if b"forged" in p] == []
@@ -228,7 +228,7 @@ def test_events_travel_on_their_owners_keys_and_the_journal_relays_them(
     got, crew = Tap(), Tap()
     subs = [debrief.declare_subscriber(f"{keys.event(ROVER)}/**", got),
             observer.declare_subscriber(f"lunaris/{ROVER}/**", crew)]
-    wait_until(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90, "every service live")
+    wait_for(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90, "every service live")
     fault = instructor.declare_publisher(keys.fault(ROVER, "battery", "capacity_loss"))
     fault.put(json.dumps({"fraction": 0.1}))
 
@@ -236,9 +236,9 @@ def test_events_travel_on_their_owners_keys_and_the_journal_relays_them(
         return [e for e in (json.loads(p) for p in got.payloads(key))
                 if e.get("key") == keys.fault(ROVER, "battery", "capacity_loss")]
 
-    own = wait_until(lambda: about(keys.event_of(ROVER, "battery")), STEP_S,
+    own = wait_for(lambda: about(keys.event_of(ROVER, "battery")), STEP_S,
                      "the battery's event on event/battery")
-    relayed = wait_until(lambda: about(keys.event(ROVER)), STEP_S, "the journal's relay on event")
+    relayed = wait_for(lambda: about(keys.event(ROVER)), STEP_S, "the journal's relay on event")
     assert own[0]["source"] == "battery" and relayed[0] == own[0]
     fault.delete()
     assert [k for k, _, _ in crew.samples() if "/event" in k] == []

@@ -16,9 +16,10 @@ from collections.abc import Iterator
 import pytest
 
 from common import keys
-from tests import netns
-from tests.deploy.deployment import Remote, wait_until
-from tests.deploy.machines import SiteOnMachines
+from lunaris.processes import wait_for
+from testbed import netns
+from testbed.deployment import Remote
+from testbed.machines import SiteOnMachines
 
 pytestmark = [pytest.mark.timeout(300),
               pytest.mark.skipif(netns.unavailable() is not None, reason=str(netns.unavailable()))]
@@ -54,29 +55,29 @@ def test_a_fault_from_the_ground_reaches_the_rovers_services_and_the_crews_diagn
     def live() -> list[str]:
         return debrief.call("alive", key=f"lunaris/{ROVER}/service/*")["keys"]
     every = {keys.service(ROVER, s) for s in (*MODELS, "faults", "bridge")}
-    wait_until(lambda: every <= set(live()), 120,
+    wait_for(lambda: every <= set(live()), 120,
                lambda: f"every service of the three machines (live: {live()})\n{machines.tails()}")
-    wait_until(lambda: _rail_level(dashboard)[-1:] == [0], STEP_S, "the crew's /diagnostics, rail OK")
+    wait_for(lambda: _rail_level(dashboard)[-1:] == [0], STEP_S, "the crew's /diagnostics, rail OK")
 
     short = keys.fault(ROVER, f"load/{LOAD}", "short")
     instructor.call("pub", key=short)
-    wait_until(lambda: instructor.call("matching", key=short)["matching"], STEP_S,
+    wait_for(lambda: instructor.call("matching", key=short)["matching"], STEP_S,
                "the instructor's publisher to learn of the loads service on the rover")
     instructor.call("put", key=short, payload=json.dumps({"resistance_ohm": 0.05}))
 
     def in_effect(service: str) -> list[str]:
         got = debrief.samples("active", keys.faults_active(ROVER, service))
         return [f["key"] for f in got[-1]["payload"]["faults"]] if got else []
-    wait_until(lambda: short in in_effect("loads"), STEP_S,
+    wait_for(lambda: short in in_effect("loads"), STEP_S,
                lambda: f"the short in effect on the rover (loads: {in_effect('loads')})")
-    wait_until(lambda: any(k.endswith(f"rail/{RAIL}/tripped") for k in in_effect("power")),
+    wait_for(lambda: any(k.endswith(f"rail/{RAIL}/tripped") for k in in_effect("power")),
                STEP_S, lambda: f"the rail tripped on the rover (power: {in_effect('power')})")
-    wait_until(lambda: _rail_level(dashboard)[-1:] == [2], STEP_S,
+    wait_for(lambda: _rail_level(dashboard)[-1:] == [2], STEP_S,
                lambda: f"the tripped rail as ERROR in the crew's /diagnostics ({_rail_level(dashboard)})")
 
     instructor.call("delete", key=short)
     instructor.call("put", key=keys.cmd_rail(ROVER, RAIL), payload=json.dumps({"reset": True}))
-    wait_until(lambda: _rail_level(dashboard)[-1:] == [0], STEP_S,
+    wait_for(lambda: _rail_level(dashboard)[-1:] == [0], STEP_S,
                lambda: f"the rail back to OK in the crew's /diagnostics ({_rail_level(dashboard)})")
     assert short not in in_effect("loads")
     # the faults service on the ground lists what the rover's services hold, none of it now
@@ -94,7 +95,7 @@ def test_the_crew_reads_only_what_its_identities_may_across_the_routers(
     debrief = machines.remote("ground", "debrief")
     observer.subscribe("all", "lunaris/**")
     debrief.subscribe("rails", f"lunaris/{ROVER}/rail/*/state")
-    wait_until(lambda: observer.samples("all", keys.rail_state(ROVER, RAIL)), 60,
+    wait_for(lambda: observer.samples("all", keys.rail_state(ROVER, RAIL)), 60,
                "the rover's rails at the crew's observer")
     dashboard.call("put", key=keys.cmd_rail(ROVER, "3V3_CH2"), payload=json.dumps({"on": False}))
     instructor = machines.remote("ground", "instructor")
@@ -103,7 +104,7 @@ def test_the_crew_reads_only_what_its_identities_may_across_the_routers(
 
     def state(rail: str) -> list[str]:
         return [m["payload"]["state"] for m in debrief.samples("rails", keys.rail_state(ROVER, rail))]
-    wait_until(lambda: state("3V3_CH1")[-1:] == ["off"], STEP_S, "the instructor's command (control)")
+    wait_for(lambda: state("3V3_CH1")[-1:] == ["off"], STEP_S, "the instructor's command (control)")
     instructor.call("put", key=keys.cmd_rail(ROVER, "3V3_CH1"), payload=json.dumps({"on": True}))
     instructor.call("delete", key=keys.fault(ROVER, "battery", "heating"))
     assert "off" not in state("3V3_CH2")

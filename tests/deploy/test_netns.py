@@ -1,4 +1,4 @@
-"""tests/netns.py: machines made of network namespaces, their cables, their cleanup."""
+"""testbed/netns.py: machines made of network namespaces, their cables, their cleanup."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from tests import netns
+from testbed import netns
 
 pytestmark = [pytest.mark.timeout(60),
               pytest.mark.skipif(netns.unavailable() is not None, reason=str(netns.unavailable()))]

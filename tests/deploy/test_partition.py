@@ -2,7 +2,7 @@
 (DECISIONS D3, SPEC §12f): the rover's cable cut for 5 s and for 15 s, the same outcome both
 times.
 
-The shipped site on three machines (tests/deploy/machines.py). Before the cuts a fault is in
+The shipped site on three machines (testbed/machines.py). Before the cuts a fault is in
 effect on the rover (battery heating). During each cut an instructor on the ground runs
 ``lunaris fault inject mapp-1 battery capacity_loss 0.3`` and ``lunaris fault list mapp-1``,
 and a debrief ``lunaris watch --once --rover mapp-1`` 3 s into the cut. The documented outcome:
@@ -35,9 +35,10 @@ from collections.abc import Iterator
 import pytest
 
 from common import keys
-from tests import netns
-from tests.deploy.deployment import Remote, wait_until
-from tests.deploy.machines import SiteOnMachines
+from lunaris.processes import wait_for
+from testbed import netns
+from testbed.deployment import Remote
+from testbed.machines import SiteOnMachines
 
 pytestmark = [pytest.mark.timeout(600),
               pytest.mark.skipif(netns.unavailable() is not None, reason=str(netns.unavailable()))]
@@ -74,7 +75,7 @@ def _listed_with_heating(partition: Partition, what: str) -> list[str]:
         code, out = _finish(partition.cli("instructor", "fault", "list", ROVER, "--json"))
         active = [f["key"] for f in json.loads(out)["active"]] if code == 0 else []
         return active if HEATING in active else None
-    return wait_until(listed, 90, what)
+    return wait_for(listed, 90, what)
 
 
 @pytest.fixture(scope="module")
@@ -85,14 +86,14 @@ def partition(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Partition]:
             instructor = m.remote("ground", "instructor")
             debrief.subscribe("active", "lunaris/*/faults/active/*")
             every = {keys.service(ROVER, s) for s in SERVICES}
-            wait_until(lambda: every <= set(debrief.call("alive", key=f"lunaris/{ROVER}/service/*")
+            wait_for(lambda: every <= set(debrief.call("alive", key=f"lunaris/{ROVER}/service/*")
                                             ["keys"]), 120, lambda: f"every service\n{m.tails()}")
             p = Partition(m, debrief)
             instructor.call("pub", key=HEATING)
-            wait_until(lambda: instructor.call("matching", key=HEATING)["matching"], 30,
+            wait_for(lambda: instructor.call("matching", key=HEATING)["matching"], 30,
                        "the instructor to learn of the battery's subscriber")
             instructor.call("put", key=HEATING, payload="5")
-            wait_until(lambda: [HEATING] in p.in_effect()[-1:], 30,
+            wait_for(lambda: [HEATING] in p.in_effect()[-1:], 30,
                        "the heating in effect on the rover (before the cuts)")
             yield p
         finally:
@@ -110,12 +111,12 @@ def test_a_write_during_a_cut_is_refused_said_and_never_applied_late(
     try:
         inject = partition.cli("instructor", "fault", "inject", ROVER, "battery", "capacity_loss", "0.3")
         listing = partition.cli("instructor", "fault", "list", ROVER)
-        wait_until(lambda: time.monotonic() >= t_cut + 3.0, 10, "3 s into the cut")
+        wait_for(lambda: time.monotonic() >= t_cut + 3.0, 10, "3 s into the cut")
         watch = partition.cli("debrief", "watch", "--once", "--rover", ROVER)
         watched = _finish(watch)[1]
         injected = _finish(inject)
         during = _finish(listing)
-        wait_until(lambda: time.monotonic() >= t_cut + cut_s, cut_s + 60,
+        wait_for(lambda: time.monotonic() >= t_cut + cut_s, cut_s + 60,
                    f"the end of the {cut_s:g} s cut")
     finally:
         net.restore(ROVER)

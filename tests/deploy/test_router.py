@@ -7,8 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from lunaris.processes import lunaris_cmd, wait_for
+from testbed.deployment import Processes, run_lunaris, start_router
 from tests.deploy.conftest import free_port
-from tests.deploy.deployment import Processes, lunaris, run_lunaris, start_router, wait_until
 
 pytestmark = pytest.mark.timeout(90)
 
@@ -24,14 +25,14 @@ def procs(tmp_path: Path):
 
 def test_the_router_logs_what_rust_log_asks_for(procs: Processes) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs.start("quiet", lunaris("router", "--listen", endpoint))
-    wait_until(lambda: "listening" in procs.log("quiet"), 30, "the quiet router")
+    procs.start("quiet", lunaris_cmd("router", "--listen", endpoint))
+    wait_for(lambda: "listening" in procs.log("quiet"), 30, "the quiet router")
     procs.stop("quiet")
     assert "INFO" not in procs.log("quiet"), procs.log("quiet")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    procs.start("told", lunaris("router", "--listen", endpoint),
+    procs.start("told", lunaris_cmd("router", "--listen", endpoint),
                 env={"RUST_LOG": "info", "NO_COLOR": "1"})
-    wait_until(lambda: "listening" in procs.log("told"), 30, "the router told to log")
+    wait_for(lambda: "listening" in procs.log("told"), 30, "the router told to log")
     assert f"Zenoh can be reached at: {endpoint}" in procs.log("told"), procs.log("told")
 
 

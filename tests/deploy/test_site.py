@@ -23,16 +23,16 @@ import zenoh
 from common import keys
 from lunaris.deploy_secrets import make_ca, make_certificate
 from lunaris.deploy_site import SiteError, load_site
-from tests.deploy.conftest import free_port, read_credentials
-from tests.deploy.deployment import (
+from lunaris.processes import wait_for
+from testbed.deployment import (
     REPO,
     Processes,
     Tap,
     open_as,
     run_lunaris,
     start_router,
-    wait_until,
 )
+from tests.deploy.conftest import free_port, read_credentials
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -216,16 +216,16 @@ def test_samples_cross_the_links_as_each_routers_access_control_allows(loopback:
     for pub, what in ((state, "the battery to learn of the ground's and the crew's subscribers"),
                       (active, "the battery to learn of the debrief's wildcard subscriber"),
                       (fault, "the instructor to learn of the battery's subscriber on mapp-1")):
-        wait_until(lambda p=pub: p.matching_status.matching, 30, what)
+        wait_for(lambda p=pub: p.matching_status.matching, 30, what)
     dashboard.put(keys.fault("mapp-1", "battery", "heating"), b"99")  # refused by crew
     for i in range(5):
         state.put(json.dumps({"t_s": i}))
         active.put(json.dumps({"faults": [], "t_s": i}))
     fault.put(b"40")
-    wait_until(lambda: len(seen["debrief"].samples()) >= 10, 20,
+    wait_for(lambda: len(seen["debrief"].samples()) >= 10, 20,
                lambda: f"ten samples of mapp-1 at the ground (got {seen['debrief'].samples()})")
-    wait_until(lambda: len(seen["observer"].samples()) >= 5, 20, "five at the crew")
-    wait_until(lambda: seen["battery"].payloads(keys.fault("mapp-1", "battery", "heating")), 20,
+    wait_for(lambda: len(seen["observer"].samples()) >= 5, 20, "five at the crew")
+    wait_for(lambda: seen["battery"].payloads(keys.fault("mapp-1", "battery", "heating")), 20,
                "the instructor's fault on the rover")
     assert {k for k, _, _ in seen["observer"].samples()} == {keys.battery_state("mapp-1")}
     assert seen["battery"].payloads(keys.fault("mapp-1", "battery", "heating")) == [b"40"]
@@ -252,7 +252,7 @@ def test_a_routers_password_alone_or_a_foreign_certificate_is_no_router(
     list(pretender.liveliness().get("lunaris/*/service/*", timeout=2.0))  # the router dealt with it
     instructor = loopback.open("ground", "instructor")
     instructor.put(keys.fault("mapp-1", "battery", "capacity_loss"), b"0.1")  # the control
-    wait_until(lambda: got.samples(), 20, "the instructor's fault (the control)")
+    wait_for(lambda: got.samples(), 20, "the instructor's fault (the control)")
     assert [p for _, p, _ in got.samples()] == [b"0.1"]
 
     # a fourth router, its certificate from another CA under the crew's name
@@ -289,7 +289,7 @@ def test_a_routers_password_alone_or_a_foreign_certificate_is_no_router(
     router = zenoh.open(zenoh.Config.from_json5(json.dumps(rogue)))
     try:
         genuine = router.declare_publisher(keys.fault("mapp-1", "battery", "resistance"))
-        wait_until(lambda: genuine.matching_status.matching, 20, "the genuine router's link")
+        wait_for(lambda: genuine.matching_status.matching, 20, "the genuine router's link")
     finally:
         router.close()
     del sub

@@ -12,19 +12,12 @@ from pathlib import Path
 import pytest
 
 from common import keys
+from testbed.procfs import rss_kib as rss_kib  # the reliability tests measure with it
 from tests.harness import ALL_SERVICES, Probe, Twin, json_bridge_extra, static_rover, wait_for
 
 R = "mapp-1"
 MAPP = static_rover("mapp.yaml")  # without its drive: parked, the pack drains
 WITH_BRIDGE = (*ALL_SERVICES, "bridge")
-
-
-def rss_kib(pid: int) -> int:
-    """Resident set size of a process [KiB], from /proc."""
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1])
-    raise AssertionError(f"no VmRSS for pid {pid}")
 
 
 def alive(pid: int) -> bool:

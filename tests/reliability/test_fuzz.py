@@ -17,9 +17,9 @@ import pytest
 from common import keys
 from common.config import load_rover
 from common.connection import write
+from testbed.fuzz import bad_payloads, writable_keys
 from tests.harness import Probe, wait_for
 from tests.reliability.conftest import MAPP, WITH_BRIDGE, R, events
-from tests.reliability.fuzz import bad_payloads, writable_keys
 
 pytestmark = pytest.mark.timeout(240)
 

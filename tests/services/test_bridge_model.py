@@ -260,7 +260,7 @@ mappings:
 
 
 def test_mapping_files_are_found_from_anywhere(tmp_path, monkeypatch):
-    from services.bridge.service import DEFAULT_MAPPING, resolve_mapping
+    from services.bridge.mapping import DEFAULT_MAPPING, resolve_mapping
 
     assert resolve_mapping(None) == DEFAULT == DEFAULT_MAPPING
     monkeypatch.chdir(tmp_path)

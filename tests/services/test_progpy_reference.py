@@ -2,7 +2,7 @@
 
 ``config/rovers/bc18650.yaml`` is BatteryCircuit's default 18650 as a Lunaris pack, generated
 by ``tools/derive_bc18650.py`` from ProgPy's own equations. Both models run ProgPy's example
-current profile and constant-power discharges (``tests/progpy_cell.py``). Targets: end of
+current profile and constant-power discharges (``testbed/progpy_cell.py``). Targets: end of
 discharge within 0.5 %, terminal voltage RMSE under 5 mV.
 """
 
@@ -12,7 +12,7 @@ import importlib.util
 
 import pytest
 
-from tests import progpy_cell as pc
+from testbed import progpy_cell as pc
 from tests.harness import ROOT
 
 

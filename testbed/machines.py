@@ -1,6 +1,6 @@
 """The shipped site (deploy/site.yaml) on three machines made of network namespaces.
 
-Each router of the site gets a machine of tests/netns.py (its address the router's only
+Each router of the site gets a machine of :mod:`testbed.netns` (its address the router's only
 host), the site's secrets are made by ``lunaris deploy secrets --site --secrets-dir``, and on
 each machine run its router (``lunaris router --config <machine>/zenohd.json5``: TLS, mutual
 TLS between routers, access control, all as generated) and its services, each under its own
@@ -15,8 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from lunaris.deploy_site import Site, load_site
-from tests import netns
-from tests.deploy.deployment import REPO, Remote, lunaris, run_lunaris, wait_until
+from lunaris.processes import lunaris_cmd, wait_for
+from testbed import netns
+from testbed.deployment import REPO, Remote, run_lunaris
 
 __all__ = ["MAPP", "SiteOnMachines"]
 
@@ -58,11 +59,11 @@ class SiteOnMachines:
                            "--secrets-dir", str(self.secrets))
         assert made.returncode == 0, made.stderr
         for spec in self.site.routers:
-            self.net.popen(spec.name, lunaris("router", "--config",
+            self.net.popen(spec.name, lunaris_cmd("router", "--config",
                                               str(self.secrets / spec.name / "zenohd.json5")),
                            log=f"{spec.name}-router", cwd=REPO, env=_env())
         for spec in self.site.routers:
-            wait_until(lambda n=spec.name: "listening" in self.log(f"{n}-router"), 60,
+            wait_for(lambda n=spec.name: "listening" in self.log(f"{n}-router"), 60,
                        lambda n=spec.name: f"the router of {n}: {self.log(f'{n}-router')[-2000:]}")
         for spec in self.site.routers:
             for service in spec.runs:
@@ -71,7 +72,7 @@ class SiteOnMachines:
                 self.start_service(spec.name, service)
 
     def start_service(self, machine: str, service: str) -> subprocess.Popen:
-        return self.net.popen(machine, lunaris(
+        return self.net.popen(machine, lunaris_cmd(
             "run", service, "--config", str(self.secrets / machine / f"client-lunaris-{service}.json5"),
             "--rover", str(self.rover), "--state-dir", str(self.folder / f"state-{machine}")),
             log=f"{machine}-{service}", cwd=REPO, env=_env())
@@ -96,13 +97,13 @@ class SiteOnMachines:
     def lunaris_on(self, machine: str, identity: str, *args: str,
                    timeout_s: float = 60.0) -> subprocess.CompletedProcess:
         """A ``lunaris`` command on ``machine`` under ``identity`` (an instructor's CLI)."""
-        return self.net.run(machine, lunaris(*args, "--config",
+        return self.net.run(machine, lunaris_cmd(*args, "--config",
                                              str(self.secrets / machine / f"client-{identity}.json5")),
                             timeout_s=timeout_s, cwd=REPO, env=_env())
 
     def lunaris_popen(self, machine: str, identity: str, *args: str) -> subprocess.Popen:
         """The same, started: its output (stdout and stderr) kept in a pipe."""
-        return self.net.popen(machine, lunaris(*args, "--config",
+        return self.net.popen(machine, lunaris_cmd(*args, "--config",
                                                str(self.secrets / machine / f"client-{identity}.json5")),
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=REPO,
                               env=_env())

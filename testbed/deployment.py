@@ -5,18 +5,16 @@ router configuration that finds them there, ``lunaris router --config`` (the emb
 router reads the same JSON5 as zenohd, access control and TLS included) and each service
 as ``lunaris run SERVICE --config client-lunaris-SERVICE.json5``: every process under its
 own identity, with the publishers it really declares. ``prefix`` runs a command elsewhere
-(``ip netns exec NS``: another machine, see tests/netns.py).
+(``ip netns exec NS``: another machine, see :mod:`testbed.netns`).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -24,33 +22,17 @@ from typing import Any
 import zenoh
 
 from common.connection import make_config
+from lunaris.processes import lunaris_cmd, run_args, stop_process, stop_processes, wait_for
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
-
-
-def lunaris(*args: str) -> list[str]:
-    return [sys.executable, "-m", "lunaris.cli", *args]
 
 
 def run_lunaris(*args: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
     """A ``lunaris`` command run to its end; its output kept for the assertion's message."""
     env = {k: v for k, v in os.environ.items() if k != "LUNARIS_ZENOH_CONFIG"}
-    return subprocess.run(lunaris(*args), cwd=REPO, capture_output=True, text=True,
+    return subprocess.run(lunaris_cmd(*args), cwd=REPO, capture_output=True, text=True,
                           timeout=timeout_s, env=env)
-
-
-def wait_until(condition: Callable[[], Any], timeout_s: float,
-               what: str | Callable[[], str]) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        got = condition()
-        if got:
-            return got
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for "
-                                 f"{what() if callable(what) else what}")
-        time.sleep(0.02)
 
 
 class Processes:
@@ -79,14 +61,10 @@ class Processes:
     def stop(self, name: str) -> None:
         proc = self.procs.pop(name, None)
         if proc is not None:
-            _stop(proc)
+            stop_process(proc, 10.0)
 
     def stop_all(self) -> None:
-        for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-        for proc in self.procs.values():
-            _stop(proc)
+        stop_processes(self.procs.values(), 10.0)
         self.procs.clear()
 
     def tails(self, chars: int = 1500) -> str:
@@ -95,24 +73,14 @@ class Processes:
                          for p in sorted(self.folder.glob("*.log")))
 
 
-def _stop(proc: subprocess.Popen, timeout_s: float = 10.0) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout_s)
-
-
 def start_router(procs: Processes, name: str, config: Path, listen: list[str] | None = None,
                  prefix: Sequence[str] = (), env: dict[str, str] | None = None) -> None:
     """``lunaris router --config FILE`` (its own endpoints, or ``listen``), once it listens."""
     args = ["router", "--config", str(config)]
     for endpoint in listen or []:
         args += ["--listen", endpoint]
-    proc = procs.start(name, lunaris(*args), prefix, env)
-    wait_until(lambda: "listening" in procs.log(name) or proc.poll() is not None, 60,
+    proc = procs.start(name, lunaris_cmd(*args), prefix, env)
+    wait_for(lambda: "listening" in procs.log(name) or proc.poll() is not None, 60,
                f"the router {name}")
     assert proc.poll() is None, f"the router {name} stopped:\n{procs.log(name)[-3000:]}"
 
@@ -121,13 +89,9 @@ def start_service(procs: Processes, service: str, secrets: Path, rovers: Sequenc
                   state_dir: Path, connect: str | None = None, prefix: Sequence[str] = (),
                   extra: Sequence[str] = (), name: str | None = None) -> subprocess.Popen:
     """``lunaris run SERVICE`` with the service's own client configuration."""
-    args = ["run", service, "--config", str(secrets / f"client-lunaris-{service}.json5"),
-            "--state-dir", str(state_dir)]
-    if connect:
-        args += ["--connect", connect]
-    for rover in rovers:
-        args += ["--rover", str(rover)]
-    return procs.start(name or service, lunaris(*args, *extra), prefix)
+    args = run_args(service, rovers, state_dir, connect=connect or None, extra=extra,
+                    config=secrets / f"client-lunaris-{service}.json5")
+    return procs.start(name or service, lunaris_cmd(*args), prefix)
 
 
 def open_as(secrets: Path, identity: str, connect: str | None = None) -> zenoh.Session:
@@ -174,7 +138,7 @@ def changes(values: list[Any]) -> list[Any]:
 
 
 class Remote:
-    """A running ``tests/deploy/remote.py``: commands in, its answers and samples out, read
+    """A running :mod:`testbed.remote`: commands in, its answers and samples out, read
     by a thread of ours as they come (see that module for the protocol)."""
 
     def __init__(self, proc: subprocess.Popen, name: str = "remote"):
@@ -189,7 +153,7 @@ class Remote:
 
     @staticmethod
     def argv(config: Path, connect: str | None = None) -> list[str]:
-        return [sys.executable, "-m", "tests.deploy.remote", "--config", str(config),
+        return [sys.executable, "-m", "testbed.remote", "--config", str(config),
                 *(["--connect", connect] if connect else [])]
 
     def _read(self) -> None:
@@ -217,7 +181,7 @@ class Remote:
             if self.proc.poll() is not None:
                 raise AssertionError(f"{self.name} stopped (exit {self.proc.returncode})")
             return next((m for m in self.lines() if test(m)), None)
-        return wait_until(found, timeout_s, what)
+        return wait_for(found, timeout_s, what, poll_s=0.02)
 
     def call(self, op: str, timeout_s: float = 30.0, **args: Any) -> dict[str, Any]:
         """A command and its answer."""

@@ -20,7 +20,7 @@ import numpy as np
 
 from common.config import Rover, load_rover
 from services.battery.model import BatteryModel
-from tests.harness import ROVERS
+from testbed.twin import ROVERS
 
 __all__ = ["PROFILES", "Comparison", "Run", "compare", "energy_soc", "example_current_a",
            "lunaris_run", "progpy_model", "progpy_monte_carlo", "progpy_run", "progpy_state",

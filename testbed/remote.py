@@ -1,7 +1,7 @@
 """A Zenoh client driven line by line: a test's hands and eyes on another machine.
 
-``python -m tests.deploy.remote --config client-<identity>.json5`` opens a session under one
-identity (on a machine of tests/netns.py, through ``ip netns exec``), then reads commands,
+``python -m testbed.remote --config client-<identity>.json5`` opens a session under one
+identity (on a machine of :mod:`testbed.netns`, through ``ip netns exec``), then reads commands,
 one JSON object a line, on stdin and answers on stdout, one JSON object a line. Times are
 ``time.monotonic()``: the same clock in every process of the host, whatever its namespace.
 
@@ -49,11 +49,10 @@ def decode(how: str, payload: bytes) -> Any:
         except ValueError:
             return payload.decode(errors="replace")
     if how == "diagnostics":
-        from tests import rosmsg
-        msg = rosmsg.decode("diagnostic_msgs/msg/DiagnosticArray", payload)
-        return [{"name": s.name, "message": s.message,
-                 "level": s.level[0] if isinstance(s.level, bytes) else int(s.level)}
-                for s in msg.status]
+        from services.bridge.cdr import decode_cdr
+        msg = decode_cdr("diagnostic_msgs/msg/DiagnosticArray", payload)
+        return [{"name": s["name"], "message": s["message"], "level": int(s["level"])}
+                for s in msg["status"]]
     return payload.decode(errors="replace")
 
 
