@@ -115,6 +115,8 @@ async def _write(request: Request) -> Response:
         planned = plan_write(rover, tail, None if request.method == "DELETE" else body)
     except BadInput as exc:
         return _answer(422, "invalid", f"not sent: {humane(str(exc))}")
+    if (why := hub.not_connected()) is not None:
+        return _answer(503, "not applied", why)
     if rover not in hub.mirror.rovers() or not hub.mirror.services(rover) and hub.mirror.token(
             rover, planned.owner) is None:
         known = ", ".join(r for r in hub.mirror.rovers() if hub.mirror.services(r)) or "none"
@@ -170,6 +172,9 @@ async def _query(request: Request) -> Response:
         selector, timeout = f"{keys.prediction(rover)}?hours={hours:g};samples={samples}", 60.0
     else:
         return JSONResponse({"message": f"no such query {what!r}"}, status_code=404)
+    hub: Hub = request.app.state.hub
+    if (why := hub.not_connected()) is not None:
+        return JSONResponse({"message": why.removeprefix("not applied: ")}, status_code=503)
     ok, errors = await asyncio.to_thread(_get, request.app.state.session, selector, timeout)
     if what == "faults" and ok and errors:  # never fewer faults without saying so
         return JSONResponse({"message": "not every owner answered: " + "; ".join(errors),

@@ -117,7 +117,7 @@ class _Play:
 
 
 class Extras:
-    def __init__(self, session: zenoh.Session, scenarios_dir: Path | None, recordings_dir: Path | None,
+    def __init__(self, session: zenoh.Session | None, scenarios_dir: Path | None, recordings_dir: Path | None,
                  connection: list[str], live_rovers: Callable[[], list[str]] | None = None):
         self.session = session
         self.scenarios_dir = scenarios_dir
@@ -161,6 +161,8 @@ class Extras:
             scenario: Scenario = load_scenario(self.scenarios_dir / file)
         except ScenarioError as exc:
             return f"{file} cannot be played: {'; '.join(exc.problems)}"
+        if self.session is None:
+            return "the console is not connected to the twin yet: a scenario plays once it is"
         live = self.live_rovers()
         if scenario.rover not in live:
             return (f"{file} is for {scenario.rover}, which is not in this session (rovers: "
