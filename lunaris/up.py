@@ -316,6 +316,8 @@ def main(args: argparse.Namespace) -> int:
                      args.seed, bridge_config, bridges)
     if args.console:
         console = ["console", "--http", args.console, "--connect", listen[0]]
+        for f in rover_files:  # which radios follow the drive, their sites and footprints
+            console += ["--rover", os.path.abspath(f)]
         if args.console_accounts:
             console += ["--accounts", args.console_accounts]
         sup.add("console", console)

@@ -28,6 +28,7 @@ from common.connection import add_connection_args, config_from_args
 from lunaris.address import AddressTaken, bind, free_port_after
 from lunaris.client import ToolError, describe_endpoint, open_session
 from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
+from lunaris.console.rovers import RoverFiles
 
 __all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http", "taken"]
 
@@ -44,6 +45,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the local user is the instructor)")
     p.add_argument("--scenarios", metavar="DIR", default=str(REPO / "config" / "scenarios"),
                    help="the scenarios offered (default config/scenarios)")
+    p.add_argument("--rover", metavar="FILE", action="append", default=[],
+                   help="a rover file of the session (repeatable): the console then knows which "
+                        "radios follow the drive, their sites and footprints (lunaris up gives its own)")
+    p.add_argument("--traverses", metavar="DIR", action="append", default=[],
+                   help="a folder of traverse files offered besides the shipped ones "
+                        "(config/traverses); repeatable")
     p.add_argument("--recordings", metavar="DIR", default="recordings",
                    help="where recordings are made and listed (default ./recordings)")
     p.add_argument("--tls-cert", metavar="FILE", help="serve HTTPS with this certificate (PEM)")
@@ -133,6 +140,7 @@ def _serve(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise ToolError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
     endpoint = describe_endpoint(args)
+    rover_files = RoverFiles(Path(f) for f in args.rover)
 
     def opener(stop: threading.Event) -> zenoh.Session:
         return open_session(args, wait_s=args.wait, stop=stop, on_waiting=lambda: print(
@@ -152,6 +160,7 @@ def _serve(args: argparse.Namespace) -> int:
 
     app = make_app(opener, accounts, tls=bool(args.tls_cert), scenarios_dir=Path(args.scenarios),
                    recordings_dir=Path(args.recordings), connection=connection,
+                   traverse_dirs=[Path(d) for d in args.traverses], rover_files=rover_files,
                    hosts=host_names(host, args.allow_host), endpoint=endpoint, give_up=give_up)
     scheme = "https" if args.tls_cert else "http"
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host

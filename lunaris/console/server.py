@@ -52,7 +52,7 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from lunaris.address import ABOUT_APP, ABOUT_PATH
 from lunaris.client import ToolError, close_session
-from lunaris.console import api, extras
+from lunaris.console import api, drive, extras, rovers
 from lunaris.console.auth import COOKIE, LOCAL, SESSION_S, Accounts, AccountsError, Attempts, SignIns
 from lunaris.console.live import Hub
 
@@ -313,13 +313,16 @@ async def _about(request: Request) -> Response:
 
 def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bool = False,
              scenarios_dir: Path | None = None, recordings_dir: Path | None = None,
+             traverse_dirs: Iterable[Path] = (), rover_files: rovers.RoverFiles | None = None,
              connection: list[str] | None = None, flush_s: float = 0.05,
              hosts: Iterable[str] | None = None, endpoint: str = "",
              give_up: Callable[[str], None] | None = None, **mirror: Any) -> Any:
     """The console as an ASGI application around the twin: an open Zenoh session, or an
     :data:`Opener` run behind the server (the page is up first; ``give_up(why)`` is called if
     the opener fails, e.g. no router within ``--wait``). ``endpoint``: the twin's address in
-    words. ``hosts``: the names a request's ``Host`` may carry (:func:`host_names`; default the
+    words. ``traverse_dirs``: folders of traverse files offered besides the shipped ones;
+    ``rover_files``: the rover files the console knows (which radios follow the drive).
+    ``hosts``: the names a request's ``Host`` may carry (:func:`host_names`; default the
     loopback names)."""
 
     @contextlib.asynccontextmanager
@@ -352,6 +355,8 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
         Route("/login", _login, methods=["GET", "POST"]),
         Route("/logout", _logout, methods=["GET", "POST"]),
         Route(ABOUT_PATH, _about),
+        *drive.routes(),
+        *rovers.routes(),
         *api.routes(),
         *extras.routes(),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
@@ -362,6 +367,8 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
     app.state.attempts = Attempts()
     app.state.tls = tls
     app.state.catalogue = api.catalogue()
+    app.state.traverses = drive.Traverses([drive.SHIPPED, *traverse_dirs])
+    app.state.rover_files = rover_files or rovers.RoverFiles()
     app.state.extras = extras.Extras(
         None, scenarios_dir, recordings_dir, connection or [],
         live_rovers=lambda: [r for r in app.state.hub.mirror.rovers() if app.state.hub.mirror.services(r)])
