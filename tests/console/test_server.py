@@ -137,6 +137,9 @@ BAD_WRITES = [
     ("@/x/sun_angle", b"3", 422, "verbatim"),
     ("input/%2A", b"3", 422, "wildcard"),
     ("input/sun angle", b"3", 422, "characters"),
+    ("control/snapshot/before storm", b"", 422,  # 26.5: said as a name, not as a key
+     "a snapshot name is letters, digits, '-', '_' and '.'; 'before storm' has a space"),
+    ("control/restore/a/b", b"", 422, "'a/b' has a '/'"),
     ("input/sun_angle", b"\xff\xfe", 422, "UTF-8"),
     ("input/sun_angle", b"[" * 100 + b"]" * 100, 422, ""),
     ("input/sun_angle", b"1" * 70_000, 413, "too large"),
