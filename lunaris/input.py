@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 
 import msgspec
@@ -33,7 +34,7 @@ from common import keys
 from common.messages import RadioPosition
 from common.traverse import TraverseError, load_traverse
 from common.writes import Write
-from lunaris.client import Answer, Mirror, Rejected, ToolError
+from lunaris.client import Answer, Mirror, Rejected, ToolError, shown
 from lunaris.confirm import add_common_arguments, confirm, plan, print_answer, tool_main, writer_for
 
 __all__ = ["add_arguments", "main", "payload"]
@@ -52,25 +53,38 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_common_arguments(p)
 
 
+POSITION = ("a radio position is two numbers, the distance [m] and the angle [deg, counter-"
+            "clockwise from east]: lunaris input ROVER radio/RADIO/position 300 45")
+
+
 def _raw(key: str, values: list[str]) -> bytes:
-    """The payload the words on the command line stand for, before it is checked."""
+    """The payload the words on the command line stand for, before it is checked (bytes that
+    are not text come as the shell passed them: the check says so)."""
     if key == "drive/traverse" and len(values) == 1 and not values[0].lstrip().startswith("{"):
         try:
             return msgspec.json.encode(load_traverse(values[0]).command())
         except TraverseError as exc:
-            raise ToolError(str(exc), 1) from None
-    if key.startswith("radio/") and len(values) == 2:
-        values = [json.dumps({"distance_m": _number(values[0]), "angle_deg": _number(values[1])})]
+            raise ToolError(f"the traverse file {exc.source} cannot be driven: {'; '.join(exc.problems)}",
+                            1) from None
+    if key.startswith("radio/") and key.endswith("/position"):
+        if len(values) == 2:
+            values = [json.dumps({"distance_m": _number(values[0], "the distance"),
+                                  "angle_deg": _number(values[1], "the angle")})]
+        elif len(values) != 1 or not values[0].lstrip().startswith("{"):
+            raise ToolError(POSITION, 1)
     if len(values) != 1:
         raise ToolError(f"give one VALUE for {key} (got {len(values)})", 1)
-    return values[0].encode()
+    return os.fsencode(values[0])
 
 
-def _number(text: str) -> float:
+def _number(text: str, what: str) -> float:
     try:
-        return float(text)
+        number = float(text)
     except ValueError:
-        raise ToolError(f"{text!r} is not a number", 1) from None
+        raise ToolError(f"{what} must be a number (got {shown(text)}); {POSITION}", 1) from None
+    if not math.isfinite(number):
+        raise ToolError(f"{what} must be a finite number (got {shown(text)})", 1)
+    return number
 
 
 def payload(rover: str, key: str, values: list[str], delete: bool = False) -> Write:

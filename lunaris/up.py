@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import errno
 import os
 import shutil
 import signal
@@ -264,9 +265,10 @@ def _check_addresses(console: str | None, listen: list[str]) -> None:
             nxt = free_port_after(host, int(port_text))
             other = f"{proto}/{address.rpartition(':')[0]}:{nxt or 'PORT'}"
             raise ToolError(
-                f"the router's address {endpoint} is taken by {exc.holder} (another twin?); nothing "
-                f"was started. Give the router another address: lunaris up --listen {other} (the "
-                f"tools then --connect {other}), or stop what holds it") from None
+                f"the router's address {endpoint} is taken by {exc.holder} (another twin?): "
+                f"{os.strerror(errno.EADDRINUSE)}; nothing was started. Give the router another "
+                f"address: lunaris up --listen {other} (the tools then --connect {other}), or stop "
+                "what holds it") from None
         except OSError:
             continue  # an address of another machine, or a name: the router says
 
@@ -300,7 +302,7 @@ def main(args: argparse.Namespace) -> int:
         _check_addresses(args.console, listen)
     except ToolError as exc:
         print(f"lunaris up: {exc}", file=sys.stderr)
-        return exc.code
+        return 1  # as a port in use always was (the router's Zenoh error)
     temp_state = args.state_dir is None
     state_dir = Path(tempfile.mkdtemp(prefix="lunaris-")) if temp_state else Path(args.state_dir)
     state_dir.mkdir(parents=True, exist_ok=True)

@@ -151,7 +151,7 @@ def test_a_console_address_in_use_is_said_with_what_holds_it(held_port, tmp_path
         done = _run("up", "--rover", str(MAPP), "--listen", free_endpoint(), "--no-status",
                     "--state-dir", str(tmp_path / "state"), "--console", f"127.0.0.1:{port}")
         said = done.stdout + done.stderr
-        assert done.returncode == 2, said
+        assert done.returncode == 1, said
         assert (f"the console's address 127.0.0.1:{port} is taken by another Lunaris console (pid "
                 f"{first.pid}: lunaris console --http 127.0.0.1:{port} --connect {endpoint}") in said
         assert f"serving the twin at {endpoint} (rovers: none yet)" in said
@@ -175,6 +175,6 @@ def test_up_says_the_router_s_address_is_taken_before_starting_anything(tmp_path
     done = _run("up", "--rover", str(MAPP), "--listen", endpoint, "--no-status", "--state-dir",
                 str(tmp_path / "state"))
     said = done.stdout + done.stderr
-    assert done.returncode == 2, said
+    assert done.returncode == 1, said
     assert f"the router's address {endpoint} is taken by another program (pid {os.getpid()}" in said
     assert "lunaris up --listen tcp/127.0.0.1:" in said and "started (pid" not in said
