@@ -10,7 +10,10 @@ observers may watch but not change anything, and it may listen on any address. T
 :mod:`~lunaris.console.server` (the web server and the sign-in gate),
 :mod:`~lunaris.console.live` (the twin's values, pushed to the pages),
 :mod:`~lunaris.console.api` (writes and queries), :mod:`~lunaris.console.auth` (accounts),
-:mod:`~lunaris.console.extras` (scenarios, recordings, reports), ``static/`` (the page).
+:mod:`~lunaris.console.extras` (scenarios, recordings, reports), :mod:`~lunaris.console.drive`
+(traverses), :mod:`~lunaris.console.rovers` (what the page needs of each rover), ``static/``
+(the page). The console takes its address first (one in use is said, with what holds it), and
+its page is up before the twin is: it reaches the twin behind it.
 """
 
 from __future__ import annotations
