@@ -427,6 +427,7 @@ def test_a_recording_is_served_for_download_and_nothing_outside_its_folder(sessi
     app = make_app(session, Accounts(accounts), recordings_dir=folder, connection=["--connect", router])
     with client(app) as c:
         assert c.get("/recordings/drill-1.mcap", follow_redirects=False).status_code == 303  # sign in
+        assert c.get("/api/about").json() == {"app": "lunaris console"}  # who it is; nothing more
         assert _sign_in(c, "obi", "lander-side-observer").status_code == 303  # an observer reads
         listed = c.get("/api/recordings").json()["recordings"]
         (entry,) = [e for e in listed if e["name"] == "drill-1.mcap"]
