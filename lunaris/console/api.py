@@ -64,7 +64,7 @@ async def read_body(request: Request, limit: int) -> bytes:
 
 
 def _params(struct: type) -> list[dict[str, Any]]:
-    if struct is NoParams:
+    if issubclass(struct, NoParams):
         return []
     info = mi.type_info(struct)
     assert isinstance(info, mi.StructType)

@@ -111,14 +111,14 @@ def test_hostile_names_show_as_text_and_never_run(live, browser, artefacts):
     # The twin's own rover, then each of its views with the forged names in them.
     pick_rover(browser, R)
     view(browser, "live")
-    shows(browser, LOADS + RAILS + PANELS + RADIOS + [EVENT, f"load/{LOADS[1]}/short"])
+    shows(browser, LOADS + RAILS + PANELS + RADIOS + [EVENT, f"Load {LOADS[1]}: Short circuit"])
     no_script_ran(browser)
-    shoot(browser, artefacts, "hostile-names-live")
+    shoot(browser, artefacts, "hostile-names-live", doc=False)
     view(browser, "faults")
     comps = lambda d: d.execute_script(  # noqa: E731 - read inside the wait
         "return [...document.querySelectorAll('#f-comp option')].map((o) => o.textContent).join('\\n')")
     WebDriverWait(browser, 10).until(lambda d: all(n in comps(d) for n in LOADS + RAILS + PANELS + RADIOS))
-    shows(browser, [EVENT, f"load/{LOADS[1]}/short"])
+    shows(browser, [EVENT, f"Load {LOADS[1]}: Short circuit"])
     no_script_ran(browser)
     view(browser, "inputs")
     shows(browser, PANELS + RADIOS)

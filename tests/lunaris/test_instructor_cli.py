@@ -56,9 +56,11 @@ def test_inputs_sun_panel_position_umbilical(live):
     # the dashboard's dust on one panel, a layer over the instructor's dust fault
     done = run_tool("input", R, "solar/left/dust", "0.5", "--connect", ep)
     assert done.returncode == 0 and "dust 0.5 on panel left" in done.stdout, done.stdout + done.stderr
-    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5 and s["faults"] == [])
+    half = p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5 and s["faults"] == [])
     p.put(keys.fault(R, "solar/left", "dust"), 0.3)
-    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == pytest.approx(0.65))
+    # 1 - (1 - 0.3)(1 - 0.5) = 0.65 of the light lost; dust reports the input, never the fault
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5
+                 and s["power_w"] == pytest.approx(0.7 * half["power_w"]))
     p.delete(keys.fault(R, "solar/left", "dust"))
     done = run_tool("input", R, "solar/left/dust", "--delete", "--connect", ep)
     assert "no dust input on panel left" in done.stdout, done.stdout + done.stderr

@@ -1,6 +1,8 @@
 // The console's HTTP API as the page uses it: writes on the twin's keys, answered by the
-// twin; queries; the answers shown at the bottom right.
+// twin; queries; the answers shown on the answer line (under the views' tabs, above the view,
+// which scrolls on its own: an answer covers nothing the instructor reads).
 
+import {plainMessage} from "./format.js";
 import {changed, store} from "./state.js";
 
 /**
@@ -31,7 +33,7 @@ export async function send(method, tail, body, rover = store.rover ?? "") {
   } catch (err) {
     data = {verdict: "no answer", message: `the console did not answer (${err})`};
   }
-  answer(data.verdict, data.message);
+  answer(data.verdict, plainMessage(data.message, tail));
   return data;
 }
 
@@ -51,7 +53,7 @@ export async function post(url, body) {
   } catch (err) {
     data = {verdict: "no answer", message: `the console did not answer (${err})`};
   }
-  answer(data.verdict, data.message);
+  answer(data.verdict, plainMessage(data.message));
   return data;
 }
 
@@ -74,9 +76,14 @@ export async function query(url) {
 const WORDS = {accepted: "Accepted", rejected: "Refused by the twin", invalid: "Not sent",
                forbidden: "Not allowed", "no answer": "No answer"};
 
+/** How long an answer stays bright, then dimmed, on the answer line. */
+const FRESH_MS = 12000;
+/** Answers kept (the newest shown; the others stay for tools and tests, hidden). */
+const KEPT = 4;
+
 /**
- * Show an answer at the bottom right for 15 s (the newest on top, four at most). Built with
- * DOM nodes and text, never markup: the message holds the twin's words and names.
+ * Show an answer on the answer line: the newest in front, dimmed after a while. Built with DOM
+ * nodes and text, never markup: the message holds the twin's words and names.
  * @param {string} verdict
  * @param {string} message
  */
@@ -89,8 +96,8 @@ export function answer(verdict, message) {
   head.textContent = `${WORDS[/** @type {keyof typeof WORDS} */ (verdict)] ?? verdict}:`;
   el.append(head, message);
   box.prepend(el);
-  while (box.children.length > 4) box.lastElementChild?.remove();
-  setTimeout(() => el.remove(), 15000);
+  while (box.children.length > KEPT) box.lastElementChild?.remove();
+  setTimeout(() => el.classList.add("old"), FRESH_MS);
 }
 
 /**

@@ -25,7 +25,7 @@ export function roverTabs() {
 export function clockBar() {
   const r = store.rover, c = r ? clock(r) : undefined;
   if (!r || !c) return nothing;
-  return html`<span>sim t <b id="clock-t" data-key="clock" data-field="t_s">${clockText(c.t_s)}</b></span>
+  return html`<span>sim time <b id="clock-t" data-key="clock" data-field="t_s">${clockText(c.t_s)}</b></span>
     <span id="clock-x" data-key="clock" data-field="time_scale">×${c.time_scale}</span>
     ${c.paused ? html`<span class="paused" data-key="clock" data-field="paused">PAUSED</span>` : nothing}
     ${c.paused

@@ -15,7 +15,7 @@ import {keyed} from "./vendor/lit-html/directives/keyed.js";
 import {syncCharts, updateCharts} from "./charts.js";
 import {clockBar, linkState, roverTabs, viewTabs, who} from "./header.js";
 import {changed, onChange, parts, store} from "./state.js";
-import {connect, sample} from "./stream.js";
+import {connect} from "./stream.js";
 import {VIEWS} from "./views/index.js";
 import {linkBanner} from "./widgets.js";
 
@@ -61,7 +61,6 @@ function draw() {
 }
 
 function everySecond() {
-  sample();
   updateCharts();
   const now = current();
   now?.view.tick?.(now.ctx);

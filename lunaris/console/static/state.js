@@ -17,7 +17,8 @@
 /** @typedef {import("./types.js").UmbilicalState} UmbilicalState */
 
 /**
- * The plots' history of one rover, a point a second.
+ * The plots' history of one rover, by simulated time (`t`: the battery state's `t_s`): a point
+ * every sim second at most, the older points thinned as the history grows.
  * @typedef {{t: number[], soc: number[], temperature_c: number[], load_w: (number | null)[],
  *   generation_w: (number | null)[]}} History
  */
@@ -36,7 +37,10 @@
 /** @typedef {"ok" | "lost"} RoverLink */
 
 export const EVENTS_KEPT = 300;
-export const HISTORY_KEPT = 900;
+/** Points of a rover's plots kept; past it, the older half is thinned to every other point. */
+export const HISTORY_KEPT = 2400;
+/** The spans of sim time the plots may show, in seconds, and their words. */
+export const SPANS = /** @type {const} */ ([[900, "15 min"], [3600, "1 h"], [8 * 3600, "8 h"]]);
 
 export const store = {
   /** @type {Record<string, unknown>} the latest payload of every key, by its full key */
@@ -62,6 +66,8 @@ export const store = {
   cat: /** @type {Catalogue | null} */ (null),
   /** @type {Set<string>} the actions sent and not answered yet (their buttons wait) */
   pending: new Set(),
+  /** the span of sim time the plots show, in seconds (one of SPANS) */
+  span: 900,
 };
 
 /** @type {Set<() => void>} */

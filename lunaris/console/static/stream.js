@@ -3,6 +3,8 @@
 
 import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, powerSummary, rovers, store} from "./state.js";
 
+/** @typedef {import("./state.js").BatteryState} BatteryState */
+
 /** @typedef {import("./state.js").TwinEvent} TwinEvent */
 /** @typedef {import("./state.js").History} History */
 /** @typedef {import("./state.js").RoverLink} RoverLink */
@@ -38,7 +40,7 @@ export function receive(msg) {
     store.values = msg.values ?? {};
     store.services = msg.services ?? {};
     store.events = {};
-    store.history = {...(msg.history ?? {})};
+    store.history = simHistory(msg.history ?? {});
     store.links = {};
     store.connected = !!msg.connected;
   } else {
@@ -46,6 +48,10 @@ export function receive(msg) {
     Object.assign(store.services, msg.services ?? {});
   }
   links(msg);
+  for (const k of Object.keys(msg.values ?? {})) {
+    const m = /^lunaris\/([^/]+)\/battery\/state$/.exec(k);
+    if (m) point(m[1]);
+  }
   for (const e of msg.events ?? []) {
     const rover = e.key.split("/")[1];
     const kept = (store.events[rover] ||= []);
@@ -72,18 +78,46 @@ function links(msg) {
   for (const [rover, data] of Object.entries(msg.links ?? {})) set(rover, typeof data === "object" ? data?.link : data);
 }
 
-/** A point a second of every rover's plots (drawn when its plots are shown). */
-export function sample() {
-  const now = Date.now() / 1000;
-  for (const r of rovers()) {
-    const b = battery(r), p = powerSummary(r);
-    if (!b) continue;
-    const h = (store.history[r] ||= {t: [], soc: [], temperature_c: [], load_w: [], generation_w: []});
-    h.t.push(now);
-    h.soc.push(b.soc * 100);
-    h.temperature_c.push(b.temperature_c);
-    h.load_w.push(p ? p.load_power_w : null);
-    h.generation_w.push(p ? p.generation_w : null);
-    if (h.t.length > HISTORY_KEPT) for (const k of /** @type {(keyof History)[]} */ (Object.keys(h))) h[k].shift();
+/**
+ * The console's history kept where it is in sim time (a `t_s` list beside its points); a
+ * history in wall-clock time only (`t`) is left out: the plots are in sim time, and they fill
+ * from the live values in a few seconds.
+ * @param {Record<string, History & {t_s?: number[]}>} sent
+ * @returns {Record<string, History>}
+ */
+function simHistory(sent) {
+  /** @type {Record<string, History>} */
+  const out = {};
+  for (const [rover, h] of Object.entries(sent)) {
+    if (Array.isArray(h.t_s) && h.t_s.length === h.soc?.length) out[rover] = {...h, t: h.t_s};
+  }
+  return out;
+}
+
+/** The smallest step of sim time between two points of the plots, in seconds. */
+const STEP_S = 1;
+
+/** @param {string} rover a point of its plots, at its battery state's sim time */
+function point(rover) {
+  const b = /** @type {BatteryState | undefined} */ (battery(rover)), p = powerSummary(rover);
+  if (!b) return;
+  let h = store.history[rover];
+  const last = h?.t.length ? h.t[h.t.length - 1] : null;
+  if (!h || (last !== null && b.t_s < last)) {  // a reset or a restore: a new time line
+    h = store.history[rover] = {t: [], soc: [], temperature_c: [], load_w: [], generation_w: []};
+  } else if (last !== null && b.t_s < last + STEP_S) {
+    return;
+  }
+  h.t.push(b.t_s);
+  h.soc.push(b.soc * 100);
+  h.temperature_c.push(b.temperature_c);
+  h.load_w.push(p ? p.load_power_w : null);
+  h.generation_w.push(p ? p.generation_w : null);
+  if (h.t.length > HISTORY_KEPT) {
+    const half = Math.floor(h.t.length / 2);
+    for (const k of /** @type {(keyof History)[]} */ (Object.keys(h))) {
+      const col = /** @type {unknown[]} */ (h[k]);
+      h[k] = /** @type {any} */ ([...col.slice(0, half).filter((_, i) => i % 2 === 0), ...col.slice(half)]);
+    }
   }
 }

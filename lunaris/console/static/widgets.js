@@ -3,7 +3,7 @@
 
 import {html, nothing} from "./vendor/lit-html/lit-html.js";
 import {act} from "./api.js";
-import {fmt} from "./format.js";
+import {clockText, faultName, fmt, paramsText, partName, plainMessage, words} from "./format.js";
 import {activeFaults, linkLost, mayAct, store, val} from "./state.js";
 
 /** @typedef {import("./format.js").Format} Format */
@@ -49,8 +49,11 @@ export function actionButton({action, label, run, rover = store.rover ?? "", tar
     @click=${() => act(id, run)}>${label}</button>`;
 }
 
+/** Who put a fault in effect, in words. */
+const ORIGIN = /** @type {Record<string, string>} */ ({injected: "injected", derived: "raised by the twin"});
+
 /**
- * The active faults of a rover; each injected one with its Clear button.
+ * The active faults of a rover; each injected one with its Clear button. Times are sim time.
  * @param {string} rover
  * @param {(component: string, kind: string) => unknown} clear
  */
@@ -58,25 +61,38 @@ export function faultsCard(rover, clear) {
   const pre = `lunaris/${rover}/`;
   const rows = activeFaults(rover).map((f) => {
     const name = (f.key.startsWith(pre) ? f.key.slice(pre.length) : f.key).replace(/^fault\//, "");
-    const params = Object.entries(f.params ?? {}).map(([k, v]) => `${k}=${typeof v === "object" ? JSON.stringify(v) : v}`).join(" ");
     const bits = name.split("/"), kind = bits.pop() ?? "", component = bits.join("/");
+    const values = paramsText(component, kind, f.params);
     return html`<tr data-fault=${name}>
-      <td class="sev-${f.severity ?? "warning"} wrap">${name}<br><small>${f.origin}${params ? ` · ${params}` : ""}</small></td>
-      <td class="num">${f.since_t_s.toFixed(1)} s</td>
-      <td>${f.origin === "injected" ? actionButton({action: "fault-clear", label: "Clear", rover, target: {component, kind},
-                                                    run: () => clear(component, kind)}) : nothing}</td></tr>`;
+      <td class="sev-${f.severity ?? "warning"} wrap">${partName(component)}: ${faultName(component, kind)}<br>
+        <small>${ORIGIN[f.origin] ?? words(f.origin)}${values ? ` · ${values}` : ""}</small></td>
+      <td class="num">${clockText(f.since_t_s)}</td>
+      <td class="end">${f.origin === "injected" ? actionButton({action: "fault-clear", label: "Clear", rover,
+        target: {component, kind}, run: () => clear(component, kind)}) : nothing}</td></tr>`;
   });
   return html`<section class="card"><h2>Active faults</h2><div id="faults-list" class="faults-list">${rows.length
-    ? html`<table><tr><th>fault</th><th class="num">since</th><th></th></tr>${rows}</table>`
+    ? html`<table><tr><th>fault</th><th class="num">since (sim time)</th><th></th></tr>${rows}</table>`
     : html`<p class="none">No active fault.</p>`}</div></section>`;
 }
 
-/** @param {string} rover the newest 120 of its events, newest first */
+/** What an event is, in words (its kind). */
+const KIND = /** @type {Record<string, string>} */ ({
+  rejected: "refused", fault_injected: "fault injected", fault_cleared: "fault cleared", fault_raised: "alarm",
+  fault_resolved: "alarm over", command: "command", input: "input", clock: "clock", session: "session",
+  scenario: "drill", internal_error: "twin error"});
+
+/** @param {import("./state.js").TwinEvent} e its message, in plain words, without repeating its kind */
+const said = (e) => {
+  const text = plainMessage(e.message, e.key);
+  return e.kind === "fault_injected" || e.kind === "fault_cleared" ? text.replace(/^(injected|cleared) /, "") : text;
+};
+
+/** @param {string} rover the newest 120 of its events, newest first; times are sim time */
 export function eventsCard(rover) {
   const evs = (store.events[rover] ?? []).slice(-120).reverse();
-  return html`<section class="card"><h2>Event log <small>newest first</small></h2>
+  return html`<section class="card"><h2>Event log <small>newest first · sim time</small></h2>
     <div id="events-list" class="events">${evs.length ? evs.map((e) => html`<div class="sev-${e.severity}" data-kind=${e.kind}>
-      <span class="t">${e.t_s.toFixed(1)} s</span><b>${e.kind.replace(/_/g, " ")}</b> ${e.message}
+      <span class="t">${clockText(e.t_s)}</span><b>${KIND[e.kind] ?? words(e.kind)}</b> ${said(e)}
       <small>[${e.source}]</small></div>`) : html`<p>No event yet.</p>`}</div></section>`;
 }
 

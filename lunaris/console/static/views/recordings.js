@@ -2,8 +2,8 @@
 // with its debrief report.
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
-import {post, query} from "../api.js";
-import {dur, wallTime} from "../format.js";
+import {answer, post, query} from "../api.js";
+import {dur, nameProblem, num, wallTime} from "../format.js";
 import {changed, mayAct} from "../state.js";
 
 /**
@@ -23,6 +23,16 @@ async function load() {
   changed();
 }
 
+/** @param {string} name a recording under this name, once the name is one the console takes */
+function start(name) {
+  const wrong = nameProblem(name.trim().replace(/\.mcap$/, ""), "recording", 80);
+  if (wrong) {
+    answer("invalid", wrong);
+    return undefined;
+  }
+  return record({name: name.trim()});
+}
+
 /** @param {Record<string, unknown>} body */
 async function record(body) {
   await post("/api/recordings", body);
@@ -38,11 +48,31 @@ function list(r) {
   </tr>`)}</table>`;
 }
 
-/** @param {Recording} rec */
-function status(rec) {
+/** @param {string[]} lines the recorder's last lines @returns {{count: number, mb: number} | null} its progress */
+function counted(lines) {
+  for (const line of [...lines].reverse()) {
+    const m = /(\d+) messages on \d+ channels[^;]*?(?:, ([\d.]+) MB|; ([\d.]+) MB)/.exec(line);
+    if (m) return {count: Number(m[1]), mb: Number(m[2] ?? m[3])};
+  }
+  return null;
+}
+
+/** @param {Recording} rec @param {RecordingInfo[]} saved what is being (or was) recorded, in words */
+function status(rec, saved) {
   if (!rec.file) return nothing;
-  return html`<p>${rec.running ? html`<b>Recording</b> to ${rec.file} for ${dur(Date.now() / 1000 - (rec.started ?? 0))}`
-                               : `Last: ${rec.file}`}</p><div class="log">${(rec.lines ?? []).join("\n")}</div>`;
+  const lines = rec.lines ?? [], got = counted(lines);
+  if (rec.running) {
+    return html`<p><b>Recording</b> to ${rec.file} for ${dur(Date.now() / 1000 - (rec.started ?? 0))}${got
+      ? `: ${num(got.count)} values and events so far (${got.mb.toFixed(1)} MB).` : ": starting…"}</p>`;
+  }
+  const file = saved.find((x) => x.name === rec.file);
+  if (file) {
+    return html`<p><b>Saved</b> ${rec.file}${got ? `: ${num(got.count)} values and events` : ""}, ${
+      (file.bytes / 1e6).toFixed(1)} MB. Its report opens from the list.</p>`;
+  }
+  const last = [...lines].reverse().find((l) => l.trim()) ?? "";
+  return html`<p class="error">The recording ${rec.file} stopped without saving: ${
+    last.replace(/^lunaris [\w ]+: /, "") || "no reason given"}.</p>`;
 }
 
 export const recordings = {
@@ -52,14 +82,15 @@ export const recordings = {
     const r = listed?.ok ? listed.data : null, rec = r?.recording ?? {file: null}, may = mayAct();
     const name = () => /** @type {HTMLInputElement | null} */ (document.getElementById("rec-name"))?.value ?? "";
     return html`<div class="grid two"><div class="col"><section class="card"><h2>Record the session</h2>
-        <p class="help">Records every value and event of the twin for the debrief (MCAP: also opens in Foxglove and
-          PlotJuggler).</p>
+        <p class="help">Records every value and event of the twin for the debrief. Each recording has a report
+          (plots and the event log) that opens here; the recording itself is an MCAP file in the console's folder${
+          r?.folder ? html` (<code>${r.folder}</code>)` : nothing}, which Foxglove and PlotJuggler open.</p>
         <div class="row"><label>Name<input type="text" id="rec-name" value=${offered}></label>
           <button type="button" class="primary" id="rec-start" ?disabled=${!r || !!rec.running || !may}
-            @click=${() => record({name: name()})}>Start recording</button>
+            @click=${() => start(name())}>Start recording</button>
           <button type="button" class="danger" id="rec-stop" ?disabled=${!rec.running || !may}
             @click=${() => record({action: "stop"})}>Stop</button></div>
-        <div id="rec-status">${status(rec)}</div></section></div>
+        <div id="rec-status">${status(rec, r?.recordings ?? [])}</div></section></div>
       <div class="col"><section class="card"><h2>Recordings <button type="button" class="act" id="rec-refresh"
           @click=${load}>Refresh</button></h2>
         <div id="rec-list">${!listed ? "loading…" : listed.ok ? list(listed.data) : html`<p class="error">${listed.message}</p>`}</div>
