@@ -145,7 +145,9 @@ def _plan(rover: str, parts: list[str], payload: bytes | None) -> Write:
         fk = parse_fault_key(parts[1:])
         if payload is None:
             return Write(key, None, accepted, owner)
-        return Write(key, msgspec.json.encode(parse_params(fk, payload)), accepted, owner)
+        # on the wire without the tag (common.faults): the kind is the key's last chunk
+        return Write(key, msgspec.json.encode(msgspec.structs.asdict(parse_params(fk, payload))),
+                     accepted, owner)
     if head == "control":
         if parts == ["control", "scenario"]:
             if payload is None:
