@@ -25,7 +25,8 @@ from common.faults import parse_fault_key, parse_params
 from common.messages import BARE_FIELD, BadInput, ScenarioMark, decode_input
 from common.session import parse_control
 
-__all__ = ["DELETABLE", "FAULT_OWNERS", "Write", "answer_of", "check_chunks", "plan_write"]
+__all__ = ["DELETABLE", "FAULT_OWNERS", "Write", "answer_of", "check_chunks", "plan_write",
+           "snapshot_name_problem"]
 
 # The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
 # gone, the rover stopped.
@@ -74,6 +75,26 @@ def check_chunks(rover: str, parts: list[str]) -> None:
         raise BadInput(f"bad rover id {rover!r}: lower-case letters, digits, '_' and '-'")
 
 
+SNAPSHOT_MAX = 64  # characters of a snapshot's name (common.keys.SNAPSHOT_NAME)
+_SNAPSHOT_WORDS = "a snapshot name is letters, digits, '-', '_' and '.'"
+_CHAR_NAMES = {" ": "a space", "/": "a '/'", "\t": "a tab", "*": "a '*'"}
+
+
+def snapshot_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a snapshot, in words (None: it can): "a snapshot name is
+    letters, digits, '-', '_' and '.'; 'before storm' has a space"."""
+    if not name:
+        return f"{_SNAPSHOT_WORDS}: give one"
+    bad = [c for c in dict.fromkeys(name) if not (c.isascii() and (c.isalnum() or c in "-_."))]
+    if bad:
+        said = [_CHAR_NAMES.get(c, f"{c!r}" if c.isprintable() else "a control character") for c in bad[:3]]
+        shown = "".join(c if c.isprintable() else "?" for c in name[:SNAPSHOT_MAX])
+        return f"{_SNAPSHOT_WORDS}; {shown!r} has {' and '.join(said)}"
+    if len(name) > SNAPSHOT_MAX:
+        return f"{_SNAPSHOT_WORDS}, at most {SNAPSHOT_MAX} of them; this one has {len(name)}"
+    return None
+
+
 def answer_of(parts: list[str] | tuple[str, ...], delete: bool) -> tuple[str, str]:
     """(event kind that accepts, service that answers) a write on ``lunaris/<rover>/<parts>``;
     :class:`BadInput` for a key no service reads. The one table every writer uses."""
@@ -112,6 +133,10 @@ def plan_write(rover: str, parts: list[str] | str, payload: bytes | None) -> Wri
 
 
 def _plan(rover: str, parts: list[str], payload: bytes | None) -> Write:
+    if parts[:1] == ["control"] and len(parts) >= 2 and parts[1] in ("snapshot", "restore"):
+        problem = snapshot_name_problem("/".join(parts[2:]))
+        if problem is not None:  # before the key's own check: said as a name, not as a key
+            raise BadInput(problem)
     check_chunks(rover, parts)
     accepted, owner = answer_of(parts, payload is None)
     key = keys.under(rover, "/".join(parts))
@@ -120,7 +145,9 @@ def _plan(rover: str, parts: list[str], payload: bytes | None) -> Write:
         fk = parse_fault_key(parts[1:])
         if payload is None:
             return Write(key, None, accepted, owner)
-        return Write(key, msgspec.json.encode(parse_params(fk, payload)), accepted, owner)
+        # on the wire without the tag (common.faults): the kind is the key's last chunk
+        return Write(key, msgspec.json.encode(msgspec.structs.asdict(parse_params(fk, payload))),
+                     accepted, owner)
     if head == "control":
         if parts == ["control", "scenario"]:
             if payload is None:

@@ -60,12 +60,13 @@ def plan(rover: str, tail: str, payload: bytes | None) -> Write:
 
 
 @contextlib.contextmanager
-def writer_for(args: argparse.Namespace, rover: str) -> Iterator[Writer]:
+def writer_for(args: argparse.Namespace, rover: str, families: tuple[str, ...] = ()) -> Iterator[Writer]:
     """A writer on ``rover`` for one command: the session opened (or :class:`ToolError`), the
-    rover's services and link known (:meth:`Writer.ready`), an unknown rover refused."""
+    rover's services and link known (:meth:`Writer.ready`), an unknown rover refused. The
+    writer's mirror also follows ``families`` (telemetry the command reads besides)."""
     session = open_session(args, wait_s=args.wait, on_waiting=lambda: print(
         "waiting for the Zenoh router ...", file=sys.stderr, flush=True))
-    mirror = Mirror(rover, families=("clock",), events=False)
+    mirror = Mirror(rover, families=("clock", *families), events=False)
     writer: Writer | None = None
     try:
         mirror.start(session)
@@ -86,9 +87,12 @@ def send(args: argparse.Namespace, write: Write) -> Answer:
 
 
 def format_event(ev: Event) -> str:
-    verdict = "rejected" if ev.kind == "rejected" else "accepted"
-    message = humane(ev.message) if ev.kind == "rejected" else ev.message
-    return f"{verdict}: {ev.kind} at t={ev.t_s:.1f} s [{ev.source}] {message}  ({ev.key})"
+    """``accepted: input at t=80.1 s [solar] sun angle 85 deg ...  (key)``; a rejection says
+    its reason once: ``rejected: at t=5.2 s [loads] rover mapp-1 has no load ...  (key)``."""
+    if ev.kind == "rejected":
+        reason = humane(ev.message.removeprefix("rejected: "))
+        return f"rejected: at t={ev.t_s:.1f} s [{ev.source}] {reason}  ({ev.key})"
+    return f"accepted: {ev.kind} at t={ev.t_s:.1f} s [{ev.source}] {ev.message}  ({ev.key})"
 
 
 def print_answer(name: str, answer: Answer, as_json: bool = False) -> int:

@@ -24,10 +24,10 @@ import zenoh
 
 from common import keys
 from common.connection import add_connection_args
-from common.faults import CATALOGUE, NAMED_COMPONENTS, parameters
+from common.faults import CATALOGUE, NAMED_COMPONENTS, NoParams, parameters, parse_fault_key
 from common.messages import BadInput
 from common.writes import Write, answer_of
-from lunaris.client import ANSWER_S, Mirror, ToolError, close_session, humane, open_session
+from lunaris.client import ANSWER_S, Mirror, ToolError, close_session, humane, open_session, shown
 from lunaris.confirm import confirm, plan, tool_main
 
 __all__ = ["add_arguments", "catalogue_help", "main", "parse_value"]
@@ -94,11 +94,16 @@ def parse_value(text: str | None) -> bytes:
     if text is None:
         return b""
     try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:  # bytes that are not text, as the shell passed them
+        raise ToolError("VALUE must be a number or a JSON object, and what was given is not even "
+                        "text (bytes that are not UTF-8)", 1) from None
+    try:
         value = json.loads(text)
-    except ValueError:
-        raise ToolError(f"VALUE must be a number or a JSON object, got {text!r}", 1) from None
+    except (ValueError, RecursionError):
+        raise ToolError(f"VALUE must be a number or a JSON object, got {shown(text)}", 1) from None
     if isinstance(value, bool) or not isinstance(value, int | float | dict):
-        raise ToolError(f"VALUE must be a number or a JSON object, got {text!r}", 1)
+        raise ToolError(f"VALUE must be a number or a JSON object, got {shown(text)}", 1)
     return json.dumps(value).encode()
 
 
@@ -118,6 +123,11 @@ def _write(args: argparse.Namespace) -> int:
         write = Write(keys.under(args.rover, tail), payload, accepted, owner)
     else:
         write = plan(args.rover, tail, None)  # the key: a component and kind of the catalogue
+        kind = parse_fault_key(tail.split("/")[1:])
+        if args.action == "inject" and args.value is not None and \
+                CATALOGUE[kind.component][kind.kind].params is NoParams:
+            raise ToolError(f"{component} {args.kind} takes no parameters: leave VALUE out (lunaris "
+                            f"fault inject {args.rover} {component} {args.kind})", 1)
         if args.action == "inject":
             payload = parse_value(args.value)
             try:

@@ -12,6 +12,7 @@ import argparse
 import msgspec
 
 from common.messages import RailCommand
+from lunaris.client import shown
 from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
 __all__ = ["COMMANDS", "add_arguments", "main"]
@@ -19,10 +20,16 @@ __all__ = ["COMMANDS", "add_arguments", "main"]
 COMMANDS = {"on": RailCommand(on=True), "off": RailCommand(on=False), "reset": RailCommand(reset=True)}
 
 
+def _action(text: str) -> str:
+    if text not in COMMANDS:
+        raise argparse.ArgumentTypeError(f"{shown(text)} is not an action: give on, off or reset")
+    return text
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("rover", help="rover id, e.g. mapp-1")
     p.add_argument("rail", help="rail name, e.g. 5V_CH2")
-    p.add_argument("action", choices=sorted(COMMANDS), help="switch it on or off, or reset a trip")
+    p.add_argument("action", type=_action, metavar="ACTION", help="on, off, or reset (after a trip)")
     add_common_arguments(p)
 
 

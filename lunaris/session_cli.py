@@ -16,7 +16,7 @@ import sys
 import time
 
 from common import keys
-from common.session import SNAPSHOT_NAME
+from common.writes import snapshot_name_problem
 from lunaris.client import ToolError, close_session, open_session
 from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
@@ -45,9 +45,9 @@ def main_snapshot(args: argparse.Namespace) -> int:
             return _list(a)
         if not a.name:
             raise ToolError(f"snapshot {a.action} needs a NAME", 1)
-        if not SNAPSHOT_NAME.match(a.name):
-            raise ToolError(f"bad snapshot name {a.name!r}: letters, digits, '_', '-' and '.', "
-                            "at most 64", 1)
+        problem = snapshot_name_problem(a.name)
+        if problem is not None:
+            raise ToolError(problem, 1)
         verb = "snapshot" if a.action == "save" else "restore"
         return confirm(a, "snapshot", plan(a.rover, f"control/{verb}/{a.name}", b""))
     return tool_main("snapshot", run, args)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import errno
 import os
 import shutil
 import signal
@@ -26,6 +27,8 @@ import zenoh
 from common import keys
 from common.connection import DEFAULT_ENDPOINT, make_config
 from common.messages import BatteryState, RailState, decode
+from lunaris.address import AddressTaken, ensure_free, free_port_after
+from lunaris.client import ToolError
 from lunaris.processes import lunaris_cmd, run_args, stop_processes
 from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV, load_rovers, served
 
@@ -224,6 +227,40 @@ class _Status:
         return out
 
 
+def _check_addresses(console: str | None, listen: list[str]) -> None:
+    """:class:`ToolError` in words when the console's address or a router endpoint (tcp) is
+    in use: what holds it, and what to give instead."""
+    if console:
+        from lunaris.console import parse_http, taken
+
+        host, port = parse_http(console)
+        try:
+            ensure_free(host, port)
+        except AddressTaken as exc:
+            raise ToolError(taken(exc, "--console", make_port=True) + "; nothing was started") from None
+        except OSError as exc:
+            raise ToolError(f"the console cannot listen on {host}:{port}: {exc.strerror or exc}; "
+                            "nothing was started") from None
+    for endpoint in listen:
+        proto, _, address = endpoint.partition("/")
+        host, sep, port_text = address.split("#", 1)[0].rpartition(":")
+        if proto not in ("tcp", "tls") or not sep or not port_text.isdigit():
+            continue
+        host = host.strip("[]")
+        try:
+            ensure_free(host, int(port_text))
+        except AddressTaken as exc:
+            nxt = free_port_after(host, int(port_text))
+            other = f"{proto}/{address.rpartition(':')[0]}:{nxt or 'PORT'}"
+            raise ToolError(
+                f"the router's address {endpoint} is taken by {exc.holder} (another twin?): "
+                f"{os.strerror(errno.EADDRINUSE)}; nothing was started. Give the router another "
+                f"address: lunaris up --listen {other} (the tools then --connect {other}), or stop "
+                "what holds it") from None
+        except OSError:
+            continue  # an address of another machine, or a name: the router says
+
+
 def main(args: argparse.Namespace) -> int:
     rover_files = args.rover or [DEFAULT_ROVER]
     rovers = load_rovers(rover_files)
@@ -249,6 +286,11 @@ def main(args: argparse.Namespace) -> int:
             return 2
     expected = {r.id: sum(1 for s in services if served(s, [r])) for r in rovers}
     listen = args.listen or [DEFAULT_ENDPOINT]
+    try:  # before anything starts: an address in use is said now, with what holds it
+        _check_addresses(args.console, listen)
+    except ToolError as exc:
+        print(f"lunaris up: {exc}", file=sys.stderr)
+        return 1  # as a port in use always was (the router's Zenoh error)
     temp_state = args.state_dir is None
     state_dir = Path(tempfile.mkdtemp(prefix="lunaris-")) if temp_state else Path(args.state_dir)
     state_dir.mkdir(parents=True, exist_ok=True)
@@ -264,6 +306,8 @@ def main(args: argparse.Namespace) -> int:
                      args.seed, bridge_config, bridges)
     if args.console:
         console = ["console", "--http", args.console, "--connect", listen[0]]
+        for f in rover_files:  # which radios follow the drive, their sites and footprints
+            console += ["--rover", os.path.abspath(f)]
         if args.console_accounts:
             console += ["--accounts", args.console_accounts]
         sup.add("console", console)

@@ -29,7 +29,7 @@ from lunaris.client.session import (
     require_rover,
     unknown_rover,
 )
-from lunaris.client.words import humane
+from lunaris.client.words import humane, shown
 from lunaris.client.writer import ANSWER_S, Accepted, Actor, Answer, NotApplied, Rejected, Writer, describe
 
 __all__ = [
@@ -59,5 +59,6 @@ __all__ = [
     "live_rovers",
     "open_session",
     "require_rover",
+    "shown",
     "unknown_rover",
 ]

@@ -105,13 +105,15 @@ def _all_refused(conf: zenoh.Config, timeout_s: float) -> bool:
 
 
 def open_session(args: argparse.Namespace, wait_s: float | None = 10.0,
-                 on_waiting: Callable[[], None] | None = None) -> zenoh.Session:
+                 on_waiting: Callable[[], None] | None = None,
+                 stop: threading.Event | None = None) -> zenoh.Session:
     """A client session from the shared connection options.
 
     Raises :class:`ToolError` when the configuration is bad, when no router listens at the
     endpoint (a refused connection: at once, with ``wait_s`` finite) or no router answers
-    within ``wait_s`` (None: wait for ever). ``on_waiting`` is called once if the router is
-    not there at once, to tell the user what the tool is waiting for.
+    within ``wait_s`` (None: wait for ever), or when ``stop`` is set while it waits (within
+    0.2 s). ``on_waiting`` is called once if the router is not there at once, to tell the user
+    what the tool is waiting for.
     """
     try:
         conf = config_from_args(args)
@@ -133,9 +135,13 @@ def open_session(args: argparse.Namespace, wait_s: float | None = 10.0,
     thread.join(min(1.0, wait_s) if wait_s is not None else 1.0)
     if not box and on_waiting is not None:
         on_waiting()
-    thread.join(None if wait_s is None else max(0.0, wait_s - 1.0))
-    while wait_s is None and thread.is_alive():  # short joins keep Ctrl-C responsive
-        thread.join(0.2)
+    deadline = None if wait_s is None else time.monotonic() + max(0.0, wait_s - 1.0)
+    while thread.is_alive():  # short joins keep Ctrl-C (and stop) responsive
+        if stop is not None and stop.is_set():
+            raise ToolError("stopped while waiting for the router")
+        if deadline is not None and time.monotonic() >= deadline:
+            break
+        thread.join(0.2 if deadline is None else max(0.0, min(0.2, deadline - time.monotonic())))
     if not box:
         raise ToolError(f"No Zenoh router answered at {describe_endpoint(args)} within {wait_s:g} s; "
                         f"{START_HINT}")

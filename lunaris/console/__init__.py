@@ -10,7 +10,10 @@ observers may watch but not change anything, and it may listen on any address. T
 :mod:`~lunaris.console.server` (the web server and the sign-in gate),
 :mod:`~lunaris.console.live` (the twin's values, pushed to the pages),
 :mod:`~lunaris.console.api` (writes and queries), :mod:`~lunaris.console.auth` (accounts),
-:mod:`~lunaris.console.extras` (scenarios, recordings, reports), ``static/`` (the page).
+:mod:`~lunaris.console.extras` (scenarios, recordings, reports), :mod:`~lunaris.console.drive`
+(traverses), :mod:`~lunaris.console.rovers` (what the page needs of each rover), ``static/``
+(the page). The console takes its address first (one in use is said, with what holds it), and
+its page is up before the twin is: it reaches the twin behind it.
 """
 
 from __future__ import annotations
@@ -19,13 +22,18 @@ import argparse
 import getpass
 import os
 import sys
+import threading
 from pathlib import Path
 
-from common.connection import add_connection_args
-from lunaris.client import ToolError, close_session, describe_endpoint, open_session
-from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
+import zenoh
 
-__all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http"]
+from common.connection import add_connection_args, config_from_args
+from lunaris.address import AddressTaken, bind, free_port_after
+from lunaris.client import ToolError, describe_endpoint, open_session
+from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
+from lunaris.console.rovers import RoverFiles
+
+__all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http", "taken"]
 
 DEFAULT_HTTP = "127.0.0.1:8080"
 ACCOUNTS_ENV = "LUNARIS_CONSOLE_ACCOUNTS"
@@ -40,12 +48,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the local user is the instructor)")
     p.add_argument("--scenarios", metavar="DIR", default=str(REPO / "config" / "scenarios"),
                    help="the scenarios offered (default config/scenarios)")
+    p.add_argument("--rover", metavar="FILE", action="append", default=[],
+                   help="a rover file of the session (repeatable): the console then knows which "
+                        "radios follow the drive, their sites and footprints (lunaris up gives its own)")
+    p.add_argument("--traverses", metavar="DIR", action="append", default=[],
+                   help="a folder of traverse files offered besides the shipped ones "
+                        "(config/traverses); repeatable")
     p.add_argument("--recordings", metavar="DIR", default="recordings",
                    help="where recordings are made and listed (default ./recordings)")
     p.add_argument("--tls-cert", metavar="FILE", help="serve HTTPS with this certificate (PEM)")
     p.add_argument("--tls-key", metavar="FILE", help="... and this private key (PEM)")
     p.add_argument("--wait", type=float, default=None, metavar="S",
-                   help="how long to wait for the Zenoh router (default: for ever)")
+                   help="how long to wait for the twin's Zenoh router, then stop (default: for ever; "
+                        "the page is up meanwhile and says it waits)")
     p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
                    help="another name this computer is reached by (a request's Host header must "
                         "be one of the console's names: its address, localhost, and these)")
@@ -117,17 +132,42 @@ def _serve(args: argparse.Namespace) -> int:
                         f"--role instructor --accounts FILE`, then give --accounts FILE")
     if bool(args.tls_cert) != bool(args.tls_key):
         raise ToolError("give both --tls-cert and --tls-key")
-    session = open_session(args, wait_s=args.wait, on_waiting=lambda: print(
-        f"waiting for the Zenoh router at {describe_endpoint(args)} ...", flush=True))
+    try:
+        config_from_args(args)
+    except (ValueError, zenoh.ZError) as exc:
+        raise ToolError(f"bad connection settings: {exc}") from None
+    try:
+        sock = bind(host, port)  # first: an address in use is said before anything starts
+    except AddressTaken as exc:
+        raise ToolError(taken(exc)) from None
+    except OSError as exc:
+        raise ToolError(f"cannot listen on {host}:{port}: {exc.strerror or exc}") from None
+    endpoint = describe_endpoint(args)
+    rover_files = RoverFiles(Path(f) for f in args.rover)
+
+    def opener(stop: threading.Event) -> zenoh.Session:
+        return open_session(args, wait_s=args.wait, stop=stop, on_waiting=lambda: print(
+            f"  waiting for the twin at {endpoint} (nothing answers there yet: start it with make run "
+            "or lunaris up); the page is up and says so", flush=True))
+
     connection = [a for ep in args.connect or [] for a in ("--connect", ep)]
     if args.config:
         connection += ["--config", args.config]
-    app = make_app(session, accounts, tls=bool(args.tls_cert), scenarios_dir=Path(args.scenarios),
+    gave_up: list[str] = []
+    server: list[uvicorn.Server] = []
+
+    def give_up(why: str) -> None:
+        gave_up.append(why)
+        if server:
+            server[0].should_exit = True
+
+    app = make_app(opener, accounts, tls=bool(args.tls_cert), scenarios_dir=Path(args.scenarios),
                    recordings_dir=Path(args.recordings), connection=connection,
-                   hosts=host_names(host, args.allow_host))
+                   traverse_dirs=[Path(d) for d in args.traverses], rover_files=rover_files,
+                   hosts=host_names(host, args.allow_host), endpoint=endpoint, give_up=give_up)
     scheme = "https" if args.tls_cert else "http"
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-    print(f"Lunaris console: {scheme}://{shown}:{port}/  (twin at {describe_endpoint(args)})", flush=True)
+    print(f"Lunaris console: {scheme}://{shown}:{port}/  (twin at {endpoint})", flush=True)
     if accounts is None:
         print("  no accounts file: listening on this computer only, and you, the local user, "
               "are the instructor", flush=True)
@@ -143,9 +183,22 @@ def _serve(args: argparse.Namespace) -> int:
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False,
                             timeout_graceful_shutdown=1, ssl_certfile=args.tls_cert,
                             ssl_keyfile=args.tls_key, lifespan="on", http=Protocol)
+    server.append(uvicorn.Server(config))
     try:
-        uvicorn.Server(config).run()
+        server[0].run(sockets=[sock])
     finally:
-        close_session(session)
+        sock.close()
+    if gave_up:
+        raise ToolError(gave_up[0])
     print("Lunaris console: stopped", flush=True)
     return 0
+
+
+def taken(exc: AddressTaken, option: str = "--http", make_port: bool = False) -> str:
+    """Words for a console address in use: what holds it, and another address to give."""
+    nxt = free_port_after(exc.host, exc.port)
+    other = f"{exc.host}:{nxt}" if nxt else f"{exc.host}:PORT"
+    make = f" (make run PORT={nxt or 'PORT'})" if make_port else ""
+    command = "lunaris up --console" if option == "--console" else "lunaris console --http"
+    return (f"the console's address {exc.host}:{exc.port} is taken by {exc.holder}. Give the "
+            f"console another address: {command} {other}{make}, or stop what holds it")

@@ -34,12 +34,12 @@ from starlette.routing import Route
 from common import keys
 from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, parameters
 from common.messages import MAX_INPUT_BYTES, BadInput
-from common.writes import plan_write
+from common.writes import Write, plan_write
 from lunaris.client import Accepted, NotApplied, Rejected, describe, humane
 from lunaris.console.auth import User
 from lunaris.console.live import Hub
 
-__all__ = ["TooLarge", "catalogue", "read_body", "routes"]
+__all__ = ["TooLarge", "answer", "catalogue", "read_body", "refused", "routes", "send"]
 
 ROVER = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
 LAST_MAX = 100_000  # the journal's latest events asked for at most
@@ -81,43 +81,60 @@ def _user(request: Request) -> User:
     return request.scope["state"]["user"]
 
 
-def _answer(status: int, verdict: str, message: str, event: dict | None = None) -> JSONResponse:
+def answer(status: int, verdict: str, message: str, event: dict | None = None) -> JSONResponse:
+    """A write's answer: ``{"verdict", "message", "event"}``."""
     return JSONResponse({"verdict": verdict, "message": message, "event": event}, status_code=status)
 
 
-async def _write(request: Request) -> Response:
+def refused(request: Request, rover: str) -> Response | None:
+    """The answer to a write nobody may send (an observer's: 403; a bad rover id: 404), or None."""
     user: User = _user(request)
-    hub: Hub = request.app.state.hub
-    rover, tail = request.path_params["rover"], request.path_params["key"]
     if not user.may_act:
-        return _answer(403, "forbidden", f"{user.name} is an observer: observers see everything "
+        return answer(403, "forbidden", f"{user.name} is an observer: observers see everything "
                                          "and change nothing")
     if not ROVER.match(rover):
-        return _answer(404, "invalid", f"bad rover id {rover!r}")
+        return answer(404, "invalid", f"bad rover id {rover!r}")
+    return None
+
+
+async def send(request: Request, planned: Write) -> Response:
+    """Send a planned write through the hub's writer and answer with the twin's answer: 200
+    accepted, 409 rejected, 503/504 not applied; 404 for a rover no service serves."""
+    hub: Hub = request.app.state.hub
+    rover = planned.rover
+    if (why := hub.not_connected()) is not None:
+        return answer(503, "not applied", why)
+    if rover not in hub.mirror.rovers() or not hub.mirror.services(rover) and hub.mirror.token(
+            rover, planned.owner) is None:
+        known = ", ".join(r for r in hub.mirror.rovers() if hub.mirror.services(r)) or "none"
+        return answer(404, "invalid", f"unknown rover {rover!r} (rovers: {known})")
+    assert hub.writer is not None
+    reply = await hub.writer.awrite(planned)
+    got = describe(reply)
+    if isinstance(reply, Accepted):
+        return answer(200, "accepted", reply.message, got["event"])
+    if isinstance(reply, Rejected):
+        return answer(409, "rejected", reply.message, got["event"])
+    assert isinstance(reply, NotApplied)
+    return answer(503 if reply.unreachable else 504, "not applied", reply.message)
+
+
+async def _write(request: Request) -> Response:
+    rover, tail = request.path_params["rover"], request.path_params["key"]
+    if (no := refused(request, rover)) is not None:
+        return no
     try:
         body = await read_body(request, MAX_INPUT_BYTES)
     except TooLarge:
-        return _answer(413, "invalid", f"not sent: the payload is too large for an input (at most "
+        return answer(413, "invalid", f"not sent: the payload is too large for an input (at most "
                                        f"{MAX_INPUT_BYTES} bytes)")
     except ClientDisconnect:
         return Response(status_code=400)
     try:
         planned = plan_write(rover, tail, None if request.method == "DELETE" else body)
     except BadInput as exc:
-        return _answer(422, "invalid", f"not sent: {humane(str(exc))}")
-    if rover not in hub.mirror.rovers() or not hub.mirror.services(rover) and hub.mirror.token(
-            rover, planned.owner) is None:
-        known = ", ".join(r for r in hub.mirror.rovers() if hub.mirror.services(r)) or "none"
-        return _answer(404, "invalid", f"unknown rover {rover!r} (rovers: {known})")
-    assert hub.writer is not None
-    answer = await hub.writer.awrite(planned)
-    got = describe(answer)
-    if isinstance(answer, Accepted):
-        return _answer(200, "accepted", answer.message, got["event"])
-    if isinstance(answer, Rejected):
-        return _answer(409, "rejected", answer.message, got["event"])
-    assert isinstance(answer, NotApplied)
-    return _answer(503 if answer.unreachable else 504, "not applied", answer.message)
+        return answer(422, "invalid", f"not sent: {humane(str(exc))}")
+    return await send(request, planned)
 
 
 def _get(session: zenoh.Session, selector: str, timeout_s: float) -> tuple[list[Any], list[str]]:
@@ -160,6 +177,9 @@ async def _query(request: Request) -> Response:
         selector, timeout = f"{keys.prediction(rover)}?hours={hours:g};samples={samples}", 60.0
     else:
         return JSONResponse({"message": f"no such query {what!r}"}, status_code=404)
+    hub: Hub = request.app.state.hub
+    if (why := hub.not_connected()) is not None:
+        return JSONResponse({"message": why.removeprefix("not applied: ")}, status_code=503)
     ok, errors = await asyncio.to_thread(_get, request.app.state.session, selector, timeout)
     if what == "faults" and ok and errors:  # never fewer faults without saying so
         return JSONResponse({"message": "not every owner answered: " + "; ".join(errors),

@@ -21,6 +21,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.parse
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
@@ -41,6 +42,7 @@ __all__ = ["Extras", "routes"]
 
 NAME = re.compile(r"^[A-Za-z0-9_.-]{1,80}$")
 LINES = 400
+MCAP_TYPE = "application/vnd.mcap"  # IANA's media type for MCAP
 
 
 class _Job:
@@ -115,7 +117,7 @@ class _Play:
 
 
 class Extras:
-    def __init__(self, session: zenoh.Session, scenarios_dir: Path | None, recordings_dir: Path | None,
+    def __init__(self, session: zenoh.Session | None, scenarios_dir: Path | None, recordings_dir: Path | None,
                  connection: list[str], live_rovers: Callable[[], list[str]] | None = None):
         self.session = session
         self.scenarios_dir = scenarios_dir
@@ -159,6 +161,8 @@ class Extras:
             scenario: Scenario = load_scenario(self.scenarios_dir / file)
         except ScenarioError as exc:
             return f"{file} cannot be played: {'; '.join(exc.problems)}"
+        if self.session is None:
+            return "the console is not connected to the twin yet: a scenario plays once it is"
         live = self.live_rovers()
         if scenario.rover not in live:
             return (f"{file} is for {scenario.rover}, which is not in this session (rovers: "
@@ -186,9 +190,38 @@ class Extras:
         out = []
         for path in sorted(folder.glob("*.mcap"), key=lambda p: p.stat().st_mtime, reverse=True):
             st = path.stat()
+            quoted = urllib.parse.quote(path.name)
             out.append({"name": path.name, "bytes": st.st_size, "modified": st.st_mtime,
-                        "report": path.with_suffix(".html").is_file()})
+                        "report": path.with_suffix(".html").is_file(),
+                        "download": f"/recordings/{quoted}", "report_url": f"/recordings/{quoted}/report"})
         return out
+
+    def _being_recorded(self, path: Path) -> bool:
+        return (self.recording is not None and self.recording.running
+                and self.recording_file is not None and self.recording_file.name == path.name)
+
+    def mcap(self, name: str) -> tuple[Path | None, int, str]:
+        """The recording ``name`` to download: (its path, 200, "") or (None, the status, why).
+        Only a ``.mcap`` file right inside the recordings folder (a link that leads out of it
+        is not one), and not while it is being written (it is whole once stopped)."""
+        folder = self.recordings_dir
+        if folder is None:
+            return None, 404, "this console has no folder for recordings (lunaris console --recordings DIR)"
+        stem = name.removesuffix(".mcap")
+        if stem == name or not NAME.match(stem):
+            return None, 404, (f"no recording {name!r}: a recording is NAME.mcap, the name made of "
+                               "letters, digits, '.', '_' and '-'")
+        path = folder / name
+        if self._being_recorded(path):  # written as NAME.mcap.part until then
+            return None, 409, (f"{name} is still being recorded: stop the recording first (the file "
+                               "is whole, and opens in Foxglove, once stopped)")
+        try:
+            inside = path.resolve(strict=True).parent == folder.resolve(strict=True)
+        except OSError:
+            inside = False
+        if not inside or not path.is_file():
+            return None, 404, f"no recording {name!r} in {folder}"
+        return path, 200, ""
 
     def record(self, name: str) -> str | None:
         if self.recording is not None and self.recording.running:
@@ -213,22 +246,20 @@ class Extras:
         return {"file": self.recording_file.name if self.recording_file else None,
                 "running": job.running, "started": job.started, "lines": list(job.lines)[-3:]}
 
-    async def report(self, name: str) -> tuple[Path | None, str]:
-        if self.recordings_dir is None or not NAME.match(name.removesuffix(".mcap")):
-            return None, f"no recording {name!r}"
-        path = self.recordings_dir / name
-        if not path.is_file():
-            return None, f"no recording {name!r}"
-        if self.recording is not None and self.recording.running and self.recording_file == path:
-            return None, "this recording is still going on: stop it first"
+    async def report(self, name: str) -> tuple[Path | None, int, str]:
+        """The debrief report of recording ``name`` (drawn once, again when the recording is
+        newer): (its path, 200, "") or (None, the status, why)."""
+        path, status, why = self.mcap(name)
+        if path is None:
+            return None, status, why
         out = path.with_suffix(".html")
         if not out.is_file() or out.stat().st_mtime < path.stat().st_mtime:
             done = await asyncio.to_thread(subprocess.run, [sys.executable, "-m", "lunaris.cli", "report",
                                                             str(path), "-o", str(out)],
                                            capture_output=True, text=True, timeout=300)
             if done.returncode != 0:
-                return None, (done.stderr or done.stdout).strip()
-        return out, ""
+                return None, 500, (done.stderr or done.stdout).strip()
+        return out, 200, ""
 
 
 def _forbidden(user: User) -> JSONResponse:
@@ -287,10 +318,20 @@ async def _recordings(request: Request) -> Response:
 
 
 async def _report(request: Request) -> Response:
-    out, why = await request.app.state.extras.report(request.path_params["name"])
+    out, status, why = await request.app.state.extras.report(request.path_params["name"])
     if out is None:
-        return JSONResponse({"message": why}, status_code=404)
+        return JSONResponse({"message": why}, status_code=status)
     return FileResponse(out, media_type="text/html")
+
+
+async def _download(request: Request) -> Response:
+    """A recording as a file to save (observers too: it is reading)."""
+    name = request.path_params["name"]
+    path, status, why = request.app.state.extras.mcap(name)
+    if path is None:
+        return JSONResponse({"message": why}, status_code=status)
+    return FileResponse(path, media_type=MCAP_TYPE, filename=path.name,
+                        headers={"Cache-Control": "no-store", "X-Content-Type-Options": "nosniff"})
 
 
 def routes() -> list[Route]:
@@ -298,4 +339,5 @@ def routes() -> list[Route]:
         Route("/api/scenarios", _scenarios, methods=["GET", "POST"]),
         Route("/api/recordings", _recordings, methods=["GET", "POST"]),
         Route("/recordings/{name}/report", _report),
+        Route("/recordings/{name}", _download),
     ]

@@ -21,11 +21,16 @@ The messages (``data:`` lines of the event stream, JSON):
 
 - ``{"type": "snapshot", "v", "values": {key: payload}, "events": [event], "services":
   {rover: [service]}, "history": {rover: {t, soc, temperature_c, load_w, generation_w}},
-  "connected": bool, "links": {rover: {"state": "up"|"lost"|"unknown", "since": wall time
-  or null, "reason": words}}}``
+  "connected": bool, "router": {"state", "endpoint", "message"}, "links": {rover: {"state":
+  "up"|"lost"|"unknown", "since": wall time or null, "reason": words}}}``
 - ``{"type": "batch", "v", "values", "events", "services", "links"}``: what changed (``links``
   holds the rovers whose link changed, often none)
-- ``{"type": "link", "v", "connected": bool}``: the router came or went.
+- ``{"type": "link", "v", "connected": bool, "router"}``: the router came or went.
+
+``router`` says where the console is with the twin's router, in words for the page:
+``state`` is ``waiting`` (the console has not reached it yet: it serves the page before the
+twin is up), ``connected`` or ``lost``; ``message`` is "waiting for the twin at
+tcp/127.0.0.1:7447 ...", "connected to the twin at ..." or "the twin at ... is gone ...".
 """
 
 from __future__ import annotations
@@ -56,9 +61,12 @@ PENDING_EVENTS = 2000  # events held for the next batch at most (a flood is cut,
 
 
 class Hub:
-    def __init__(self, loop: asyncio.AbstractEventLoop, flush_s: float = 0.05, **mirror: Any):
+    def __init__(self, loop: asyncio.AbstractEventLoop, flush_s: float = 0.05, endpoint: str = "",
+                 **mirror: Any):
         self.loop = loop
         self.flush_s = flush_s
+        self.endpoint = endpoint or "its router"
+        self.started = False  # the Zenoh session is open and the mirror subscribed
         self.mirror = Mirror("*", keep_events=EVENTS, history={"battery/state": HISTORY,
                                                                "power/summary": HISTORY},
                              history_every_s=HISTORY_S, **mirror)
@@ -90,7 +98,27 @@ class Hub:
         self.mirror.listen(self._hand)
         self.mirror.start(session)
         self.writer = Writer(session, self.mirror, "instructor")
+        self.started = True
         self._watch = self.loop.create_task(self._watch_links())
+
+    def router(self) -> dict[str, str]:
+        """Where the console is with the twin's router, in words (the module's ``router``)."""
+        if not self.started:
+            return {"state": "waiting", "endpoint": self.endpoint, "message":
+                    f"waiting for the twin at {self.endpoint}: nothing answers there yet (start "
+                    "the twin with make run, or lunaris up)"}
+        if self.connected:
+            return {"state": "connected", "endpoint": self.endpoint,
+                    "message": f"connected to the twin at {self.endpoint}"}
+        return {"state": "lost", "endpoint": self.endpoint, "message":
+                f"the twin's router at {self.endpoint} is gone: waiting for it to come back"}
+
+    def not_connected(self) -> str | None:
+        """Why a write or a query cannot go to the twin now (None: it can)."""
+        if not self.started:
+            return (f"not applied: the console is not connected to the twin yet (waiting for it at "
+                    f"{self.endpoint})")
+        return None
 
     def stop(self) -> None:
         self.closed = True
@@ -193,8 +221,9 @@ class Hub:
         if connected != self.connected:
             self.connected = connected
             self.version += 1
-            self._log.append((self.version, b'{"type":"link","v":%d,"connected":%s}'
-                              % (self.version, b"true" if connected else b"false")))
+            self._log.append((self.version, b'{"type":"link","v":%d,"connected":%s,"router":%s}'
+                              % (self.version, b"true" if connected else b"false",
+                                 msgspec.json.encode(self.router()))))
             self._notify()
 
     # -- what pages are sent ------------------------------------------------------------------
@@ -229,6 +258,7 @@ class Hub:
             "services": {r: sorted(s) for r, s in self.mirror.all_services().items()},
             "history": self.history(),
             "connected": self.connected,
+            "router": self.router(),
             "links": {r: lk.as_json() for r, lk in self.mirror.links().items()}})
         return (b'{"type":"snapshot","v":%d,"values":{%s},"events":[%s],%s'
                 % (self.version, values, events, rest[1:]))

@@ -16,8 +16,14 @@ a lockout that doubles, said on the page). A request must be complete (headers a
 within :data:`REQUEST_S` of its connection or of the answer before it (:class:`Protocol`, the
 HTTP/1.1 protocol uvicorn runs), or its connection is closed: a half-sent request holds
 nothing for long. A user removed from the accounts file is signed out at once, their live
-streams closed within a second. The Zenoh session is opened before the server starts; the
-hub subscribes in the lifespan, on the server's loop.
+streams closed within a second.
+
+The page is up before the twin is: given an opener rather than a session, the server answers
+at once and opens its Zenoh session behind it (the live stream says "waiting for the twin at
+<endpoint>" until then, a write or a query is 503 in words); the hub subscribes on the
+server's loop once the session is open. ``GET /api/about`` says, to anyone, that this is a
+Lunaris console (``lunaris up`` asks it, to say what holds an address), and to its users the
+twin it serves.
 """
 
 from __future__ import annotations
@@ -27,9 +33,11 @@ import contextlib
 import html
 import mimetypes
 import socket
+import sys
+import threading
 import time
 import urllib.parse
-from collections.abc import AsyncIterator, Iterable
+from collections.abc import AsyncIterator, Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -42,11 +50,17 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-from lunaris.console import api, extras
+from lunaris.address import ABOUT_APP, ABOUT_PATH
+from lunaris.client import ToolError, close_session
+from lunaris.console import api, drive, extras, rovers
 from lunaris.console.auth import COOKIE, LOCAL, SESSION_S, Accounts, AccountsError, Attempts, SignIns
 from lunaris.console.live import Hub
 
-__all__ = ["LOCAL_NAMES", "REQUEST_S", "STATIC", "Protocol", "host_names", "make_app"]
+__all__ = ["LOCAL_NAMES", "REQUEST_S", "STATIC", "Opener", "Protocol", "host_names", "make_app"]
+
+# Opens the console's Zenoh session, waiting for the router as long as it takes; returns early
+# (raising) when the event is set: the console is stopping.
+Opener = Callable[[threading.Event], zenoh.Session]
 
 STATIC = Path(__file__).resolve().parent / "static"
 mimetypes.add_type("text/javascript", ".js")  # the page's ES modules (RFC 9239), whatever the OS's table says
@@ -54,7 +68,8 @@ mimetypes.add_type("text/javascript", ".js")  # the page's ES modules (RFC 9239)
 PAGE_POLICY = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
                "img-src 'self' data:; connect-src 'self'; object-src 'none'; base-uri 'none'; "
                "form-action 'self'; frame-ancestors 'none'")
-PUBLIC = ("/login", "/static/app.css", "/favicon.ico")
+LIVE_PATH = "/api/live"
+PUBLIC = ("/login", "/static/app.css", "/favicon.ico", ABOUT_PATH)
 WRITES = {"PUT", "POST", "DELETE", "PATCH"}
 LOCAL_NAMES = ("localhost", "127.0.0.1", "::1", "localhost.localdomain")
 REQUEST_S = 10.0  # a request's headers and body must be in within this long
@@ -164,6 +179,15 @@ class Protocol(H11Protocol):
         super().on_response_complete()
         if not self.transport.is_closing():
             self._arm()  # the next request on this connection, if one comes
+
+    def shutdown(self) -> None:
+        """The server stops: a live stream, which never ends by itself, is closed at once
+        (its page reconnects to the next console) rather than waited for and cancelled."""
+        cycle = self.cycle
+        if cycle is not None and not cycle.response_complete and cycle.scope.get("path") == LIVE_PATH:
+            self.transport.close()
+            return
+        super().shutdown()
 
     def connection_lost(self, exc: Exception | None) -> None:
         if self._deadline is not None:
@@ -277,47 +301,105 @@ async def _index(request: Request) -> Response:
                                                         "Content-Security-Policy": PAGE_POLICY})
 
 
-def make_app(session: zenoh.Session, accounts: Accounts | None, *, tls: bool = False,
+async def _about(request: Request) -> Response:
+    """Who answers here: a Lunaris console; to its users, the twin it serves and its rovers."""
+    about: dict[str, Any] = {"app": ABOUT_APP}
+    if "user" in request.scope["state"]:
+        hub: Hub = request.app.state.hub
+        about.update(twin=hub.endpoint, connected=hub.connected,
+                     rovers=[r for r in hub.mirror.rovers() if hub.mirror.services(r)])
+    return JSONResponse(about)
+
+
+def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bool = False,
              scenarios_dir: Path | None = None, recordings_dir: Path | None = None,
+             traverse_dirs: Iterable[Path] = (), rover_files: rovers.RoverFiles | None = None,
              connection: list[str] | None = None, flush_s: float = 0.05,
-             hosts: Iterable[str] | None = None, **mirror: Any) -> Any:
-    """The console as an ASGI application around an open Zenoh session. ``hosts``: the names
-    a request's ``Host`` may carry (:func:`host_names`; default the loopback names)."""
+             hosts: Iterable[str] | None = None, endpoint: str = "",
+             give_up: Callable[[str], None] | None = None, **mirror: Any) -> Any:
+    """The console as an ASGI application around the twin: an open Zenoh session, or an
+    :data:`Opener` run behind the server (the page is up first; ``give_up(why)`` is called if
+    the opener fails, e.g. no router within ``--wait``). ``endpoint``: the twin's address in
+    words. ``traverse_dirs``: folders of traverse files offered besides the shipped ones;
+    ``rover_files``: the rover files the console knows (which radios follow the drive).
+    ``hosts``: the names a request's ``Host`` may carry (:func:`host_names`; default the
+    loopback names)."""
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        hub = Hub(asyncio.get_running_loop(), flush_s, **mirror)
-        hub.start(session)
+        hub = Hub(asyncio.get_running_loop(), flush_s, endpoint=endpoint, **mirror)
         app.state.hub = hub
         app.state.verifying = asyncio.Semaphore(VERIFYING)
+        stop = threading.Event()
+        connecting = None
+        if isinstance(twin, zenoh.Session):
+            _connected(app, twin)
+        else:
+            connecting = asyncio.create_task(_connect(app, twin, stop, give_up))
         watch = asyncio.create_task(_watch_accounts(app)) if accounts is not None else None
         try:
             yield
         finally:
-            if watch is not None:
-                watch.cancel()
+            stop.set()
+            for task in (watch, connecting):
+                if task is not None:
+                    task.cancel()
             app.state.extras.close()
             hub.stop()
+            if connecting is not None and app.state.session is not None:
+                await asyncio.to_thread(close_session, app.state.session)
 
     app = Starlette(routes=[
         Route("/", _index),
         Route("/favicon.ico", _favicon),
         Route("/login", _login, methods=["GET", "POST"]),
         Route("/logout", _logout, methods=["GET", "POST"]),
+        Route(ABOUT_PATH, _about),
+        *drive.routes(),
+        *rovers.routes(),
         *api.routes(),
         *extras.routes(),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ], lifespan=lifespan)
-    app.state.session = session
+    app.state.session = None  # until the twin is reached
     app.state.accounts = accounts
     app.state.sign_ins = SignIns(accounts) if accounts is not None else None
     app.state.attempts = Attempts()
     app.state.tls = tls
     app.state.catalogue = api.catalogue()
+    app.state.traverses = drive.Traverses([drive.SHIPPED, *traverse_dirs])
+    app.state.rover_files = rover_files or rovers.RoverFiles()
     app.state.extras = extras.Extras(
-        session, scenarios_dir, recordings_dir, connection or [],
+        None, scenarios_dir, recordings_dir, connection or [],
         live_rovers=lambda: [r for r in app.state.hub.mirror.rovers() if app.state.hub.mirror.services(r)])
     return Gate(app, accounts, app.state.sign_ins, set(hosts) if hosts is not None else set(LOCAL_NAMES))
+
+
+def _connected(app: Starlette, session: zenoh.Session) -> None:
+    """The twin reached: the hub mirrors it, the API and the scenarios write on it."""
+    app.state.session = session
+    app.state.extras.session = session
+    app.state.hub.start(session)
+
+
+async def _connect(app: Starlette, opener: Opener, stop: threading.Event,
+                   give_up: Callable[[str], None] | None) -> None:
+    """Open the session behind the running server, then start the hub on it."""
+    try:
+        session = await asyncio.to_thread(opener, stop)
+    except ToolError as exc:
+        if stop.is_set():
+            return
+        if give_up is not None:
+            give_up(str(exc))
+        else:
+            print(f"lunaris console: {exc}", file=sys.stderr, flush=True)
+        return
+    if stop.is_set():
+        await asyncio.to_thread(close_session, session)
+        return
+    _connected(app, session)
+    print(f"Lunaris console: connected to the twin at {app.state.hub.endpoint}", flush=True)
 
 
 async def _watch_accounts(app: Starlette) -> None:

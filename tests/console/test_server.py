@@ -137,6 +137,9 @@ BAD_WRITES = [
     ("@/x/sun_angle", b"3", 422, "verbatim"),
     ("input/%2A", b"3", 422, "wildcard"),
     ("input/sun angle", b"3", 422, "characters"),
+    ("control/snapshot/before storm", b"", 422,  # 26.5: said as a name, not as a key
+     "a snapshot name is letters, digits, '-', '_' and '.'; 'before storm' has a space"),
+    ("control/restore/a/b", b"", 422, "'a/b' has a '/'"),
     ("input/sun_angle", b"\xff\xfe", 422, "UTF-8"),
     ("input/sun_angle", b"[" * 100 + b"]" * 100, 422, ""),
     ("input/sun_angle", b"1" * 70_000, 413, "too large"),
@@ -407,3 +410,54 @@ def test_unknown_rovers_and_forged_keys_are_bounded_and_forgotten(session, route
         clock.t += 120  # strangers are forgotten after 30 s without a live service
         wait_for(lambda: mirror.rovers() == [R], 5, "the strangers to be forgotten")
         assert mirror.stats()["rovers"] == 1
+
+
+# -- 26.6: recordings to download ----------------------------------------------------------------------
+
+
+def test_a_recording_is_served_for_download_and_nothing_outside_its_folder(session, accounts, tmp_path,
+                                                                          router):
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    data = b"\x89MCAP0\r\n" + bytes(range(256)) * 40
+    (folder / "drill-1.mcap").write_bytes(data)
+    (folder / "notes.txt").write_text("not a recording")
+    (tmp_path / "secret.mcap").write_bytes(b"outside the folder")
+    (folder / "leak.mcap").symlink_to(tmp_path / "secret.mcap")
+    app = make_app(session, Accounts(accounts), recordings_dir=folder, connection=["--connect", router])
+    with client(app) as c:
+        assert c.get("/recordings/drill-1.mcap", follow_redirects=False).status_code == 303  # sign in
+        assert c.get("/api/about").json() == {"app": "lunaris console"}  # who it is; nothing more
+        assert _sign_in(c, "obi", "lander-side-observer").status_code == 303  # an observer reads
+        listed = c.get("/api/recordings").json()["recordings"]
+        (entry,) = [e for e in listed if e["name"] == "drill-1.mcap"]
+        assert entry["download"] == "/recordings/drill-1.mcap"
+        r = c.get(entry["download"])
+        assert r.status_code == 200 and r.content == data
+        assert r.headers["content-type"] == "application/vnd.mcap"
+        assert r.headers["content-disposition"] == 'attachment; filename="drill-1.mcap"'
+        for bad in ("leak.mcap", "notes.txt", "..%2Fsecret.mcap", "%2E%2E%2Fsecret.mcap",
+                    "nothing.mcap", ".mcap", "drill-1.mcap%00.txt"):
+            r = c.get(f"/recordings/{bad}")
+            assert r.status_code == 404, (bad, r.status_code)
+            assert b"outside the folder" not in r.content
+        assert "no recording" in c.get("/recordings/leak.mcap").json()["message"]
+        assert c.post("/api/recordings", json={"name": "live"}).status_code == 403  # reads only
+
+
+def test_a_recording_being_made_is_refused_until_it_is_stopped(session, rover, tmp_path, router):
+    folder = tmp_path / "recordings"
+    app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
+    with client(app) as c:
+        started = c.post("/api/recordings", json={"name": "live"})
+        assert started.status_code == 200, started.text
+        wait_for(lambda: (folder / "live.mcap.part").is_file(), 30, "lunaris record to open its file")
+        r = c.get("/recordings/live.mcap")
+        assert r.status_code == 409 and "still being recorded" in r.json()["message"]
+        assert c.get("/recordings/live.mcap/report").status_code == 409
+        assert c.post("/api/recordings", json={"action": "stop"}).status_code == 200
+        extras = app.app.state.extras
+        wait_for(lambda: not extras.recording.running, 30, "the recording to stop")
+        r = c.get("/recordings/live.mcap")
+        assert r.status_code == 200 and r.content.startswith(b"\x89MCAP0\r\n")
+        assert r.content.endswith(b"\x89MCAP0\r\n")  # whole: the closing magic written at Stop

@@ -58,7 +58,7 @@ def test_the_twin_rejecting_is_printed_and_exits_1(live):
     ep = live.endpoint
     done = run_tool("fault", "inject", R, "load/no_such_load", "short", "--connect", ep)
     assert done.returncode == 1
-    assert done.stdout.startswith("rejected: rejected") and "has no load 'no_such_load'" in done.stdout
+    assert done.stdout.startswith("rejected: at t=") and "has no load 'no_such_load'" in done.stdout
     done = run_tool("fault", "clear", R, "umbilical", "disconnect", "--connect", ep)
     assert done.returncode == 1 and "no active fault umbilical/disconnect to clear" in done.stdout
     # --no-check sends what the tool would refuse, and the twin refuses it

@@ -126,3 +126,15 @@ def test_a_reader_that_goes_away_ends_the_tool_without_a_traceback(live, command
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.parametrize("name, said", [
+    ("before storm", "'before storm' has a space"),
+    ("été", "'été' has 'é'"),
+    ("a/b", "'a/b' has a '/'"),
+])
+def test_a_snapshot_name_that_cannot_be_one_is_refused_in_words_before_sending(name, said):
+    done = run_tool("snapshot", "save", R, name, "--connect", "tcp/127.0.0.1:9", "--wait", "1")
+    assert done.returncode == 1 and done.stdout == ""
+    assert done.stderr == ("lunaris snapshot: a snapshot name is letters, digits, '-', '_' and '.'; "
+                           f"{said}\n")
