@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+import lunaris.up as up_module
 from common import keys
 from lunaris.up import Supervisor
 from tests.harness import ALL_SERVICES, ROOT, Probe, free_endpoint, lunaris_cmd, wait_for
@@ -158,4 +159,37 @@ def test_a_service_stops_when_its_supervisor_is_gone(router, tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 0 and "supervisor 1 is gone" in out
+
+
+
+class _Crashes(Supervisor):
+    """A supervisor whose every service dies at once of the same error."""
+
+    def __init__(self, tmp: Path):
+        super().__init__(["faults"], [], "tcp/127.0.0.1:1", tmp, None)
+
+    def command(self, service: str) -> list[str]:
+        return [sys.executable, "-c", "import msgspec; msgspec.json.decode(b'{\"t_s\": 1')"]
+
+
+def test_a_service_that_keeps_failing_is_shown_failed_with_its_error(tmp_path, capsys):
+    """Found: a faults service with a torn journal restarted 9 times in 25 s, for ever, and
+    was never shown FAILED."""
+    sup = _Crashes(tmp_path)
+    sup.start_all()
+    try:
+        wait_for(lambda: (sup.poll(), "faults" in sup.failed)[1], 30,
+                 lambda: f"the faults service shown failed (restarts: {sup.restarts})", poll_s=0.05)
+        assert sup.restarts["faults"] == up_module.FAILING_AFTER - 1
+        assert "msgspec.DecodeError: Input data was truncated" in sup.failed["faults"]
+        out = capsys.readouterr().out
+        assert "faults" in out and "FAILED" in out and "not restarting it" in out
+        first = sup.procs["faults"]
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:  # no longer restarted
+            sup.poll()
+            time.sleep(0.05)
+        assert sup.procs["faults"] is first
+    finally:
+        sup.stop_all()
 
