@@ -8,7 +8,8 @@ on. Its :class:`FaultBook`
   has the model apply it (``apply(rover, key, params)``; ``params`` None clears), and
   journals it as an event;
 - raises and resolves the faults the models derive themselves, on transitions;
-- persists the injected faults, so a restarted service re-applies them;
+- persists the injected faults, so a restarted service re-applies them (a saved fault that
+  is damaged is skipped and said aloud, the others re-applied);
 - publishes ``lunaris/<rover>/faults/active/<service>`` on every change (cached for late
   joiners: the bridge's ``/diagnostics``, ``lunaris watch``, the console) and answers a
   query on that key from the book itself, which is what ``get lunaris/<rover>/faults``
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 import zenoh
@@ -29,14 +30,36 @@ import zenoh
 from common import keys
 from common.faults import FaultKey, Params, params_from_dict, parse_fault_key, parse_params
 from common.messages import ActiveFault, ActiveFaults, BadInput, Severity, encode
+from common.state_store import Damaged, not_finite
 
 if TYPE_CHECKING:
     from common.runtime import Runtime, Sample
 
-__all__ = ["FaultApply", "FaultBook"]
+__all__ = ["FaultApply", "FaultBook", "saved_fault"]
 
 FaultApply = Callable[[str, FaultKey, Params | None], None]  # rover, key, params (None: clear)
 Names = Callable[[str], Iterable[str]]
+
+
+def saved_fault(raw: Any) -> tuple[ActiveFault, FaultKey, Params]:
+    """A saved injected fault (a record of :meth:`FaultBook._save`, or of a snapshot), checked
+    as an injection is: ValueError naming what is wrong (its key, a parameter's type or
+    range, a number that is not finite)."""
+    try:
+        fault = msgspec.convert(raw, ActiveFault)
+    except msgspec.ValidationError as exc:
+        raise ValueError(str(exc)) from None
+    bad = not_finite(fault.params) or (None if not_finite(fault.since_t_s) is None else "since_t_s")
+    if bad:
+        raise ValueError(f"{bad} is not a finite number")
+    try:
+        _, parts = keys.split(fault.key)
+        if parts[:1] != ["fault"]:
+            raise BadInput(f"{fault.key} is not a fault key")
+        fk = parse_fault_key(parts[1:])
+        return fault, fk, params_from_dict(fk, fault.params)
+    except (BadInput, ValueError) as exc:
+        raise ValueError(str(exc)) from None
 
 
 class FaultBook:
@@ -116,21 +139,58 @@ class FaultBook:
         self._inject(rover, fault.key, fk, params_from_dict(fk, fault.params))
 
     def restore(self) -> None:
-        """Re-apply the injected faults persisted by an earlier run of this service."""
-        saved = self.rt.store.load("faults") or {}
+        """Re-apply the injected faults persisted by an earlier run of this service. A saved
+        fault that is damaged (its parameters of the wrong type or out of range, the file
+        unreadable) is skipped, said in a ``critical`` event, and the file moved aside; the
+        intact ones are re-applied."""
+        rt = self.rt
+        try:
+            saved = rt.store.load("faults")
+        except Damaged as exc:
+            for rover in sorted(self.injected):
+                rt.state_damaged(rover, f"{rt.name} injected faults of {rover} damaged "
+                                 f"({exc.reason}): none re-applied (inject them again); "
+                                 f"{exc.where()}", params={"what": "faults", "reason": exc.reason})
+            self.publish_all()
+            return
+        if saved is None:
+            return
+        bad: list[tuple[str, str, str]] = []  # (rover, path or "", reason)
+        if not isinstance(saved, dict):
+            bad = [(r, "", f"the file holds {type(saved).__name__}, not a mapping of rovers")
+                   for r in sorted(self.injected)]
+            saved = {}
         for rover, faults in saved.items():
             if rover not in self.injected:
                 continue
+            if not isinstance(faults, dict):
+                bad.append((rover, "", f"a {type(faults).__name__} where a mapping of faults was "
+                                       "expected"))
+                continue
             for path, raw in faults.items():
-                fault = msgspec.convert(raw, ActiveFault)
-                fk = parse_fault_key(path.split("/"))
-                apply = self._appliers.get(fk.component)
-                if apply is None:
+                try:
+                    fault, fk, params = saved_fault(raw)
+                    if fk.path != path:
+                        raise ValueError(f"saved under {path} but its key is {fault.key}")
+                    apply = self._appliers.get(fk.component)
+                    if apply is None:
+                        continue
+                    apply(rover, fk, params)
+                except Exception as exc:  # anything the owner refuses: damaged, skipped
+                    bad.append((rover, str(path), str(exc) or type(exc).__name__))
                     continue
-                params = params_from_dict(fk, fault.params)
-                apply(rover, fk, params)
                 self.injected[rover][path] = (fault, params)
-            self._publish(rover)
+        if bad:
+            moved = rt.store.set_aside("faults")
+            where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
+            for rover, path, reason in bad:
+                what = f"saved fault {path} of {rover}" if path else f"injected faults of {rover}"
+                kept = ", ".join(sorted(self.injected[rover])) or "none"
+                rt.state_damaged(rover, f"{rt.name} {what} damaged ({reason}): skipped (inject it "
+                                 f"again); re-applied: {kept}; {where}",
+                                 params={"what": "faults", "fault": path, "reason": reason})
+            self._save()
+        self.publish_all()
 
     # -- derived faults ----------------------------------------------------------------------
 
@@ -169,7 +229,7 @@ class FaultBook:
         self._publish(rover)
 
     def _save(self) -> None:
-        self.rt.store.save("faults", {
+        self.rt.save_state("faults", {
             r: {p: msgspec.structs.asdict(f) for p, (f, _) in fs.items()}
             for r, fs in self.injected.items()})
 

@@ -203,7 +203,7 @@ class DriveState(_Msg):
 # input, a change of the clock, a bug in a service.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error"]
+                    "internal_error", "state_damaged"]
 
 
 class Event(_Msg):

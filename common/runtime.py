@@ -52,7 +52,7 @@ from common.connection import PRIORITY
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
-from common.session import SessionKeeper, StateGet, StateReset, StateSet
+from common.session import SessionKeeper, StateCheck, StateDamaged, StateGet, StateReset, StateSet
 from common.state_store import StateStore
 from common.worker import POLL_S, Worker
 
@@ -97,6 +97,7 @@ class Runtime:
         self.rovers: set[str] = set(rovers)
         self.t_s: dict[str, float] = dict.fromkeys(self.rovers, 0.0)  # sim time per rover
         self.store = StateStore(state_dir, name)
+        self._unsaved: dict[str, str] = {}  # what could not be saved -> the error, said once
         self._conf = conf
         self.worker = Worker(self._guard)
         self._exit_hooks: list[Callable[[], None]] = []
@@ -139,6 +140,31 @@ class Runtime:
         done.wait(wait_s)  # a running clock ticks every 0.1 s; none at all: a fresh twin
         sub.undeclare()
         self.t_s.update(seen)
+
+    def save_state(self, what: str, data: Any) -> bool:
+        """Save ``data`` in the store; a disk that refuses it is said once in a ``critical``
+        event (and again if the error changes), not at every save. Whether it was saved."""
+        try:
+            self.store.save(what, data)
+        except OSError as exc:
+            error = f"{type(exc).__name__}: {exc.strerror or exc}"
+            if self._unsaved.get(what) != error:
+                self._unsaved[what] = error
+                for rover in sorted(self.rovers):
+                    self.event(rover, "critical", "state_damaged", keys.service(rover, self.name),
+                               f"{self.name} cannot save its {what} in {self.store.path(what)} "
+                               f"({error}): a restart would lose what changed since")
+            return False
+        if self._unsaved.pop(what, None) is not None:
+            print(f"{self.name}: its {what} is saved again", file=sys.stderr, flush=True)
+        return True
+
+    def state_damaged(self, rover: str, message: str, key: str | None = None,
+                      params: dict | None = None) -> None:
+        """Say in a ``critical`` event that saved state was damaged, and what was done."""
+        print(f"{self.name}: {message}", file=sys.stderr, flush=True)
+        self.event(rover, "critical", "state_damaged", key or keys.service(rover, self.name),
+                   f"{self.name}: {message}", params)
 
     def __exit__(self, *exc: object) -> None:
         self.close()
@@ -190,12 +216,17 @@ class Runtime:
 
     def own_state(self, get: StateGet, set_: StateSet, reset: StateReset, *,
                   after: Callable[[str], None] | None = None,
-                  persist_every_s: float | None = 1.0) -> None:
+                  persist_every_s: float | None = 1.0, check: StateCheck | None = None,
+                  damaged: StateDamaged | None = None) -> None:
         """Hand the service's state to the session keeper (:mod:`common.session`): kept on
         disk, reset by ``control/reset``, saved and restored by snapshots. ``after(rover)``
         republishes once the state has changed by a control. The persisted state is read back
-        at once (call this before the first publish)."""
-        self._session_keeper = SessionKeeper(self, get, set_, reset, after, persist_every_s)
+        at once (call this before the first publish), checked against the shape of the
+        state the service has now and by ``check(rover, state)`` (ranges: raise ValueError);
+        a damaged one is said aloud and the rover reset (``damaged(rover)``, which returns
+        what it did in words, instead of ``reset``)."""
+        self._session_keeper = SessionKeeper(self, get, set_, reset, after, persist_every_s,
+                                             check=check, damaged=damaged)
 
     @property
     def keeper(self) -> SessionKeeper:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Annotated, Any
+
+import msgspec
 
 from common import keys
 from common.config import Rover
@@ -15,6 +17,21 @@ from services.clock.model import ClockModel, Tick
 __all__ = ["serve"]
 
 
+class SavedClock(msgspec.Struct):
+    """What the clock saves: checked, types and ranges, when it is read back."""
+
+    t_s: Annotated[float, msgspec.Meta(ge=0)]
+    seq: Annotated[int, msgspec.Meta(ge=0)]
+    epoch: Annotated[int, msgspec.Meta(ge=0)]
+    time_scale: Annotated[float, msgspec.Meta(gt=0)] = 1.0
+    paused: bool = False
+    cause: str = ""
+
+
+def check_state(rover: str, state: dict[str, Any]) -> None:
+    msgspec.convert(state, SavedClock)
+
+
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     clocks = {r.id: ClockModel(r.tick_hz) for r in rovers}
 
@@ -22,8 +39,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.t_s[rover] = tick.t_s
         rt.publish(keys.clock(rover), Clock(**tick._asdict()))
 
-    def ticker(rover: str, clock: ClockModel) -> Callable[[], None]:
-        return lambda: publish(rover, clock.tick())
+    def ticker(rover: str) -> Callable[[], None]:
+        return lambda: publish(rover, clocks[rover].tick())
 
     def on_control(s: Sample) -> None:
         ctl = decode_input(s.payload, ClockControl)
@@ -59,13 +76,19 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         clocks[rover].set_state(state)
         rt.t_s[rover] = clocks[rover].t_s
 
+    def damaged(rover: str) -> str:
+        """Not the clock's reset, which would begin a reset of the whole twin."""
+        clocks[rover] = ClockModel(clocks[rover].tick_hz)
+        return "time starts at 0"
+
     rt.subscribe(keys.clock_control("*"), on_control)
     rt.subscribe(keys.control_reset("*"), on_session)
     rt.subscribe(keys.control_restore("*", "*"), on_session)
     # Saved every tick: a restarted clock goes on from its last tick, never back in time.
     period = min(c.period_s for c in clocks.values())
     rt.own_state(lambda rover: clocks[rover].state(), set_state,
-                 lambda rover: clocks[rover].reset(), persist_every_s=period)
-    for rover_id, clock in clocks.items():
+                 lambda rover: clocks[rover].reset(), persist_every_s=period, check=check_state,
+                 damaged=damaged)
+    for rover_id in clocks:
         # A clock that falls behind skips ahead rather than bursting (see Runtime.every).
-        rt.every(clock.period_s, ticker(rover_id, clock))
+        rt.every(clocks[rover_id].period_s, ticker(rover_id))
