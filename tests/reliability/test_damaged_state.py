@@ -13,12 +13,22 @@ bad file is moved aside.
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from common import keys
-from tests.harness import Probe, Twin, mapp_fleet, wait_for
+from tests.harness import (
+    ALL_SERVICES,
+    ROOT,
+    Probe,
+    Twin,
+    env_without_zenoh_config,
+    lunaris_cmd,
+    mapp_fleet,
+    wait_for,
+)
 from tests.reliability.conftest import MAPP, R, kill9
 
 pytestmark = pytest.mark.timeout(180)
@@ -205,3 +215,51 @@ def test_a_torn_journal_keeps_its_good_lines_and_the_faults_service_up(twin_fact
     damage_event(p, "journal of mapp-1", "unreadable")
     wait_for(lambda: p.get_json(keys.faults_journal(R)), 10, "the new journal answered")
 
+
+def restore(p: Probe, name: str) -> subprocess.CompletedProcess:
+    return subprocess.run(lunaris_cmd("snapshot", "restore", R, name, "--connect", p.endpoint),
+                          capture_output=True, text=True, timeout=60, cwd=ROOT,
+                          env=env_without_zenoh_config(), stdin=subprocess.DEVNULL)
+
+
+def test_a_restore_is_all_or_nothing_and_names_the_damaged_part(twin_factory, probe_solo):
+    """Found: a restore with a corrupted battery part answered "restored", exit 0; every other
+    service restored its part and the battery kept its own state (its energy then stood still
+    at 506.3 kJ for 10 s while drawing 35 W)."""
+    p = probe_solo
+    p.watch("lunaris/**")
+    twin = twin_factory([MAPP])
+    p.wait_services(R, ALL_SERVICES)
+    p.put(keys.fault(R, "solar/left", "dust"), 0.4)
+    p.put(keys.clock_control(R), {"time_scale": 100})
+    p.wait_value(keys.battery_state(R), lambda b: b["energy_j"] < CAPACITY_J - 2000)
+    for name in ("drill", "good"):
+        p.put(keys.control_snapshot(R, name), b"")
+        p.wait_event(R, lambda e, n=name: e["kind"] == "session" and f"{n!r} saved" in e["message"])
+    part = twin.state_dir / "snapshots" / "drill" / "battery-snapshot.json"
+    wait_for(lambda: part.is_file(), 10, "the battery's part saved")
+    edit_json(part, lambda s: s[R]["state"].update(energy_j="lots"))
+    p.delete(keys.fault(R, "solar/left", "dust"))
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.0)
+    epoch = p.wait_value(keys.clock(R))["epoch"]
+
+    refused = restore(p, "drill")
+    assert refused.returncode == 1, refused.stdout + refused.stderr
+    assert "not restored" in refused.stdout and "the battery part is damaged" in refused.stdout
+    assert "energy_j" in refused.stdout, refused.stdout
+    # nothing changed: no new epoch, the dust still gone, the pack still draining
+    b0 = p.wait_value(keys.battery_state(R))
+    later = p.wait_value(keys.battery_state(R), lambda b: b["t_s"] > b0["t_s"] + 20)
+    assert later["energy_j"] < b0["energy_j"]
+    assert all(c["epoch"] == epoch for c in p.samples(keys.clock(R))[-5:])
+    assert p.value(keys.solar_power(R, "left"))["dust"] == 0.0
+
+    part.unlink()  # a part missing: refused all the same
+    refused = restore(p, "drill")
+    assert refused.returncode == 1 and "the battery service holds no part of it" in refused.stdout, (
+        refused.stdout)
+
+    done = restore(p, "good")
+    assert done.returncode == 0 and "'good' restored" in done.stdout, done.stdout + done.stderr
+    p.wait_value(keys.clock(R), lambda c: c["cause"] == "restore:good" and c["epoch"] == epoch + 1)
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.4)
