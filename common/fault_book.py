@@ -240,7 +240,8 @@ class FaultBook:
         self.rt.publish(keys.faults_active(rover, self.rt.name), self._message(rover), reliable=True)
 
     def _message(self, rover: str) -> ActiveFaults:
-        return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover))
+        return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover),
+                            epoch=self.rt.epoch[rover])
 
     def publish_all(self) -> None:
         for rover in sorted(self.injected):

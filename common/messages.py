@@ -238,6 +238,7 @@ class ActiveFaults(_Msg):
     t_s: float
     service: str
     faults: list[ActiveFault]
+    epoch: int = 0  # the clock's epoch of t_s: a clock that lost its time learns it back here
 
 
 class SnapshotInfo(_Msg):

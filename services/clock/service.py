@@ -1,5 +1,14 @@
 """Clock service: publishes ``lunaris/<rover>/clock`` ticks; ``clock/control`` pauses and scales.
 
+Its time never goes back within an epoch. It is saved after every tick (a restarted clock
+goes on from its last tick); a saved state that is missing or damaged is not a reason to
+start again at 0 in the same epoch: the clock takes the latest time it can find, its own
+saved time (``clock-time.json``) or the time the other services report with their faults
+in effect (``faults/active/<service>``, which carries the epoch). A clock whose state is
+damaged and that finds no time at all (every other service down too) holds its ticks, and
+keeps asking, for up to ``HOLD_FOR_S``: the services that come back tell it where the twin
+was; none in that time, it starts at 0 and says so.
+
 It begins the epochs of the session: ``control/reset`` at once, ``control/restore/<name>``
 once every service has checked its part of the snapshot (``snapshots/<service>?check=``):
 all parts intact, the restore goes ahead; any part damaged or missing, it is refused with
@@ -9,6 +18,7 @@ the reason and nothing changes. The clock answers a restore (a ``session`` event
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from typing import Annotated, Any
 
@@ -17,7 +27,7 @@ import zenoh
 
 from common import keys
 from common.config import Rover
-from common.messages import BadInput, Clock, ClockControl, decode_input
+from common.messages import ActiveFaults, BadInput, Clock, ClockControl, decode, decode_input
 from common.runtime import Runtime, Sample
 from common.session import NO_PART, RESTORE, parse_control
 from services.clock.model import ClockModel, Tick
@@ -25,6 +35,9 @@ from services.clock.model import ClockModel, Tick
 __all__ = ["serve"]
 
 CHECK_TIMEOUT_S = 2.0  # how long a restore waits for the services' checks of their parts
+ASK_S = 0.5  # how often a clock that lost its time and found none asks the twin again
+HOLD_FOR_S = 10.0  # ... holding its ticks meanwhile, for at most this long
+ASK_FOR_S = 60.0  # ... and asking for this long (a later time found: it goes on from there)
 
 
 class SavedClock(msgspec.Struct):
@@ -43,14 +56,30 @@ def check_state(rover: str, state: dict[str, Any]) -> None:
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
+    rt.makes_time()
     clocks = {r.id: ClockModel(r.tick_hz) for r in rovers}
+    asking: dict[str, float] = {}  # rover -> until when the clock asks the twin for its time
+    holding: dict[str, float] = {}  # rover -> until when its ticks wait for a time found
 
     def publish(rover: str, tick: Tick) -> None:
-        rt.t_s[rover] = tick.t_s
+        rt.t_s[rover], rt.epoch[rover] = tick.t_s, tick.epoch
         rt.publish(keys.clock(rover), Clock(**tick._asdict()))
 
-    def ticker(rover: str) -> Callable[[], None]:
-        return lambda: publish(rover, clocks[rover].tick())
+    def save() -> None:
+        rt.keeper.persist()
+        rt.save_time()  # a second copy of the time, should the state be damaged
+
+    def ticker(group: list[str]) -> Callable[[], None]:
+        """Tick every rover of a tick rate: saved before it is published, so that a restart
+        never goes on from a time older than one already sent."""
+        def tick() -> None:
+            ticks = [(rover, clocks[rover].tick()) for rover in group if rover not in holding]
+            for rover, t in ticks:
+                rt.t_s[rover], rt.epoch[rover] = t.t_s, t.epoch
+            save()
+            for rover, t in ticks:
+                publish(rover, t)
+        return tick
 
     def on_control(s: Sample) -> None:
         ctl = decode_input(s.payload, ClockControl)
@@ -63,6 +92,68 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             clock.paused = ctl.paused
         rt.event(s.rover, "info", "clock", s.key,
                  f"clock {'paused' if clock.paused else 'running'} at x{clock.time_scale:g}")
+
+    # -- time that never goes back -------------------------------------------------------------
+
+    def reached(rover: str) -> tuple[tuple[int, float], str] | None:
+        """The latest (epoch, t_s) of ``rover`` this clock can find, and where it found it."""
+        found: list[tuple[tuple[int, float], str]] = []
+        saved = rt.saved_time(rover)
+        if saved is not None:
+            found.append((saved, "its saved time"))
+        try:
+            replies = rt.zenoh_session.get(keys.faults_active(rover, "*"), timeout=0.5)
+            for reply in replies:
+                if reply.ok is not None:
+                    answer = decode(reply.ok.payload.to_bytes(), ActiveFaults)
+                    found.append(((answer.epoch, answer.t_s), f"the {answer.service} service"))
+        except (zenoh.ZError, msgspec.DecodeError, msgspec.ValidationError):
+            pass
+        return max(found, default=None)
+
+    def resume(rover: str, at: tuple[int, float]) -> None:
+        clock = clocks[rover]
+        clock.epoch, clock.t_s = at
+        rt.epoch[rover], rt.t_s[rover] = at
+
+    def recover(rover: str) -> str:
+        """A damaged state: the time is the latest this clock can find, never 0 again."""
+        clocks[rover] = ClockModel(clocks[rover].tick_hz)
+        found = reached(rover)
+        if found is None:
+            now = time.monotonic()
+            holding[rover], asking[rover] = now + HOLD_FOR_S, now + ASK_FOR_S
+            return (f"no time found (no other service is up): its ticks wait up to "
+                    f"{HOLD_FOR_S:g} s for one to say where the twin was, then start at 0")
+        (epoch, t_s), source = found
+        resume(rover, (epoch, t_s))
+        return (f"time resumed at t={t_s:.1f} s in epoch {epoch}, from {source}, running at x1 "
+                "(its speed was lost with its state)")
+
+    def ask_again() -> None:
+        """A clock that lost its time and found none: a service that came back knows it."""
+        now = time.monotonic()
+        for rover, until in list(asking.items()):
+            found = reached(rover)
+            clock = clocks[rover]
+            if found is not None and (rover in holding or found[0] > (clock.epoch, clock.t_s)):
+                del asking[rover]
+                holding.pop(rover, None)
+                (epoch, t_s), source = max(found, ((clock.epoch, clock.t_s), "its own"))
+                resume(rover, (epoch, t_s))
+                rt.event(rover, "warning", "clock", keys.clock(rover),
+                         f"clock of {rover}: time resumed at t={t_s:.1f} s in epoch {epoch}, "
+                         f"from {source}, running at x1 (its own state was lost)")
+            elif now >= until:
+                del asking[rover]
+        for rover, until in list(holding.items()):
+            if now >= until:
+                del holding[rover]
+                rt.event(rover, "critical", "clock", keys.clock(rover),
+                         f"clock of {rover}: its state was lost and no service said where the "
+                         f"twin was within {HOLD_FOR_S:g} s: time starts at 0")
+
+    # -- epochs: reset, and restores checked part by part ------------------------------------
 
     checking: dict[str, str] = {}  # rover -> the snapshot whose parts are being checked
 
@@ -129,29 +220,33 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def begin(rover: str) -> None:
         clock = clocks[rover]
         rt.keeper.epoch[rover] = clock.epoch
-        rt.keeper.persist()
-        publish(rover, clock.mark())
+        mark = clock.mark()
+        rt.t_s[rover], rt.epoch[rover] = mark.t_s, mark.epoch
+        save()
+        publish(rover, mark)
 
     def set_state(rover: str, state: dict[str, Any]) -> None:
         clocks[rover].set_state(state)
-        rt.t_s[rover] = clocks[rover].t_s
-
-    def damaged(rover: str) -> str:
-        """Not the clock's reset, which would begin a reset of the whole twin."""
-        clocks[rover] = ClockModel(clocks[rover].tick_hz)
-        return "time starts at 0"
+        rt.t_s[rover], rt.epoch[rover] = clocks[rover].t_s, clocks[rover].epoch
 
     rt.subscribe(keys.clock_control("*"), on_control)
     rt.subscribe(keys.control_reset("*"), on_session)
     rt.subscribe(keys.control_restore("*", "*"), on_session)
-    # Saved every tick: a restarted clock goes on from its last tick, never back in time.
-    period = min(c.period_s for c in clocks.values())
     rt.own_state(lambda rover: clocks[rover].state(), set_state,
-                 lambda rover: clocks[rover].reset(), persist_every_s=period, check=check_state,
-                 damaged=damaged)
-    for rover_id in clocks:
+                 lambda rover: clocks[rover].reset(), persist_every_s=None, check=check_state,
+                 damaged=recover)
+    for rover in clocks:
+        if rover not in rt.keeper.resumed and rover not in rt.keeper.damaged:
+            found = reached(rover)  # no state of its own (a new state folder): the twin's
+            if found is not None and found[0] > (0, 0.0):
+                resume(rover, found[0])
+    groups: dict[float, list[str]] = {}  # the rovers of each tick period
+    for rover_id, clock in clocks.items():
+        groups.setdefault(clock.period_s, []).append(rover_id)
+    for period_s, group in groups.items():
         # A clock that falls behind skips ahead rather than bursting (see Runtime.every).
-        rt.every(clocks[rover_id].period_s, ticker(rover_id))
+        rt.every(period_s, ticker(group))
+    rt.every(ASK_S, lambda: ask_again() if asking or holding else None)
 
 
 def _answer(reply: zenoh.Reply) -> tuple[str, str | None]:
