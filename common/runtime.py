@@ -32,7 +32,8 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   starts from it (or from the running clock, if that is later), publishes nothing stamped
   with time before the clock's first tick has reached it (what it published before it was
   killed may be later than what it last saved), and ignores a tick from before the time it
-  has reached (a clock that lost its own).
+  has reached (a clock that lost its own);
+- :meth:`claim`: one instance of a service per rover, also when two start at once.
 
 """
 
@@ -76,6 +77,10 @@ CHANNEL_CAPACITY = 65536  # samples a telemetry channel holds before Zenoh waits
 # out of the collections (still freed when no longer referenced).
 FREEZE_AGAIN_S = (5.0, 30.0)
 SAVE_TIME_S = 1.0  # wall time between saves of the sim time reached
+# Two instances started at once both claim; each looks again this long after its own claim
+# reached the router, so that of two claims each sees the other, or the later one sees the
+# earlier one's ownership (see Runtime.claim).
+CLAIM_SETTLE_S = 0.5
 
 
 class AlreadyRunning(RuntimeError):
@@ -263,10 +268,19 @@ class Runtime:
 
         Two instances would each tick, step and write the same keys and state files (the
         clock ticking twice as fast, the battery drained twice). The state directory is
-        locked, and a live token ``lunaris/<rover>/service/<name>`` means another instance
-        serves that rover: :class:`AlreadyRunning` (``lunaris run`` exits with status 3). A
-        token still up after ``wait_s`` is a live instance, not the last one going away (a
-        restart right after a crash: the router drops a dead session's tokens at once).
+        locked, and the rovers are claimed on the router:
+
+        - a live token ``lunaris/<rover>/service/<name>`` (an instance serving) or
+          ``.../service/<name>/owner/<zid>`` (an instance that has won its claim and is
+          setting up) means another instance has the rover: :class:`AlreadyRunning`
+          (``lunaris run`` exits with status 3). One still up after ``wait_s`` is a live
+          instance, not the last one going away (a restart right after a crash: the router
+          drops a dead session's tokens at once);
+        - else each instance declares ``.../service/<name>/claim/<zid>``, looks again
+          ``CLAIM_SETTLE_S`` later, and gives way to a claim of a smaller Zenoh id. Of two
+          instances started at once, either each sees the other's claim (and both pick the
+          same one), or the later one's claim came after the earlier one looked: the earlier
+          one has won and owns the rover by the time the later one looks.
         """
         if self.store.dir is not None:
             self.store.dir.mkdir(parents=True, exist_ok=True)
@@ -275,19 +289,53 @@ class Runtime:
                 fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 raise AlreadyRunning(f"another {self.name} service holds {self.store.dir}") from None
-        wanted = {keys.service(rover, self.name) for rover in self.rovers}
-        deadline = time.monotonic() + wait_s
-        while True:
-            live = {str(r.ok.key_expr) for r in self.zenoh_session.liveliness().get(
-                keys.service("*", self.name), timeout=2.0) if r.ok is not None}
-            taken = sorted(wanted & live)
-            if not taken or time.monotonic() >= deadline:
-                break
-            time.sleep(0.2)
-        if taken:
-            rovers = ", ".join(keys.split(k)[0] for k in taken)
-            raise AlreadyRunning(f"another {self.name} service already serves {rovers} "
-                                 "(its liveliness token is up)")
+        liveliness = self.zenoh_session.liveliness()
+        me = self._zid
+        claims = [liveliness.declare_token(keys.service_claim(rover, self.name, me))
+                  for rover in sorted(self.rovers)]
+        try:
+            start = time.monotonic()
+            while True:
+                owners, rivals = self._claims(me)
+                waited = time.monotonic() - start
+                if owners:
+                    if waited >= wait_s:
+                        raise AlreadyRunning(f"another {self.name} service already serves "
+                                             f"{', '.join(owners)} (its liveliness token is up)")
+                elif waited >= CLAIM_SETTLE_S:
+                    first = {rover: zid for rover, zid in rivals.items() if zid < me}
+                    if first:
+                        raise AlreadyRunning(
+                            f"another {self.name} service started at the same time for "
+                            f"{', '.join(sorted(first))} and goes first (session "
+                            f"{min(first.values())}; this one is {me})")
+                    break
+                time.sleep(0.1)
+        finally:
+            for token in claims:
+                token.undeclare()
+        for rover in sorted(self.rovers):  # held for the life of the service
+            self._keep.append(liveliness.declare_token(keys.service_owner(rover, self.name, me)))
+
+    def _claims(self, me: str) -> tuple[list[str], dict[str, str]]:
+        """(the rovers another instance owns or serves, {rover: the smallest rival claim})."""
+        owners: set[str] = set()
+        rivals: dict[str, str] = {}
+        for pattern in (keys.service("*", self.name), keys.service_claims("*", self.name)):
+            for reply in self.zenoh_session.liveliness().get(pattern, timeout=2.0):
+                if reply.ok is None:
+                    continue
+                rover, parts = keys.split(str(reply.ok.key_expr))
+                if rover not in self.rovers:
+                    continue
+                if len(parts) == 2:  # service/<name>: an instance serving
+                    owners.add(rover)
+                elif len(parts) == 4 and parts[3] != me:
+                    if parts[2] == "owner":
+                        owners.add(rover)
+                    elif parts[2] == "claim":
+                        rivals[rover] = min(parts[3], rivals.get(rover, parts[3]))
+        return sorted(owners), rivals
 
     def watch_parent(self, pid: int) -> None:
         """Stop when the supervisor that started this service is gone (it was killed): the

@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -193,3 +194,66 @@ def test_a_service_that_keeps_failing_is_shown_failed_with_its_error(tmp_path, c
     finally:
         sup.stop_all()
 
+
+def _claim_at_once(router: str, n: int, state_dirs: list[Path]) -> list[str | None]:
+    """``n`` clocks of mapp-1 on their own state dirs claim at the same moment (threads of
+    one test process, each its own session); each one's AlreadyRunning message, or None."""
+    from common.connection import make_config
+    from common.runtime import AlreadyRunning, Runtime
+
+    rts = [Runtime("clock", [R], make_config("client", connect=[router]), state_dirs[i])
+           for i in range(n)]
+    for rt in rts:
+        rt.__enter__()
+    barrier = threading.Barrier(n)
+    outcome: list[str | None] = [None] * n
+
+    def claim(i: int) -> None:
+        barrier.wait()
+        try:
+            rts[i].claim()
+        except AlreadyRunning as exc:
+            outcome[i] = str(exc)
+
+    threads = [threading.Thread(target=claim, args=(i,)) for i in range(n)]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+    finally:
+        for rt in rts:
+            rt.close()
+    return outcome
+
+
+def test_simultaneous_starts_leave_exactly_one_instance(router, tmp_path):
+    """Found: two clocks with different state dirs both ran (20 ticks/s) in 1 of 4
+    simultaneous starts: each looked for the other's token before either had declared it."""
+    for round_ in range(3):
+        n = 2 if round_ < 2 else 3
+        outcome = _claim_at_once(router, n, [tmp_path / f"r{round_}-{i}" for i in range(n)])
+        winners = [i for i, why in enumerate(outcome) if why is None]
+        assert len(winners) == 1, outcome
+        assert all("another clock service" in why for why in outcome if why), outcome
+
+
+def test_two_clocks_started_at_once_one_exits_3(router, tmp_path):
+    procs = [subprocess.Popen(lunaris_cmd("run", "clock", "--rover", str(MAPP), "--connect", router,
+                                          "--state-dir", str(tmp_path / f"s{i}")),
+                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i in range(2)]
+    try:
+        with Probe(router) as p:
+            p.watch(keys.clock(R))
+            loser = wait_for(lambda: next((q for q in procs if q.poll() is not None), None), 30,
+                             "one of the two clocks to give way")
+            assert loser.returncode == 3, loser.communicate()
+            assert "another clock service" in loser.communicate()[1]
+            p.wait_value(keys.clock(R))
+            assert one_clock(p)
+    finally:
+        for q in procs:
+            if q.poll() is None:
+                q.send_signal(signal.SIGINT)
+                q.communicate(timeout=20)
