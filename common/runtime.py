@@ -184,8 +184,8 @@ class Runtime:
             saved = self.store.load("time")
         except Damaged as exc:
             for rover in sorted(self.rovers):
-                self.state_damaged(rover, f"saved time of {rover} damaged ({exc.reason}): "
-                                   f"not used; {exc.where()}")
+                self.state_damaged(rover, f"{self.name} saved time of {rover} damaged "
+                                   f"({exc.reason}): not used; {exc.where()}")
             return {}
         if saved is None:
             return {}
@@ -212,8 +212,8 @@ class Runtime:
             moved = self.store.set_aside("time")
             where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
             for rover, reason in bad.items():
-                self.state_damaged(rover, f"saved time of {rover} damaged ({reason}): not used; "
-                                   f"{where}")
+                self.state_damaged(rover, f"{self.name} saved time of {rover} damaged ({reason}): "
+                                   f"not used; {where}")
         return out
 
     def save_time(self) -> None:
@@ -255,10 +255,11 @@ class Runtime:
 
     def state_damaged(self, rover: str, message: str, key: str | None = None,
                       params: dict | None = None) -> None:
-        """Say in a ``critical`` event that saved state was damaged, and what was done."""
+        """Say in a ``critical`` event that saved state was damaged, and what was done (the
+        message names the service: "battery state of mapp-1 damaged (...): ...")."""
         print(f"{self.name}: {message}", file=sys.stderr, flush=True)
         self.event(rover, "critical", "state_damaged", key or keys.service(rover, self.name),
-                   f"{self.name}: {message}", params)
+                   message, params)
 
     def __exit__(self, *exc: object) -> None:
         self.close()

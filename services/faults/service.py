@@ -192,7 +192,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.event("*"), on_event, history=True)
     for rover, journal in journals.items():
         if journal.damage:
-            rt.state_damaged(rover, f"the journal of {rover} was damaged: {journal.damage}",
+            rt.state_damaged(rover, f"faults journal of {rover} damaged: {journal.damage}",
                              keys.faults_journal(rover))
         if journal.count == 0:  # a new session: its first line
             rt.event(rover, "info", "session", keys.faults_journal(rover),
