@@ -118,6 +118,7 @@ class Runtime:
         self._behind: set[str] = set()  # rovers whose clock is behind (said once)
         self._makes_time = False  # the clock: it ticks, and waits for no tick
         self._unsaved: dict[str, str] = {}  # what could not be saved -> the error, said once
+        self._owner_tokens: list[Any] = []  # claim() won: held until the service tokens are up
         self._conf = conf
         self.worker = Worker(self._guard)
         self._exit_hooks: list[Callable[[], None]] = []
@@ -315,8 +316,9 @@ class Runtime:
         finally:
             for token in claims:
                 token.undeclare()
-        for rover in sorted(self.rovers):  # held for the life of the service
-            self._keep.append(liveliness.declare_token(keys.service_owner(rover, self.name, me)))
+        # held until the service tokens are up (run), which say the same from then on
+        self._owner_tokens = [liveliness.declare_token(keys.service_owner(rover, self.name, me))
+                              for rover in sorted(self.rovers)]
 
     def _claims(self, me: str) -> tuple[list[str], dict[str, str]]:
         """(the rovers another instance owns or serves, {rover: the smallest rival claim})."""
@@ -431,6 +433,9 @@ class Runtime:
         # The tokens go up once every handler is declared: live means listening.
         for rover in sorted(self.rovers):
             self._keep.append(self.zenoh_session.liveliness().declare_token(keys.service(rover, self.name)))
+        for token in self._owner_tokens:  # after the service tokens (in order at the router)
+            token.undeclare()
+        self._owner_tokens.clear()
         if self.worker.channels:
             print(f"{self.name}: {len(self.rovers)} rovers: {self.worker.channels} telemetry "
                   f"subscriptions drained every {POLL_S * 1000:g} ms", file=sys.stderr, flush=True)
@@ -450,6 +455,7 @@ class Runtime:
             self._lock_file.close()
             self._lock_file = None
         self._keep.clear()
+        self._owner_tokens.clear()
         self._heard.clear()
         self._publishers.clear()
         if self.session is not None:
