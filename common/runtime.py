@@ -217,13 +217,13 @@ class Runtime:
                                    f"not used; {where}")
         return out
 
-    def save_time(self) -> None:
+    def save_time(self, durable: bool = True) -> None:
         """Save the (epoch, sim time) each rover has reached, when it has moved."""
         if self.store.dir is None:
             return
         record = {r: {"epoch": self.epoch[r], "t_s": self.t_s[r]} for r in sorted(self.rovers)}
         data = msgspec.json.encode(record)
-        if data != self._time_written and self.save_state("time", record):
+        if data != self._time_written and self.save_state("time", record, durable):
             self._time_written = data
 
     def saved_time(self, rover: str) -> tuple[int, float] | None:
@@ -236,11 +236,11 @@ class Runtime:
         self._makes_time = True
         self._waiting.clear()
 
-    def save_state(self, what: str, data: Any) -> bool:
+    def save_state(self, what: str, data: Any, durable: bool = True) -> bool:
         """Save ``data`` in the store; a disk that refuses it is said once in a ``critical``
         event (and again if the error changes), not at every save. Whether it was saved."""
         try:
-            self.store.save(what, data)
+            self.store.save(what, data, durable)
         except OSError as exc:
             error = f"{type(exc).__name__}: {exc.strerror or exc}"
             if self._unsaved.get(what) != error:

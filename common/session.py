@@ -234,10 +234,10 @@ class SessionKeeper:
         self._reset(rover)
         return "reset to the rover file"
 
-    def persist(self) -> None:
+    def persist(self, durable: bool = True) -> None:
         self.rt.save_state("state", {
             rover: {"state": self._get(rover), "epoch": self.epoch.get(rover, 0)}
-            for rover in sorted(self.rt.rovers)})
+            for rover in sorted(self.rt.rovers)}, durable)
 
     # -- following the clock's epochs ---------------------------------------------------------
 

@@ -5,7 +5,9 @@ state directory nothing is kept, and nothing is read.
 
 - **Written atomically and durably**: to a temporary file beside it, flushed to the disk
   (``fsync``), renamed over the old one, and the folder's entry flushed too. A kill or a
-  power cut mid-write leaves the previous file, never half of the new one.
+  power cut mid-write leaves the previous file, never half of the new one. (What is saved
+  at every tick, the clock's time, is flushed once a second: ``durable=False`` in between
+  still leaves a whole file after a kill, the page cache outliving the process.)
 - **Read with suspicion**: a file that cannot be read (a folder in its place, no permission,
   not JSON, cut short) raises :class:`Damaged`, which names the file and what is wrong with
   it. What a service saves is then checked by its owner (types, finite numbers, ranges:
@@ -51,9 +53,10 @@ class Damaged(Exception):
         return f"the file was moved to {self.moved_to.name}"
 
 
-def write_atomically(path: Path, data: bytes) -> None:
+def write_atomically(path: Path, data: bytes, durable: bool = True) -> None:
     """Replace ``path`` by ``data`` so that a kill or a power cut at any moment leaves either
-    the old file or the new one: a temporary file, fsync, rename, fsync of the folder."""
+    the old file or the new one: a temporary file, fsync, rename, fsync of the folder
+    (without ``durable``, no fsync: whole after a kill, perhaps the older after a power cut)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.tmp")
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -61,11 +64,13 @@ def write_atomically(path: Path, data: bytes) -> None:
         view = memoryview(data)
         while view:
             view = view[os.write(fd, view):]
-        os.fsync(fd)
+        if durable:
+            os.fsync(fd)
     finally:
         os.close(fd)
     os.replace(tmp, path)
-    fsync_folder(path.parent)
+    if durable:
+        fsync_folder(path.parent)
 
 
 def fsync_folder(folder: Path) -> None:
@@ -144,12 +149,12 @@ class StateStore:
             return None
         return self.dir / f"{self.service}-{what}.json"
 
-    def save(self, what: str, data: Any) -> None:
+    def save(self, what: str, data: Any, durable: bool = True) -> None:
         """Write ``data`` as JSON, atomically and durably (OSError when the disk refuses)."""
         path = self.path(what)
         if path is None:
             return
-        write_atomically(path, msgspec.json.encode(data))
+        write_atomically(path, msgspec.json.encode(data), durable)
 
     def load(self, what: str, *, set_aside: bool = True) -> Any:
         """The saved data, or None when there is none. A file that cannot be read raises
