@@ -9,7 +9,8 @@ on. Its :class:`FaultBook`
   the faults now in effect on that component (``apply(rover, name, faults)``: the model
   applies them and keeps no record of its own), and journals it as an event;
 - raises and resolves the faults the models derive themselves, on transitions;
-- persists the injected faults, so a restarted service re-applies them;
+- persists the injected faults, so a restarted service re-applies them (a saved fault that
+  is damaged is skipped and said aloud, the others re-applied);
 - publishes ``lunaris/<rover>/faults/active/<service>`` on every change (cached for late
   joiners: the bridge's ``/diagnostics``, ``lunaris watch``, the console) and answers a
   query on that key from the book itself, which is what ``get lunaris/<rover>/faults``
@@ -22,7 +23,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import msgspec
 import zenoh
@@ -30,11 +31,12 @@ import zenoh
 from common import keys
 from common.faults import Fault, FaultKey, params_from_dict, parse_fault_key, parse_params
 from common.messages import ActiveFault, ActiveFaults, BadInput, Severity, encode
+from common.state_store import Damaged, not_finite
 
 if TYPE_CHECKING:
     from common.runtime import Runtime, Sample
 
-__all__ = ["FaultApply", "FaultBook"]
+__all__ = ["FaultApply", "FaultBook", "saved_fault"]
 
 # rover, the component's name (None for battery and umbilical), every fault in effect on it
 FaultApply = Callable[[str, str | None, tuple[Fault, ...]], None]
@@ -46,6 +48,27 @@ def _target(path: str) -> tuple[str, str | None]:
     ``battery/heating`` -> ``(battery, None)``."""
     parts = path.split("/")
     return parts[0], (parts[1] if len(parts) == 3 else None)
+
+
+def saved_fault(raw: Any) -> tuple[ActiveFault, FaultKey, Fault]:
+    """A saved injected fault (a record of :meth:`FaultBook._save`, or of a snapshot), checked
+    as an injection is: ValueError naming what is wrong (its key, a parameter's type or
+    range, a number that is not finite)."""
+    try:
+        fault = msgspec.convert(raw, ActiveFault)
+    except msgspec.ValidationError as exc:
+        raise ValueError(str(exc)) from None
+    bad = not_finite(fault.params) or (None if not_finite(fault.since_t_s) is None else "since_t_s")
+    if bad:
+        raise ValueError(f"{bad} is not a finite number")
+    try:
+        _, parts = keys.split(fault.key)
+        if parts[:1] != ["fault"]:
+            raise BadInput(f"{fault.key} is not a fault key")
+        fk = parse_fault_key(parts[1:])
+        return fault, fk, params_from_dict(fk, fault.params)
+    except (BadInput, ValueError) as exc:
+        raise ValueError(str(exc)) from None
 
 
 class FaultBook:
@@ -139,22 +162,67 @@ class FaultBook:
         self._inject(rover, fault.key, fk, params_from_dict(fk, fault.params))
 
     def restore(self) -> None:
-        """Re-apply the injected faults persisted by an earlier run of this service."""
-        saved = self.rt.store.load("faults") or {}
+        """Re-apply the injected faults persisted by an earlier run of this service. A saved
+        fault that is damaged (its parameters of the wrong type or out of range, the file
+        unreadable) is skipped, said in a ``critical`` event, and the file moved aside; the
+        intact ones are re-applied."""
+        rt = self.rt
+        try:
+            saved = rt.store.load("faults")
+        except Damaged as exc:
+            for rover in sorted(self.injected):
+                rt.state_damaged(rover, f"{rt.name} injected faults of {rover} damaged "
+                                 f"({exc.reason}): none re-applied (inject them again); "
+                                 f"{exc.where()}", params={"what": "faults", "reason": exc.reason})
+            self._publish_all()
+            return
+        if saved is None:
+            return
+        bad: list[tuple[str, str, str]] = []  # (rover, path or "", reason)
+        if not isinstance(saved, dict):
+            bad = [(r, "", f"the file holds {type(saved).__name__}, not a mapping of rovers")
+                   for r in sorted(self.injected)]
+            saved = {}
         for rover, faults in saved.items():
             if rover not in self.injected:
                 continue
+            if not isinstance(faults, dict):
+                bad.append((rover, "", f"a {type(faults).__name__} where a mapping of faults was "
+                                       "expected"))
+                continue
             touched: dict[tuple[str, str | None], FaultKey] = {}
             for path, raw in faults.items():
-                fault = msgspec.convert(raw, ActiveFault)
-                fk = parse_fault_key(path.split("/"))
+                try:
+                    fault, fk, params = saved_fault(raw)
+                    if fk.path != path:
+                        raise ValueError(f"saved under {path} but its key is {fault.key}")
+                except Exception as exc:  # anything the owner refuses: damaged, skipped
+                    bad.append((rover, str(path), str(exc) or type(exc).__name__))
+                    continue
                 if fk.component not in self._appliers:
                     continue
-                self.injected[rover][path] = (fault, params_from_dict(fk, fault.params))
+                self.injected[rover][path] = (fault, params)
                 touched[(fk.component, fk.name)] = fk
             for fk in touched.values():  # each component once, given all of its faults
-                self._apply(rover, fk)
-            self._publish(rover)
+                try:
+                    self._apply(rover, fk)
+                except Exception as exc:  # the model refuses them: skipped, said aloud
+                    for path in [p for p in self.injected[rover]
+                                 if _target(p) == (fk.component, fk.name)]:
+                        del self.injected[rover][path]
+                        bad.append((rover, path, str(exc) or type(exc).__name__))
+                    self._apply(rover, fk)
+        if bad:
+            moved = rt.store.set_aside("faults")
+            where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
+            for rover, path, reason in bad:
+                what = f"saved fault {path} of {rover}" if path else f"injected faults of {rover}"
+                kept = ", ".join(sorted(self.injected[rover])) or "none"
+                rt.state_damaged(rover, f"{rt.name} {what} damaged ({reason}): skipped (inject it "
+                                 f"again); re-applied: {kept}; {where}",
+                                 params={"what": "faults", "fault": path, "reason": reason})
+            self._save()
+        self._publish_all()
 
     # -- derived faults ----------------------------------------------------------------------
 
@@ -193,7 +261,7 @@ class FaultBook:
         self._publish(rover)
 
     def _save(self) -> None:
-        self.rt.store.save("faults", {
+        self.rt.save_state("faults", {
             r: {p: msgspec.structs.asdict(f) for p, (f, _) in fs.items()}
             for r, fs in self.injected.items()})
 
@@ -204,7 +272,12 @@ class FaultBook:
         self.rt.publish(keys.faults_active(rover, self.rt.name), self._message(rover), reliable=True)
 
     def _message(self, rover: str) -> ActiveFaults:
-        return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover))
+        return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover),
+                            epoch=self.rt.epoch[rover])
+
+    def _publish_all(self) -> None:
+        for rover in sorted(self.injected):
+            self._publish(rover)
 
     def _declare(self) -> None:
         if self._declared:

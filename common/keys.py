@@ -60,6 +60,9 @@ __all__ = [
     "rail_state",
     "rover_prefix",
     "service",
+    "service_claim",
+    "service_claims",
+    "service_owner",
     "snapshots",
     "snapshots_of",
     "solar_power",
@@ -224,6 +227,22 @@ def event(rover: str) -> str:
 
 def service(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/service/{name}"
+
+
+def service_claim(rover: str, name: str, zid: str) -> str:
+    """Liveliness: an instance of a service claiming a rover as it starts (see
+    :meth:`common.runtime.Runtime.claim`); below ``service/<name>``, out of ``service/*``."""
+    return f"{ROOT}/{rover}/service/{name}/claim/{zid}"
+
+
+def service_owner(rover: str, name: str, zid: str) -> str:
+    """Liveliness: the instance of a service that won its claim on a rover, for its life."""
+    return f"{ROOT}/{rover}/service/{name}/owner/{zid}"
+
+
+def service_claims(rover: str, name: str) -> str:
+    """Every claim and ownership of a service on a rover (liveliness key expression)."""
+    return f"{ROOT}/{rover}/service/{name}/*/*"
 
 
 def split(key: str) -> tuple[str, list[str]]:

@@ -284,7 +284,7 @@ class DriveRoute(_Msg):
 # input, a change of the clock, a bug in a service.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error"]
+                    "internal_error", "state_damaged"]
 
 
 class Event(_Msg):
@@ -319,6 +319,7 @@ class ActiveFaults(_Msg):
     t_s: float
     service: str
     faults: list[ActiveFault]
+    epoch: int = 0  # the clock's epoch of t_s: a clock that lost its time learns it back here
 
 
 class SnapshotInfo(_Msg):

@@ -26,7 +26,14 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
 - one way to refuse input: a handler raises :class:`~common.messages.BadInput` and the
   runtime publishes a ``rejected`` event naming the key and the reason;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
-  owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk.
+  owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk;
+- time that never goes back within an epoch: the sim time a service has reached (and its
+  epoch) is saved under ``--state-dir`` (``<service>-time.json``); a restarted service
+  starts from it (or from the running clock, if that is later), publishes nothing stamped
+  with time before the clock's first tick has reached it (what it published before it was
+  killed may be later than what it last saved), and ignores a tick from before the time it
+  has reached (a clock that lost its own);
+- :meth:`claim`: one instance of a service per rover, also when two start at once.
 
 """
 
@@ -52,8 +59,8 @@ from common.connection import PRIORITY
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
-from common.session import SessionKeeper, StateGet, StateReset, StateSet
-from common.state_store import StateStore
+from common.session import SessionKeeper, StateCheck, StateDamaged, StateGet, StateReset, StateSet
+from common.state_store import Damaged, StateStore, not_finite
 from common.worker import POLL_S, Worker
 
 __all__ = ["AlreadyRunning", "Runtime", "Sample"]
@@ -69,6 +76,11 @@ CHANNEL_CAPACITY = 65536  # samples a telemetry channel holds before Zenoh waits
 # again after these delays (the publishers declared with the first samples), is frozen: kept
 # out of the collections (still freed when no longer referenced).
 FREEZE_AGAIN_S = (5.0, 30.0)
+SAVE_TIME_S = 1.0  # wall time between saves of the sim time reached
+# Two instances started at once both claim; each looks again this long after its own claim
+# reached the router, so that of two claims each sees the other, or the later one sees the
+# earlier one's ownership (see Runtime.claim).
+CLAIM_SETTLE_S = 0.5
 
 
 class AlreadyRunning(RuntimeError):
@@ -96,7 +108,17 @@ class Runtime:
         self.name = name
         self.rovers: set[str] = set(rovers)
         self.t_s: dict[str, float] = dict.fromkeys(self.rovers, 0.0)  # sim time per rover
+        self.epoch: dict[str, int] = dict.fromkeys(self.rovers, 0)  # the epoch of t_s
         self.store = StateStore(state_dir, name)
+        # Rovers whose time came from the disk, not from a tick: nothing stamped with time is
+        # published for them until the clock's first tick has reached that time.
+        self._waiting: set[str] = set()
+        self._saved_time: dict[str, tuple[int, float]] = {}  # what <name>-time.json held
+        self._time_written = b""
+        self._behind: set[str] = set()  # rovers whose clock is behind (said once)
+        self._makes_time = False  # the clock: it ticks, and waits for no tick
+        self._unsaved: dict[str, str] = {}  # what could not be saved -> the error, said once
+        self._owner_tokens: list[Any] = []  # claim() won: held until the service tokens are up
         self._conf = conf
         self.worker = Worker(self._guard)
         self._exit_hooks: list[Callable[[], None]] = []
@@ -120,25 +142,125 @@ class Runtime:
         self._zid = str(self.session.info.zid())
         self.subscribe(keys.clock("*"), self._on_clock, telemetry=True)
         self._learn_time()
+        self.every(SAVE_TIME_S, self.save_time)
+        self.on_exit(self.save_time)
         return self
 
     def _learn_time(self, wait_s: float = 0.5) -> None:
-        """Start at the running clock's time, so that what the service publishes before its
-        first tick is handled does not carry a time older than the twin's (a restart)."""
-        seen: dict[str, float] = {}
+        """Start at the time this service had reached (saved) or at the running clock's,
+        whichever is later: what it publishes never carries a time older than what it, or the
+        twin, already published in the same epoch. A time from the disk alone may be a little
+        older than what the service published before it was killed: until a tick reaches it,
+        nothing stamped with time goes out (:attr:`_waiting`)."""
+        self._saved_time = self._read_time()
+        seen: dict[str, tuple[int, float]] = {}
         done = threading.Event()
 
         def on_tick(s: zenoh.Sample) -> None:
             rover, _ = keys.split(str(s.key_expr))
             if rover in self.rovers and rover not in seen:
-                seen[rover] = decode(s.payload.to_bytes(), Clock).t_s
+                try:
+                    tick = decode(s.payload.to_bytes(), Clock)
+                except (msgspec.DecodeError, msgspec.ValidationError):
+                    return
+                seen[rover] = (tick.epoch, tick.t_s)
                 if len(seen) == len(self.rovers):
                     done.set()
 
         sub = self.zenoh_session.declare_subscriber(keys.clock("*"), on_tick)
         done.wait(wait_s)  # a running clock ticks every 0.1 s; none at all: a fresh twin
         sub.undeclare()
-        self.t_s.update(seen)
+        for rover in self.rovers:
+            live, disk = seen.get(rover), self._saved_time.get(rover)
+            if live is not None and (disk is None or live >= disk):
+                self.epoch[rover], self.t_s[rover] = live
+            elif disk is not None:
+                self.epoch[rover], self.t_s[rover] = disk
+                self._waiting.add(rover)
+
+    def _read_time(self) -> dict[str, tuple[int, float]]:
+        """The (epoch, sim time) each rover had reached, from ``<name>-time.json``; a damaged
+        record is said aloud and left out."""
+        try:
+            saved = self.store.load("time")
+        except Damaged as exc:
+            for rover in sorted(self.rovers):
+                self.state_damaged(rover, f"{self.name} saved time of {rover} damaged "
+                                   f"({exc.reason}): not used; {exc.where()}")
+            return {}
+        if saved is None:
+            return {}
+        out: dict[str, tuple[int, float]] = {}
+        bad: dict[str, str] = {}
+        for rover in sorted(self.rovers):
+            record = saved.get(rover) if isinstance(saved, dict) else saved
+            if record is None:
+                continue
+            try:
+                if not isinstance(record, dict):
+                    raise ValueError(f"a {type(record).__name__} where a mapping was expected")
+                epoch, t_s = record.get("epoch"), record.get("t_s")
+                if type(epoch) is not int or epoch < 0:
+                    raise ValueError(f"epoch {epoch!r} is not a whole number >= 0")
+                if isinstance(t_s, bool) or not isinstance(t_s, int | float) or not_finite(
+                        float(t_s)) or t_s < 0:
+                    raise ValueError(f"t_s {t_s!r} is not a finite number >= 0")
+            except ValueError as exc:
+                bad[rover] = str(exc)
+                continue
+            out[rover] = (epoch, float(t_s))
+        if bad:
+            moved = self.store.set_aside("time")
+            where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
+            for rover, reason in bad.items():
+                self.state_damaged(rover, f"{self.name} saved time of {rover} damaged ({reason}): "
+                                   f"not used; {where}")
+        return out
+
+    def save_time(self, durable: bool = True) -> None:
+        """Save the (epoch, sim time) each rover has reached, when it has moved."""
+        if self.store.dir is None:
+            return
+        record = {r: {"epoch": self.epoch[r], "t_s": self.t_s[r]} for r in sorted(self.rovers)}
+        data = msgspec.json.encode(record)
+        if data != self._time_written and self.save_state("time", record, durable):
+            self._time_written = data
+
+    def saved_time(self, rover: str) -> tuple[int, float] | None:
+        """The (epoch, sim time) ``rover`` had reached when this service last saved it."""
+        return self._saved_time.get(rover)
+
+    def makes_time(self) -> None:
+        """This service is the clock: it publishes the ticks, so it waits for none and judges
+        none against its own time."""
+        self._makes_time = True
+        self._waiting.clear()
+
+    def save_state(self, what: str, data: Any, durable: bool = True) -> bool:
+        """Save ``data`` in the store; a disk that refuses it is said once in a ``critical``
+        event (and again if the error changes), not at every save. Whether it was saved."""
+        try:
+            self.store.save(what, data, durable)
+        except OSError as exc:
+            error = f"{type(exc).__name__}: {exc.strerror or exc}"
+            if self._unsaved.get(what) != error:
+                self._unsaved[what] = error
+                for rover in sorted(self.rovers):
+                    self.event(rover, "critical", "state_damaged", keys.service(rover, self.name),
+                               f"{self.name} cannot save its {what} in {self.store.path(what)} "
+                               f"({error}): a restart would lose what changed since")
+            return False
+        if self._unsaved.pop(what, None) is not None:
+            print(f"{self.name}: its {what} is saved again", file=sys.stderr, flush=True)
+        return True
+
+    def state_damaged(self, rover: str, message: str, key: str | None = None,
+                      params: dict | None = None) -> None:
+        """Say in a ``critical`` event that saved state was damaged, and what was done (the
+        message names the service: "battery state of mapp-1 damaged (...): ...")."""
+        print(f"{self.name}: {message}", file=sys.stderr, flush=True)
+        self.event(rover, "critical", "state_damaged", key or keys.service(rover, self.name),
+                   message, params)
 
     def __exit__(self, *exc: object) -> None:
         self.close()
@@ -148,10 +270,19 @@ class Runtime:
 
         Two instances would each tick, step and write the same keys and state files (the
         clock ticking twice as fast, the battery drained twice). The state directory is
-        locked, and a live token ``lunaris/<rover>/service/<name>`` means another instance
-        serves that rover: :class:`AlreadyRunning` (``lunaris run`` exits with status 3). A
-        token still up after ``wait_s`` is a live instance, not the last one going away (a
-        restart right after a crash: the router drops a dead session's tokens at once).
+        locked, and the rovers are claimed on the router:
+
+        - a live token ``lunaris/<rover>/service/<name>`` (an instance serving) or
+          ``.../service/<name>/owner/<zid>`` (an instance that has won its claim and is
+          setting up) means another instance has the rover: :class:`AlreadyRunning`
+          (``lunaris run`` exits with status 3). One still up after ``wait_s`` is a live
+          instance, not the last one going away (a restart right after a crash: the router
+          drops a dead session's tokens at once);
+        - else each instance declares ``.../service/<name>/claim/<zid>``, looks again
+          ``CLAIM_SETTLE_S`` later, and gives way to a claim of a smaller Zenoh id. Of two
+          instances started at once, either each sees the other's claim (and both pick the
+          same one), or the later one's claim came after the earlier one looked: the earlier
+          one has won and owns the rover by the time the later one looks.
         """
         if self.store.dir is not None:
             self.store.dir.mkdir(parents=True, exist_ok=True)
@@ -160,19 +291,54 @@ class Runtime:
                 fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 raise AlreadyRunning(f"another {self.name} service holds {self.store.dir}") from None
-        wanted = {keys.service(rover, self.name) for rover in self.rovers}
-        deadline = time.monotonic() + wait_s
-        while True:
-            live = {str(r.ok.key_expr) for r in self.zenoh_session.liveliness().get(
-                keys.service("*", self.name), timeout=2.0) if r.ok is not None}
-            taken = sorted(wanted & live)
-            if not taken or time.monotonic() >= deadline:
-                break
-            time.sleep(0.2)
-        if taken:
-            rovers = ", ".join(keys.split(k)[0] for k in taken)
-            raise AlreadyRunning(f"another {self.name} service already serves {rovers} "
-                                 "(its liveliness token is up)")
+        liveliness = self.zenoh_session.liveliness()
+        me = self._zid
+        claims = [liveliness.declare_token(keys.service_claim(rover, self.name, me))
+                  for rover in sorted(self.rovers)]
+        try:
+            start = time.monotonic()
+            while True:
+                owners, rivals = self._claims(me)
+                waited = time.monotonic() - start
+                if owners:
+                    if waited >= wait_s:
+                        raise AlreadyRunning(f"another {self.name} service already serves "
+                                             f"{', '.join(owners)} (its liveliness token is up)")
+                elif waited >= CLAIM_SETTLE_S:
+                    first = {rover: zid for rover, zid in rivals.items() if zid < me}
+                    if first:
+                        raise AlreadyRunning(
+                            f"another {self.name} service started at the same time for "
+                            f"{', '.join(sorted(first))} and goes first (session "
+                            f"{min(first.values())}; this one is {me})")
+                    break
+                time.sleep(0.1)
+        finally:
+            for token in claims:
+                token.undeclare()
+        # held until the service tokens are up (run), which say the same from then on
+        self._owner_tokens = [liveliness.declare_token(keys.service_owner(rover, self.name, me))
+                              for rover in sorted(self.rovers)]
+
+    def _claims(self, me: str) -> tuple[list[str], dict[str, str]]:
+        """(the rovers another instance owns or serves, {rover: the smallest rival claim})."""
+        owners: set[str] = set()
+        rivals: dict[str, str] = {}
+        for pattern in (keys.service("*", self.name), keys.service_claims("*", self.name)):
+            for reply in self.zenoh_session.liveliness().get(pattern, timeout=2.0):
+                if reply.ok is None:
+                    continue
+                rover, parts = keys.split(str(reply.ok.key_expr))
+                if rover not in self.rovers:
+                    continue
+                if len(parts) == 2:  # service/<name>: an instance serving
+                    owners.add(rover)
+                elif len(parts) == 4 and parts[3] != me:
+                    if parts[2] == "owner":
+                        owners.add(rover)
+                    elif parts[2] == "claim":
+                        rivals[rover] = min(parts[3], rivals.get(rover, parts[3]))
+        return sorted(owners), rivals
 
     def watch_parent(self, pid: int) -> None:
         """Stop when the supervisor that started this service is gone (it was killed): the
@@ -190,12 +356,17 @@ class Runtime:
 
     def own_state(self, get: StateGet, set_: StateSet, reset: StateReset, *,
                   after: Callable[[str], None] | None = None,
-                  persist_every_s: float | None = 1.0) -> None:
+                  persist_every_s: float | None = 1.0, check: StateCheck | None = None,
+                  damaged: StateDamaged | None = None) -> None:
         """Hand the service's state to the session keeper (:mod:`common.session`): kept on
         disk, reset by ``control/reset``, saved and restored by snapshots. ``after(rover)``
         republishes once the state has changed by a control. The persisted state is read back
-        at once (call this before the first publish)."""
-        self._session_keeper = SessionKeeper(self, get, set_, reset, after, persist_every_s)
+        at once (call this before the first publish), checked against the shape of the
+        state the service has now and by ``check(rover, state)`` (ranges: raise ValueError);
+        a damaged one is said aloud and the rover reset (``damaged(rover)``, which returns
+        what it did in words, instead of ``reset``)."""
+        self._session_keeper = SessionKeeper(self, get, set_, reset, after, persist_every_s,
+                                             check=check, damaged=damaged)
 
     @property
     def keeper(self) -> SessionKeeper:
@@ -217,11 +388,29 @@ class Runtime:
 
     def _on_clock(self, s: Sample) -> None:
         tick = decode(s.payload, Clock)
-        if self._session_keeper is not None and not self._session_keeper.follow(s.rover, tick):
+        rover = s.rover
+        if not self._makes_time and (tick.epoch, tick.t_s) < (self.epoch[rover], self.t_s[rover]):
+            self._clock_behind(rover, tick)  # a late tick of an older epoch, or a clock that
+            return                           # lost its time: never back in time
+        self._behind.discard(rover)
+        if self._session_keeper is not None and not self._session_keeper.follow(rover, tick):
             return  # a tick from before a reset or restore
-        self.t_s[s.rover] = tick.t_s
+        resumed = rover in self._waiting
+        self._waiting.discard(rover)
+        self.epoch[rover], self.t_s[rover] = tick.epoch, tick.t_s
+        if resumed and self._faults is not None:
+            self._faults.publish(rover)  # held back until now: the record with a current time
         for fn in self._tick_handlers:
-            fn(s.rover, tick)
+            fn(rover, tick)
+
+    def _clock_behind(self, rover: str, tick: Clock) -> None:
+        if tick.epoch < self.epoch[rover] or rover in self._behind:
+            return  # a tick from before a reset or restore, late: nothing to say
+        self._behind.add(rover)
+        self.event(rover, "warning", "clock", keys.clock(rover),
+                   f"{self.name}: the clock of {rover} is behind the time this service has "
+                   f"reached (t={tick.t_s:.1f} s < {self.t_s[rover]:.1f} s in epoch "
+                   f"{tick.epoch}): its ticks are ignored until it catches up")
 
     def stop(self) -> None:
         self.worker.stop()
@@ -244,6 +433,9 @@ class Runtime:
         # The tokens go up once every handler is declared: live means listening.
         for rover in sorted(self.rovers):
             self._keep.append(self.zenoh_session.liveliness().declare_token(keys.service(rover, self.name)))
+        for token in self._owner_tokens:  # after the service tokens (in order at the router)
+            token.undeclare()
+        self._owner_tokens.clear()
         if self.worker.channels:
             print(f"{self.name}: {len(self.rovers)} rovers: {self.worker.channels} telemetry "
                   f"subscriptions drained every {POLL_S * 1000:g} ms", file=sys.stderr, flush=True)
@@ -263,6 +455,7 @@ class Runtime:
             self._lock_file.close()
             self._lock_file = None
         self._keep.clear()
+        self._owner_tokens.clear()
         self._heard.clear()
         self._publishers.clear()
         if self.session is not None:
@@ -403,10 +596,21 @@ class Runtime:
         cache as :meth:`publish`. ``heartbeat_s``: the publisher (declared on first use) also
         sends a sporadic heartbeat, so an advanced subscriber that missed the last sample
         fetches it from the cache (what rmw_zenoh's transient-local publishers do)."""
+        if self._waiting and self._waits(key):
+            return  # stamped with a time from the disk: the first tick republishes
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._declare_publisher(key, 1, encoding, reliable, heartbeat_s)
         pub.put(payload, attachment=attachment)
+
+    def _waits(self, key: str) -> bool:
+        """Whether a sample on ``key`` waits for its rover's first tick (see :attr:`_waiting`):
+        everything but events, which say what happens now (a damaged state found)."""
+        try:
+            rover, parts = keys.split(key)
+        except ValueError:
+            return False
+        return rover in self._waiting and parts[:1] != ["event"]
 
     def _declare_publisher(self, key: str, cache: int,
                            encoding: zenoh.Encoding = zenoh.Encoding.APPLICATION_JSON,

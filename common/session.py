@@ -7,7 +7,12 @@ Then, with no more code in the service:
 
 - **persistence**: the state is written under ``--state-dir`` every ``persist_every_s`` of
   wall time and when the service stops, and read back when it starts, so a restarted
-  service resumes where it was;
+  service resumes where it was. What is read back is checked before it is used: the saved
+  record of each rover must have the shape of the state the service has now (the same
+  fields, of the same types; every number finite) and pass the service's own ``check``
+  (ranges). A rover whose record is damaged is reset (or what the service's ``damaged``
+  does), the others resume; a ``critical`` event says what was damaged and what was done,
+  and the damaged file is moved aside (``<file>.damaged-<time>``);
 - ``lunaris/<rover>/control/snapshot/<name>``: the state and the injected faults are saved
   under ``<state-dir>/snapshots/<name>/`` (so they survive a restart);
 - **reset and restore** follow the clock. ``control/reset`` and ``control/restore/<name>``
@@ -19,16 +24,20 @@ Then, with no more code in the service:
   integrated after it, and a service that was down during a reset catches up with it when
   it comes back (the epoch it last followed is persisted with its state);
 - ``lunaris/<rover>/snapshots/<service>`` answers a query with the snapshots this service
-  holds (the faults service gathers them for ``get lunaris/<rover>/snapshots``).
+  holds (the faults service gathers them for ``get lunaris/<rover>/snapshots``); with
+  ``?check=<name>`` it checks its part of that snapshot as a restore would read it, and
+  answers ``[info]`` (intact), ``[]`` (no part) or an error saying what is damaged.
 
-The faults service answers each control with the one ``session`` event that marks it in
-the journal, or refuses it (``rejected``: an unknown control or snapshot, a bad name); a
-service ignores a control it cannot act on.
+A restore is all or nothing: the clock, which begins its epoch, first asks every service
+to check its part (``?check=``) and begins it only when every part is intact; else it
+refuses the restore, naming the damaged parts, and nothing changes. The clock answers a
+restore; the faults service answers the other controls with the one ``session`` event that
+marks each in the journal, or refuses them (``rejected``: an unknown control, a bad name).
+A service ignores a control it cannot act on.
 """
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -37,19 +46,24 @@ import msgspec
 import zenoh
 
 from common import keys
-from common.messages import ActiveFault, Clock, SnapshotInfo, encode
-from common.state_store import StateStore
+from common.fault_book import saved_fault
+from common.messages import Clock, SnapshotInfo, encode
+from common.state_store import Damaged, StateStore, not_finite
 
 if TYPE_CHECKING:
     from common.runtime import Runtime, Sample
 
-__all__ = ["RESTORE", "SNAPSHOT_NAME", "SessionKeeper", "StateGet", "StateReset", "StateSet", "parse_control"]
+__all__ = ["RESTORE", "SNAPSHOT_NAME", "SessionKeeper", "StateCheck", "StateDamaged", "StateGet",
+           "StateReset", "StateSet", "parse_control", "shape_problem"]
 
 StateGet = Callable[[str], dict[str, Any]]
 StateSet = Callable[[str, dict[str, Any]], None]
 StateReset = Callable[[str], None]
+StateCheck = Callable[[str, dict[str, Any]], None]  # raises ValueError naming the problem
+StateDamaged = Callable[[str], str]  # resets a rover whose state was damaged; says what it did
 SNAPSHOT_NAME = keys.SNAPSHOT_NAME
 RESTORE = "restore:"
+NO_PART = "no part"  # check_part: this service holds no part of the snapshot
 
 
 def parse_control(parts: list[str]) -> tuple[str, str] | None:
@@ -63,21 +77,81 @@ def parse_control(parts: list[str]) -> tuple[str, str] | None:
     return None
 
 
+def _kind(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, str):
+        return "text"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a mapping"
+    return "null" if value is None else type(value).__name__
+
+
+def shape_problem(saved: Any, template: Any, at: str = "the state") -> str | None:
+    """What is wrong with ``saved`` against ``template`` (a state as the service has it now),
+    or None: a field of another type than the template's (a number where a number is, true
+    or false where a flag is, ...), a number that is not finite. Fields the template does
+    not have are let through (the service's ``set`` ignores them); missing ones too (it has
+    defaults for what older versions did not save)."""
+    if isinstance(template, bool):
+        ok = isinstance(saved, bool)
+    elif isinstance(template, int | float):
+        ok = isinstance(saved, int | float) and not isinstance(saved, bool)
+        if ok and not_finite(float(saved)):
+            return f"{at} is {saved!r}, not a finite number"
+    elif isinstance(template, str):
+        ok = isinstance(saved, str)
+    elif isinstance(template, list):
+        ok = isinstance(saved, list)
+        if ok and template:
+            for i, item in enumerate(saved):
+                problem = shape_problem(item, template[0], f"{at}[{i}]")
+                if problem:
+                    return problem
+    elif isinstance(template, dict):
+        ok = isinstance(saved, dict)
+        if ok:
+            for k, v in saved.items():
+                if k in template:
+                    problem = shape_problem(v, template[k], k if at == "the state" else f"{at}.{k}")
+                    if problem:
+                        return problem
+                elif (path := not_finite(v)) is not None:
+                    where = k if at == "the state" else f"{at}.{k}"
+                    return f"{where}{'' if path == 'the value' else '.' + path} is not a finite number"
+    else:
+        return None
+    if not ok:
+        return f"{at} is {_kind(saved)}, not {_kind(template)} ({_short(saved)})"
+    return None
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 class SessionKeeper:
     """Persistence, reset, snapshots and restores of one service's state."""
 
     def __init__(self, rt: Runtime, get: StateGet, set_: StateSet, reset: StateReset,
-                 after: Callable[[str], None] | None, persist_every_s: float | None):
+                 after: Callable[[str], None] | None, persist_every_s: float | None,
+                 check: StateCheck | None = None, damaged: StateDamaged | None = None):
         self.rt, self._get, self._set, self._reset = rt, get, set_, reset
         self._after = after or (lambda rover: None)
+        self._check = check
+        self._damaged = damaged or self._reset_damaged
         self.epoch: dict[str, int] = {}  # rover -> the epoch of the session followed
+        self.resumed: set[str] = set()  # rovers whose saved state was read back
+        self.damaged: dict[str, str] = {}  # rover -> what was wrong with its saved state
         # Without a state directory, snapshots live as long as the service.
         self._memory: dict[str, dict[str, Any]] = {}
-        saved = rt.store.load("state") or {}
-        for rover, record in saved.items():
-            if rover in rt.rovers and isinstance(record, dict) and "state" in record:
-                set_(rover, record["state"])
-                self.epoch[rover] = int(record.get("epoch", 0))
+        self._templates = {rover: get(rover) for rover in rt.rovers}  # the rover file's state
+        self._load()
         if persist_every_s is not None:
             rt.every(persist_every_s, self.persist)
         rt.on_exit(self.persist)
@@ -86,10 +160,84 @@ class SessionKeeper:
 
     # -- persistence -------------------------------------------------------------------------
 
-    def persist(self) -> None:
-        self.rt.store.save("state", {
+    def _load(self) -> None:
+        """Read the saved state back: every rover whose record is intact resumes; the others
+        are reset, each said in a ``critical`` event, and the damaged file moved aside."""
+        rt = self.rt
+        try:
+            saved = rt.store.load("state")
+        except Damaged as exc:
+            for rover in sorted(rt.rovers):
+                self._report(rover, exc.reason, exc.where())
+            return
+        if saved is None:
+            return
+        bad: dict[str, str] = {}
+        if not isinstance(saved, dict):
+            bad = dict.fromkeys(sorted(rt.rovers), f"the file holds {_kind(saved)}, not a "
+                                                     "mapping of rovers")
+        for rover in sorted(rt.rovers) if not bad else ():
+            record = saved.get(rover)
+            if record is None:
+                continue  # not saved yet (a rover new to the fleet)
+            try:
+                state, epoch = self._record(rover, record)
+            except ValueError as exc:
+                bad[rover] = str(exc)
+                continue
+            try:
+                self._set(rover, state)
+            except Exception as exc:  # a value the service's set refuses: damaged all the same
+                bad[rover] = f"{type(exc).__name__}: {exc}"
+                continue
+            self.epoch[rover] = epoch
+            self.resumed.add(rover)
+        if bad:
+            moved = rt.store.set_aside("state")
+            where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
+            for rover, reason in bad.items():
+                self._report(rover, reason, where)
+            self.persist()  # the intact rovers' records, in a file of their own again
+
+    def _record(self, rover: str, record: Any) -> tuple[dict[str, Any], int]:
+        """The state and epoch of a saved record, checked; ValueError naming the problem."""
+        if not isinstance(record, dict) or not isinstance(record.get("state"), dict):
+            what = _kind(record.get("state")) if isinstance(record, dict) else _kind(record)
+            raise ValueError(f"the state is {what}, not a mapping")
+        epoch = record.get("epoch", 0)
+        if type(epoch) is not int or epoch < 0:
+            raise ValueError(f"epoch is {_short(epoch)}, not a whole number >= 0")
+        state = record["state"]
+        self.check(rover, state)
+        return state, epoch
+
+    def check(self, rover: str, state: dict[str, Any]) -> None:
+        """Check a saved state of ``rover`` without applying it: ValueError naming what is
+        wrong (a field's type, a number that is not finite, a value out of range)."""
+        problem = shape_problem(state, self._templates.get(rover, {}))
+        if problem:
+            raise ValueError(problem)
+        if self._check is not None:
+            try:
+                self._check(rover, state)
+            except (TypeError, KeyError, msgspec.ValidationError) as exc:
+                raise ValueError(str(exc)) from None
+
+    def _report(self, rover: str, reason: str, where: str) -> None:
+        self.damaged[rover] = reason
+        done = self._damaged(rover)
+        self.rt.state_damaged(
+            rover, f"{self.rt.name} state of {rover} damaged ({reason}): {done}; {where}",
+            params={"what": "state", "reason": reason, "done": done})
+
+    def _reset_damaged(self, rover: str) -> str:
+        self._reset(rover)
+        return "reset to the rover file"
+
+    def persist(self, durable: bool = True) -> None:
+        self.rt.save_state("state", {
             rover: {"state": self._get(rover), "epoch": self.epoch.get(rover, 0)}
-            for rover in sorted(self.rt.rovers)})
+            for rover in sorted(self.rt.rovers)}, durable)
 
     # -- following the clock's epochs ---------------------------------------------------------
 
@@ -111,12 +259,7 @@ class SessionKeeper:
         if cause == "reset":
             self.reset(rover)
         elif cause.startswith(RESTORE):
-            name = cause[len(RESTORE):]
-            if name in self.names(rover):
-                self.restore(rover, name)
-            else:
-                print(f"{self.rt.name}: no snapshot {name!r} of {rover} here: state kept",
-                      file=sys.stderr, flush=True)
+            self.restore(rover, cause[len(RESTORE):])
 
     def reset(self, rover: str) -> None:
         """Every injected fault cleared (journalled), the state back to the rover file's."""
@@ -126,16 +269,31 @@ class SessionKeeper:
         self.rt.t_s[rover] = 0.0
         self._changed(rover)
 
-    def restore(self, rover: str, name: str) -> None:
-        saved = (self._read(name) or {})[rover]
+    def restore(self, rover: str, name: str) -> bool:
+        """Put this service's part of snapshot ``name`` back; whether it could. A part that is
+        missing or damaged (the clock checks every part before it begins a restore: a service
+        that was down then) is said aloud, and the service keeps its state."""
+        try:
+            state, t_s, faults = self._part(rover, name)
+        except ValueError as exc:
+            if str(exc) == NO_PART:
+                self.rt.event(rover, "warning", "session", keys.control_restore(rover, name),
+                              f"{self.rt.name} holds no part of snapshot {name!r} of {rover} "
+                              "(it was not running when it was saved): its state is kept")
+            else:
+                self.rt.state_damaged(
+                    rover, f"{self.rt.name} part of snapshot {name!r} of {rover} damaged ({exc}): "
+                    "its state is kept", keys.control_restore(rover, name))
+            return False
         if self.rt.has_faults:
             self.rt.faults.clear_all(rover)
-        self._set(rover, saved["state"])
-        self.rt.t_s[rover] = float(saved.get("t_s", self.rt.t_s[rover]))
+        self._set(rover, state)
+        self.rt.t_s[rover] = t_s
         if self.rt.has_faults:
-            for raw in saved.get("faults", []):
-                self.rt.faults.reinject(rover, msgspec.convert(raw, ActiveFault))
+            for fault in faults:
+                self.rt.faults.reinject(rover, fault)
         self._changed(rover)
+        return True
 
     def _changed(self, rover: str) -> None:
         if self.rt.has_faults:
@@ -159,43 +317,122 @@ class SessionKeeper:
         store = self._store(name)
         if store is None:
             self._memory.setdefault(name, {})[rover] = record
-        else:
+            return
+        try:
             existing = store.load("snapshot") or {}
-            existing[rover] = record
+        except Damaged as exc:
+            existing = {}
+            self.rt.state_damaged(rover, f"{self.rt.name} part of snapshot {name!r} damaged "
+                                  f"({exc.reason}): saved anew with this rover only (the other "
+                                  f"rovers' parts of it are lost); {exc.where()}",
+                                  keys.control_snapshot(rover, name))
+        if not isinstance(existing, dict):
+            existing = {}
+        existing[rover] = record
+        try:
             store.save("snapshot", existing)
+        except OSError as exc:
+            self.rt.state_damaged(rover, f"{self.rt.name} could not save its part of snapshot "
+                                  f"{name!r} ({exc.strerror or exc})", keys.control_snapshot(rover, name))
 
     def _store(self, name: str) -> StateStore | None:
         if self.rt.store.dir is None:
             return None
         return StateStore(self.rt.store.dir / "snapshots" / name, self.rt.name)
 
-    def _read(self, name: str) -> dict[str, Any] | None:
+    def _read(self, name: str) -> Any:
+        """This service's file of snapshot ``name`` as read (None: none); Damaged, left in place."""
         store = self._store(name)
-        return self._memory.get(name) if store is None else store.load("snapshot")
+        return self._memory.get(name) if store is None else store.load("snapshot", set_aside=False)
+
+    def _part(self, rover: str, name: str) -> tuple[dict[str, Any], float, list]:
+        """(state, t_s, faults) of this service's part of snapshot ``name``, every piece
+        checked as it will be used; ValueError(NO_PART) when there is none, ValueError naming
+        the damage otherwise."""
+        try:
+            saved = self._read(name)
+        except Damaged as exc:
+            raise ValueError(exc.reason) from None
+        if saved is None or (isinstance(saved, dict) and rover not in saved):
+            raise ValueError(NO_PART)
+        if not isinstance(saved, dict):
+            raise ValueError(f"the file holds {_kind(saved)}, not a mapping of rovers")
+        record = saved[rover]
+        if not isinstance(record, dict) or not isinstance(record.get("state"), dict):
+            raise ValueError("the part is not a mapping with a state")
+        t_s = record.get("t_s", 0.0)
+        if isinstance(t_s, bool) or not isinstance(t_s, int | float) or not_finite(float(t_s)) \
+                or t_s < 0:
+            raise ValueError(f"t_s is {_short(t_s)}, not a finite number >= 0")
+        self.check(rover, record["state"])
+        raw_faults = record.get("faults", [])
+        if not isinstance(raw_faults, list):
+            raise ValueError(f"faults is {_kind(raw_faults)}, not a list")
+        faults = []
+        for raw in raw_faults:
+            try:
+                faults.append(saved_fault(raw)[0])
+            except ValueError as exc:
+                raise ValueError(f"a saved fault: {exc}") from None
+        return record["state"], float(t_s), faults
+
+    def check_part(self, rover: str, name: str) -> str | None:
+        """None when this service's part of snapshot ``name`` is intact, :data:`NO_PART` when
+        it holds none, else what is damaged."""
+        try:
+            self._part(rover, name)
+        except ValueError as exc:
+            return str(exc)
+        return None
 
     def names(self, rover: str) -> list[str]:
-        """The snapshots of ``rover`` this service holds its part of."""
+        """The snapshots of ``rover`` this service holds a part of (a damaged file counts:
+        it may hold one, and a restore must not go on without it)."""
         if self.rt.store.dir is None:
             return sorted(n for n, rovers in self._memory.items() if rover in rovers)
         root = self.rt.store.dir / "snapshots"
         if not root.is_dir():
             return []
-        return sorted(d.name for d in root.iterdir()
-                      if d.is_dir() and rover in (self._read(d.name) or {}))
+        return sorted(d.name for d in root.iterdir() if d.is_dir() and self._holds(rover, d.name))
+
+    def _holds(self, rover: str, name: str) -> bool:
+        try:
+            saved = self._read(name)
+        except Damaged:
+            return True
+        return saved is not None and (not isinstance(saved, dict) or rover in saved)
 
     def info(self, rover: str) -> list[SnapshotInfo]:
+        """The intact snapshots of ``rover`` this service holds, as listed."""
         out = []
         for name in self.names(rover):
-            record = (self._read(name) or {})[rover]
-            out.append(SnapshotInfo(name=name, t_s=float(record.get("t_s", 0.0)),
-                                    saved_at=float(record.get("saved_at", 0.0)),
-                                    services=[self.rt.name]))
+            try:
+                record = self._read(name)[rover]
+                out.append(SnapshotInfo(name=name, t_s=float(record.get("t_s", 0.0)),
+                                        saved_at=float(record.get("saved_at", 0.0)),
+                                        services=[self.rt.name]))
+            except (Damaged, TypeError, KeyError, ValueError, AttributeError):
+                continue  # damaged: a restore says so
         return out
 
     def _on_query(self, q: zenoh.Query) -> None:
         with q:
+            check = q.parameters.get("check")
             for rover in sorted(self.rt.rovers):
                 key = keys.snapshots_of(rover, self.rt.name)
-                if zenoh.KeyExpr(key).intersects(q.key_expr):
+                if not zenoh.KeyExpr(key).intersects(q.key_expr):
+                    continue
+                if check is None:
                     body = b"[" + b",".join(encode(i) for i in self.info(rover)) + b"]"
                     q.reply(key, body, encoding=zenoh.Encoding.APPLICATION_JSON)
+                    continue
+                problem = self.check_part(rover, check) if SNAPSHOT_NAME.match(check) else NO_PART
+                if problem is None:
+                    infos = [i for i in self.info(rover) if i.name == check]
+                    q.reply(key, b"[" + b",".join(encode(i) for i in infos) + b"]",
+                            encoding=zenoh.Encoding.APPLICATION_JSON)
+                elif problem == NO_PART:
+                    q.reply(key, b"[]", encoding=zenoh.Encoding.APPLICATION_JSON)
+                else:
+                    q.reply_err(msgspec.json.encode({"service": self.rt.name, "rover": rover,
+                                                     "problem": problem}))

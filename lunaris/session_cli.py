@@ -4,7 +4,8 @@
 conditions, the injected faults are cleared and the clock is at 0. ``snapshot save NAME``
 saves every service's state under NAME (kept under the services' ``--state-dir``, so it
 survives a restart), ``snapshot restore NAME`` puts it back, ``snapshot list`` lists them.
-Each write is confirmed by the ``session`` event of the faults service, or its rejection;
+Each write is confirmed by the ``session`` event of the faults service (of the clock for a
+restore, which checks every service's part first), or its rejection;
 exit status as ``lunaris fault``: 0 accepted, 1 rejected, 2 not applied.
 """
 

@@ -3,8 +3,10 @@
 Each service runs in its own process (``lunaris run``), connected as a client to
 the router this process opens. A service no rover needs is not started (the drive, when no
 rover has a ``drive`` section). A service that dies is restarted (with a growing
-back-off if it keeps dying) and resumes from its persisted state. A compact
-status line per rover is shown; Ctrl-C stops everything.
+back-off if it keeps dying) and resumes from its persisted state; one that keeps dying soon
+after it starts (``FAILING_AFTER`` times in a row, each within ``QUICK_EXIT_S``) is shown
+FAILED with its last error and not restarted again: a crash loop helps no one, the error
+does. A compact status line per rover is shown; Ctrl-C stops everything.
 """
 
 from __future__ import annotations
@@ -39,6 +41,8 @@ PR_SET_PDEATHSIG = 1  # prctl(2)
 # A bridge process serves this many rovers by default: at 100 MAPP rovers each of two
 # shards took 25-45 % of a core (bench/fleet.py), one Python thread's worth to spare.
 ROVERS_PER_BRIDGE = 50
+QUICK_EXIT_S = 30.0  # a service that exits within this of its start has failed to start
+FAILING_AFTER = 5  # so many such exits in a row: shown FAILED, not restarted again
 
 
 def default_bridges(rovers: int) -> int:
@@ -100,6 +104,8 @@ class Supervisor:
         self.restarts: dict[str, int] = dict.fromkeys(self.services, 0)
         self.failed: dict[str, str] = {}  # service -> why it is not restarted
         self._next_start: dict[str, float] = {}
+        self._started: dict[str, float] = {}  # service -> monotonic time of its last start
+        self._quick: dict[str, list[float]] = {}  # service -> lifetimes of its quick exits in a row
         self.commands: dict[str, list[str]] = {}  # processes other than services: the console
 
     def add(self, name: str, args: list[str]) -> None:
@@ -134,6 +140,7 @@ class Supervisor:
                                     stderr=subprocess.STDOUT, env=env, start_new_session=True,
                                     preexec_fn=_die_with_parent)
         self.procs[service] = proc
+        self._started[service] = time.monotonic()
         print(f"[up] {service} started (pid {proc.pid})", flush=True)
 
     def _tail(self, service: str, lines: int = 8) -> str:
@@ -142,6 +149,18 @@ class Supervisor:
         except OSError:
             return ""
         return "\n".join(f"      {line}" for line in text.strip().splitlines()[-lines:])
+
+    def _last_error(self, service: str) -> str:
+        """The last error a service's log shows (a traceback's last line), else its last line."""
+        try:
+            lines = [ln.strip() for ln in self.log_path(service).read_text(errors="replace")
+                     .splitlines()[-200:] if ln.strip()]
+        except OSError:
+            return "no log"
+        errors = [ln for ln in lines if ln.split(":", 1)[0].replace(".", "").isidentifier()
+                  and ln.split(":", 1)[0].endswith(("Error", "Exception", "Exit", "Interrupt"))]
+        last = (errors or lines or ["nothing in its log"])[-1]
+        return last if len(last) <= 200 else last[:197] + "..."
 
     def start_all(self) -> None:
         for service in self.services:
@@ -165,6 +184,20 @@ class Supervisor:
                 continue
             due = self._next_start.get(service)
             if due is None:
+                lived = now - self._started.get(service, now)
+                quick = self._quick.setdefault(service, [])
+                if lived < QUICK_EXIT_S:
+                    quick.append(lived)
+                else:
+                    quick.clear()
+                if len(quick) >= FAILING_AFTER:
+                    error = self._last_error(service)
+                    self.failed[service] = f"kept failing: {error}"
+                    print(f"[up] {service} (pid {proc.pid}) FAILED: it exited {len(quick)} times in "
+                          f"a row, each within {QUICK_EXIT_S:g} s of its start (last exit status "
+                          f"{code}); not restarting it. Its last error: {error}\n"
+                          f"{self._tail(service)}", flush=True)
+                    continue
                 self.restarts[service] += 1
                 delay = min(5.0, 0.2 * 2 ** min(self.restarts[service] - 1, 5))
                 self._next_start[service] = now + delay

@@ -119,6 +119,16 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         packs[rover].set_state(state)
         stepped_t[rover] = float(state.get("t_s", 0.0))
 
+    def check_state(rover: str, state: dict[str, Any]) -> None:
+        """The ranges of a saved state (the keeper checks the types and finite numbers)."""
+        capacity = config[rover].capacity_j
+        if not 0.0 <= state.get("energy_j", 0.0) <= capacity:
+            raise ValueError(f"energy_j {state['energy_j']} J is outside 0 .. {capacity} J")
+        if not state.get("temperature_c", 0.0) > -273.15:
+            raise ValueError(f"temperature_c {state['temperature_c']} C is below absolute zero")
+        if not state.get("t_s", 0.0) >= 0.0:
+            raise ValueError(f"t_s {state['t_s']} s is negative")
+
     def reset(rover: str) -> None:
         packs[rover] = BatteryModel(config[rover])
         stepped_t[rover] = 0.0
@@ -133,7 +143,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.every(HOLD_S / 4, release_held)
     rt.subscribe(keys.power_summary("*"), on_summary, telemetry=True)
     rt.faults.own("battery", None, apply_faults)
-    rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S)
+    rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S,
+                 check=check_state)
+    for rover in rt.keeper.damaged:  # reset to the rover file from now: no past to integrate
+        stepped_t[rover] = rt.t_s[rover]
     rt.faults.restore()
     for rover in packs:
         if stepped_t[rover] == 0.0:  # a fresh start; after a restart the first tick publishes,

@@ -2,7 +2,11 @@
 
 One JSON line per event in ``<state-dir>/faults-journal-<rover>.jsonl``, appended as events
 come and read back when the faults service restarts, so the whole session's history
-survives restarts of any service. A flood of rejections is summarised
+survives restarts of any service. A damaged journal (a last line cut short by a kill
+mid-write, a line that is not an event, a folder in place of the file) never keeps the
+service down: the intact lines are kept, the file as found is moved aside
+(``.damaged-<time>``), a new one holds the intact lines, and :attr:`Journal.damage` says
+what was found, for the service to say in a ``critical`` event. A flood of rejections is summarised
 (:class:`~services.faults.model.FloodGate`). Events replayed from the publishers' caches
 after a restart are recognised and not written twice. Without a state directory the
 journal is kept in memory for the life of the service.
@@ -10,12 +14,14 @@ journal is kept in memory for the life of the service.
 
 from __future__ import annotations
 
+import os
 from collections import deque
 from pathlib import Path
 
 import msgspec
 
 from common.messages import Event
+from common.state_store import set_aside, write_atomically
 from services.faults.model import FloodGate
 
 __all__ = ["Journal"]
@@ -37,9 +43,48 @@ class Journal:
         self._spans: dict[str, list[tuple[int, int]]] = {}  # summarised seqs per source
         self.count = 0
         self.summarised = 0
-        if path is not None and path.is_file():
-            for line in path.read_bytes().splitlines():
-                self._note(msgspec.json.decode(line, type=Event))
+        self.damage: str | None = None  # what was wrong with the file read back, in words
+        if path is not None and os.path.lexists(path):
+            self._read_back(path)
+
+    def _read_back(self, path: Path) -> None:
+        """Journal again every intact line of ``path``; set the rest aside (see the module)."""
+        try:
+            if path.is_dir():
+                raise OSError("a folder in place of the file")
+            raw = path.read_bytes()
+        except OSError as exc:
+            moved = set_aside(path)
+            self.damage = (f"{path.name} unreadable ({exc.strerror or exc}): the journal starts "
+                           f"anew; {_where(moved)}")
+            return
+        lines = raw.split(b"\n")
+        tail = lines.pop()  # what follows the last newline: nothing, unless cut short
+        good: list[bytes] = []
+        bad = 0
+        for line in [*lines, tail] if tail.strip() else lines:
+            if not line.strip():
+                continue
+            try:
+                ev = msgspec.json.decode(line, type=Event)
+            except (msgspec.DecodeError, msgspec.ValidationError):
+                bad += 1
+                continue
+            self._note(ev)
+            good.append(line)
+        if not bad and not tail.strip():
+            return
+        torn = bool(tail.strip()) and (not good or good[-1] is not tail)
+        moved = set_aside(path)
+        try:
+            write_atomically(path, b"".join(line + b"\n" for line in good))
+        except OSError as exc:  # the next event starts a new file
+            print(f"journal: cannot write {path} ({exc})", flush=True)
+        what = (f"{bad} damaged line{'s' if bad != 1 else ''}"
+                + (" (the last one cut short)" if torn else "") if bad
+                else "its last line had no end of line")
+        self.damage = (f"{path.name}: {what}; {len(good)} event{'s' if len(good) != 1 else ''} "
+                       f"kept{', the damaged lines left out' if bad else ''}; {_where(moved)}")
 
     def _note(self, ev: Event) -> None:
         self._remember(_identity(ev))
@@ -95,3 +140,7 @@ class Journal:
         if not self.path.is_file():
             return []
         return self.path.read_bytes().splitlines()
+
+
+def _where(moved: Path | None) -> str:
+    return f"the file as found was moved to {moved.name}" if moved else "the file could not be moved aside"

@@ -14,8 +14,10 @@
   like every other bad input.
 - **Session controls** (``control/reset``, ``control/snapshot/<name>``,
   ``control/restore/<name>``): every service acts on its own state (``common.session``);
-  this one answers each with the one ``session`` event that marks it in the journal, or
-  refuses it, and answers ``get lunaris/<rover>/snapshots`` from what the services hold.
+  this one answers a reset or a snapshot with the one ``session`` event that marks it in the
+  journal, refuses a malformed control, and answers ``get lunaris/<rover>/snapshots`` from
+  what the services hold. A restore is the clock's to answer: it checks every part first
+  (all or nothing, see ``common.session``).
   A scenario's progress (``control/scenario``) is journalled as ``scenario`` events.
 """
 
@@ -53,7 +55,6 @@ SESSION_MESSAGES = {
     "reset": "session reset: every service back to the rover file's initial conditions, "
              "injected faults cleared, the clock at 0",
     "snapshot": "snapshot {name!r} saved",
-    "restore": "snapshot {name!r} restored",
 }
 
 
@@ -118,10 +119,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             raise BadInput("a session control is a put, not a delete")
         action, name = control
         if action == "restore":
-            held = {i.name for i in gather_snapshots(s.rover)}
-            if name not in held:
-                raise BadInput(f"no snapshot {name!r} of {s.rover} "
-                               f"(snapshots: {', '.join(sorted(held)) or 'none'})")
+            return  # the clock checks every part, then restores or refuses: it answers
         rt.event(s.rover, "info", "session", s.key, SESSION_MESSAGES[action].format(name=name))
 
     def gather_snapshots(rover: str) -> list[SnapshotInfo]:
@@ -193,6 +191,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     rt.subscribe(keys.event("*"), on_event, history=True)
     for rover, journal in journals.items():
+        if journal.damage:
+            rt.state_damaged(rover, f"faults journal of {rover} damaged: {journal.damage}",
+                             keys.faults_journal(rover))
         if journal.count == 0:  # a new session: its first line
             rt.event(rover, "info", "session", keys.faults_journal(rover),
                      f"journal opened: the session of {rover} begins")

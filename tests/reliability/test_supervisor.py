@@ -11,11 +11,13 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import pytest
 
+import lunaris.up as up_module
 from common import keys
 from lunaris.up import Supervisor
 from tests.harness import ALL_SERVICES, ROOT, Probe, free_endpoint, lunaris_cmd, wait_for
@@ -159,3 +161,99 @@ def test_a_service_stops_when_its_supervisor_is_gone(router, tmp_path):
             proc.kill()
     assert proc.returncode == 0 and "supervisor 1 is gone" in out
 
+
+
+class _Crashes(Supervisor):
+    """A supervisor whose every service dies at once of the same error."""
+
+    def __init__(self, tmp: Path):
+        super().__init__(["faults"], [], "tcp/127.0.0.1:1", tmp, None)
+
+    def command(self, service: str) -> list[str]:
+        return [sys.executable, "-c", "import msgspec; msgspec.json.decode(b'{\"t_s\": 1')"]
+
+
+def test_a_service_that_keeps_failing_is_shown_failed_with_its_error(tmp_path, capsys):
+    """Found: a faults service with a torn journal restarted 9 times in 25 s, for ever, and
+    was never shown FAILED."""
+    sup = _Crashes(tmp_path)
+    sup.start_all()
+    try:
+        wait_for(lambda: (sup.poll(), "faults" in sup.failed)[1], 30,
+                 lambda: f"the faults service shown failed (restarts: {sup.restarts})", poll_s=0.05)
+        assert sup.restarts["faults"] == up_module.FAILING_AFTER - 1
+        assert "msgspec.DecodeError: Input data was truncated" in sup.failed["faults"]
+        out = capsys.readouterr().out
+        assert "faults" in out and "FAILED" in out and "not restarting it" in out
+        first = sup.procs["faults"]
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline:  # no longer restarted
+            sup.poll()
+            time.sleep(0.05)
+        assert sup.procs["faults"] is first
+    finally:
+        sup.stop_all()
+
+
+def _claim_at_once(router: str, n: int, state_dirs: list[Path]) -> list[str | None]:
+    """``n`` clocks of mapp-1 on their own state dirs claim at the same moment (threads of
+    one test process, each its own session); each one's AlreadyRunning message, or None."""
+    from common.connection import make_config
+    from common.runtime import AlreadyRunning, Runtime
+
+    rts = [Runtime("clock", [R], make_config("client", connect=[router]), state_dirs[i])
+           for i in range(n)]
+    for rt in rts:
+        rt.__enter__()
+    barrier = threading.Barrier(n)
+    outcome: list[str | None] = [None] * n
+
+    def claim(i: int) -> None:
+        barrier.wait()
+        try:
+            rts[i].claim()
+        except AlreadyRunning as exc:
+            outcome[i] = str(exc)
+
+    threads = [threading.Thread(target=claim, args=(i,)) for i in range(n)]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+    finally:
+        for rt in rts:
+            rt.close()
+    return outcome
+
+
+def test_simultaneous_starts_leave_exactly_one_instance(router, tmp_path):
+    """Found: two clocks with different state dirs both ran (20 ticks/s) in 1 of 4
+    simultaneous starts: each looked for the other's token before either had declared it."""
+    for round_ in range(3):
+        n = 2 if round_ < 2 else 3
+        outcome = _claim_at_once(router, n, [tmp_path / f"r{round_}-{i}" for i in range(n)])
+        winners = [i for i, why in enumerate(outcome) if why is None]
+        assert len(winners) == 1, outcome
+        assert all("another clock service" in why for why in outcome if why), outcome
+
+
+def test_two_clocks_started_at_once_one_exits_3(router, tmp_path):
+    procs = [subprocess.Popen(lunaris_cmd("run", "clock", "--rover", str(MAPP), "--connect", router,
+                                          "--state-dir", str(tmp_path / f"s{i}")),
+                              cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i in range(2)]
+    try:
+        with Probe(router) as p:
+            p.watch(keys.clock(R))
+            loser = wait_for(lambda: next((q for q in procs if q.poll() is not None), None), 30,
+                             "one of the two clocks to give way")
+            assert loser.returncode == 3, loser.communicate()
+            assert "another clock service" in loser.communicate()[1]
+            p.wait_value(keys.clock(R))
+            assert one_clock(p)
+    finally:
+        for q in procs:
+            if q.poll() is None:
+                q.send_signal(signal.SIGINT)
+                q.communicate(timeout=20)
