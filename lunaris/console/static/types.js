@@ -18,6 +18,7 @@
  * @property {number} t_s
  * @property {string} service
  * @property {Array<ActiveFault>} faults
+ * @property {number} [epoch]
  */
 /**
  * @typedef {Object} BatteryState
@@ -90,7 +91,7 @@
  * @property {number} t_s
  * @property {"critical" | "info" | "warning"} severity
  * @property {string} source
- * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "rejected" | "scenario" | "session"} kind
+ * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "rejected" | "scenario" | "session" | "state_damaged"} kind
  * @property {string} key
  * @property {string} message
  * @property {Record<string, unknown> | null} [params]
