@@ -175,7 +175,8 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
                   answered + pub + adv + ["lunaris/*/faults/active/*", "lunaris/*/snapshots/*"]
                   + (reads + dash_adv if service == "bridge" else [])),
             _rule(f"{r}-announce", "allow", ["ingress"], ["liveliness_token"],
-                  [f"lunaris/*/service/{service}"] + adv
+                  # its token, and its claims while it starts (Runtime.claim: claim/<zid>, owner/<zid>)
+                  [f"lunaris/*/service/{service}", f"lunaris/*/service/{service}/*/*"] + adv
                   + (dash_adv + ["@ros2_lv/**"] if service == "bridge" else [])),
         ]
         if service == "bridge":  # it hears the dashboard's inbound topics and ROS 2 discovery

@@ -132,6 +132,24 @@ def test_no_identity_forges_another_services_telemetry_tokens_or_answers(router:
     del token, tokens, queryables
 
 
+def test_a_service_claims_its_rovers_and_no_other_identity_can(router: Router) -> None:
+    """A starting service declares claim and owner tokens below its own ``service/<name>``
+    (``Runtime.claim``: two clocks started at once must see each other's claim); only that
+    service's identity may, or a forged claim could keep the real clock from starting."""
+    reader = router.open("debrief")
+    clock = router.open("lunaris-clock")
+    forger = router.open("lunaris-battery")
+    seen = lambda: sorted(str(r.ok.key_expr) for r in reader.liveliness().get(  # noqa: E731
+        keys.service_claims(ROVER, "clock"), timeout=5.0) if r.ok is not None)
+    forged = forger.liveliness().declare_token(keys.service_claim(ROVER, "clock", "f0rged"))
+    claim = clock.liveliness().declare_token(keys.service_claim(ROVER, "clock", "c10ck"))
+    owner = clock.liveliness().declare_token(keys.service_owner(ROVER, "clock", "c10ck"))
+    wait_for(lambda: seen() == [keys.service_claim(ROVER, "clock", "c10ck"),
+                                keys.service_owner(ROVER, "clock", "c10ck")],
+             lambda: f"the clock's own claim and ownership, and no other (seen {seen()})")
+    del forged, claim, owner
+
+
 @pytest.mark.timeout(60)
 def test_the_dashboard_sends_its_inbound_topic_and_nothing_else(router: Router) -> None:
     bridge = router.open("lunaris-bridge")
