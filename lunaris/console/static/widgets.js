@@ -96,10 +96,19 @@ export function eventsCard(rover) {
       <small>[${e.source}]</small></div>`) : html`<p>No event yet.</p>`}</div></section>`;
 }
 
-/** @param {string} rover a banner while the console says the rover's link is lost */
+/** @param {string} rover a banner while the console says the rover's link is lost, and why */
 export function linkBanner(rover) {
-  return linkLost(rover)
-    ? html`<div class="link-lost" role="alert" data-link="lost">Link to ${rover} lost: the values below are the
-        last received, and nothing sent to it is applied until the link is back.</div>`
-    : nothing;
+  const link = store.links[rover];
+  if (!linkLost(rover) || !link) return nothing;
+  return html`<div class="link-lost" role="alert" data-link="lost">Link to ${rover} lost${link.reason
+    ? `: ${link.reason}` : ""}. The values below are the last received, and nothing sent to it is applied until
+    the link is back.</div>`;
+}
+
+/** A banner while the console has lost the twin's router (every rover's values are old). */
+export function routerBanner() {
+  const router = store.router;
+  if (router?.state !== "lost") return nothing;
+  return html`<div class="link-lost" role="alert" data-router="lost">Connection to the twin lost: ${router.message}.
+    The values below are the last received; nothing can be sent until it is back.</div>`;
 }
