@@ -1,9 +1,10 @@
-// Inputs & drive: the sun angle (all panels, or one panel's own), each radio's position,
-// the umbilical, a drive order (to a point, optionally and back) or Stop.
+// Inputs: the sun angle (all panels, or one panel's own), each radio's position (a radio that
+// follows the drive takes none: the rover is moved on the map instead), the umbilical; Stop,
+// and the way to the map, where the rover is driven.
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
-import {panel, radio} from "../state.js";
+import {panel, pickView, radio} from "../state.js";
 import {actionButton, field} from "../widgets.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
@@ -64,29 +65,19 @@ function radiosCard(r, p) {
     }) : html`<p>No radio.</p>`}</section>`;
 }
 
-/** @param {string} r @param {Parts} p */
+/** @param {string} r @param {Parts} p where to drive the rover from */
 function driveCard(r, p) {
-  if (!p.drive) return html`<section class="card"><h2>Drive</h2><p>This rover has no drive section: it does not drive.</p></section>`;
-  const go = () => send("PUT", "input/drive/traverse", JSON.stringify({
-    waypoints: [{x_m: num("tr-x"), y_m: num("tr-y"), z_m: num("tr-z")}], speed_m_per_s: num("tr-v"),
-    return_to_start: /** @type {HTMLInputElement | null} */ (document.getElementById("tr-back"))?.checked ?? false}), r);
-  return html`<section class="card"><h2>Drive</h2>
-    <p class="help">Send the rover straight to a point of the site, in metres from the site's origin, or stop it.</p>
-    <div class="row"><label>east [m]<input type="number" id="tr-x" step="1" value="20"></label>
-      <label>north [m]<input type="number" id="tr-y" step="1" value="0"></label>
-      <label>up [m]<input type="number" id="tr-z" step="0.5" value="0"></label>
-      <label>speed [m/s]<input type="number" id="tr-v" min="0" step="0.01" placeholder="top speed"></label>
-      <label class="check"><input type="checkbox" id="tr-back"> and back</label></div>
-    <div class="row">${actionButton({action: "traverse-go", label: "Drive there", rover: r, cls: "primary", run: go})}
+  if (!p.drive) return html`<section class="card"><h2>Drive</h2><p>${r} has no drive section: it does not drive.</p></section>`;
+  return html`<section class="card"><h2>Drive</h2><p class="help">The rover is driven from the map: a shipped traverse,
+      waypoints typed or clicked on the map, Stop; each shown on the map before it is sent.</p>
+    <div class="row"><button type="button" class="primary" id="to-map" @click=${() => pickView("map")}>Open the map</button>
       ${actionButton({action: "traverse-stop", label: "Stop the rover", rover: r, cls: "danger",
-                      run: () => send("DELETE", "input/drive/traverse", undefined, r)})}</div>
-    <p>Now ${field(r, "drive/state", "status", "text")}, ${field(r, "drive/state", "x_m", "m")} east and
-      ${field(r, "drive/state", "y_m", "m")} north of the origin.</p></section>`;
+                      run: () => send("DELETE", "input/drive/traverse", undefined, r)})}</div></section>`;
 }
 
 export const inputs = {
   name: "inputs",
-  label: "Inputs & drive",
+  label: "Inputs",
   /** @param {{rover: string, parts: Parts}} ctx */
   render: ({rover, parts}) => html`<div class="grid two">
     <div class="col">${sunCard(rover, parts)}${umbilicalCard(rover)}</div>
