@@ -29,8 +29,8 @@
 /**
  * The fault catalogue the forms are built from (`GET /api/catalogue`).
  * @typedef {{name: string, type: string, ge?: number, gt?: number, le?: number, lt?: number,
- *   default: number | null}} CatalogueParam
- * @typedef {{description: string, params: CatalogueParam[]}} CatalogueKind
+ *   default: number | null, label?: string, unit?: string, hint?: string}} CatalogueParam
+ * @typedef {{name?: string, effect?: string, description: string, params: CatalogueParam[]}} CatalogueKind
  * @typedef {{named: boolean, kinds: Record<string, CatalogueKind>}} CatalogueComponent
  * @typedef {{components: Record<string, CatalogueComponent>, derived: Record<string, unknown>}} Catalogue
  */

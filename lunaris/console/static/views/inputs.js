@@ -2,10 +2,11 @@
 // follows the drive takes none: the rover is moved on the map instead), the umbilical; Stop,
 // and the way to the map, where the rover is driven.
 
-import {html, nothing} from "../vendor/lit-html/lit-html.js";
+import {html} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
 import {panel, pickView, radio} from "../state.js";
 import {actionButton, field} from "../widgets.js";
+import {loadRovers, radioInfo} from "./map.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 
@@ -44,18 +45,36 @@ function umbilicalCard(r) {
   </section>`;
 }
 
+/**
+ * Whether a radio follows the drive (the drive sets where the rover is from it, and the twin
+ * refuses a position typed for it): its telemetry's `follows_drive`, else what the console
+ * knows from the rover file (`GET /api/rovers`); null when neither says.
+ * @param {string} r @param {string} n
+ * @returns {boolean | null}
+ */
+function followsDrive(r, n) {
+  const said = radio(r, n)?.follows_drive;
+  if (typeof said === "boolean") return said;
+  const info = radioInfo(r, n);
+  return info ? info.follows_drive : null;
+}
+
 /** @param {string} r @param {Parts} p */
 function radiosCard(r, p) {
   return html`<section class="card"><h2>Where the rover is from each radio</h2>
     <p class="help">A distance, and an angle measured from east, counter-clockwise: 0° east, 90° north, 180° west,
       270° south. (Not a compass bearing: the drive's heading is one, 0° north and clockwise.)</p>
-    ${p.drive ? html`<p class="help">This rover drives: a radio that stands at a site follows the drive by itself,
-      and the twin refuses a position typed for it.</p>` : nothing}
     ${p.radios.length ? p.radios.map((n) => {
       const link = radio(r, n), x = link?.x_m ?? 0, y = link?.y_m ?? 0;
-      const angle = Math.round((Math.atan2(y, x) * 180 / Math.PI + 360) % 360);
-      return html`<div class="row"><b>${n}</b><label>distance [m]<input type="number" id=${`pos-d-${n}`} min="0" step="10"
-          value=${Math.round(Math.hypot(x, y))}></label>
+      const angle = Math.round((Math.atan2(y, x) * 180 / Math.PI + 360) % 360), distance = Math.round(Math.hypot(x, y));
+      if (followsDrive(r, n)) {
+        return html`<div class="radio-follows" data-radio=${n} data-follows-drive="true"><b>${n}</b> ${field(r, `radio/${n}/link`,
+            "in_range", "range")}: now ${distance} m at ${angle}° from east.
+          <p class="help">The drive sets where the rover is: move the rover on the map's drive panel instead.
+            <button type="button" class="act" data-to-map=${n} @click=${() => pickView("map")}>Open the map</button></p></div>`;
+      }
+      return html`<div class="row" data-radio=${n}><b>${n}</b><label>distance [m]<input type="number" id=${`pos-d-${n}`} min="0" step="10"
+          value=${distance}></label>
         <label>angle from east [°]<input type="number" id=${`pos-a-${n}`} min="-360" max="360" step="1"
           value=${angle}></label>
         ${actionButton({action: "input-position", label: "Set", rover: r, target: {radio: n},
@@ -82,4 +101,5 @@ export const inputs = {
   render: ({rover, parts}) => html`<div class="grid two">
     <div class="col">${sunCard(rover, parts)}${umbilicalCard(rover)}</div>
     <div class="col">${radiosCard(rover, parts)}${driveCard(rover, parts)}</div></div>`,
+  enter: () => loadRovers(),
 };
