@@ -100,7 +100,7 @@ export function answer(verdict, message) {
   el.className = `answer ${String(verdict).replace(" ", "")}`;
   el.dataset.verdict = verdict;
   head.textContent = `${said}:`;
-  el.append(head, message.replace(new RegExp(`^${said}:\\s*`, "i"), ""));
+  el.append(head, " ", message.replace(new RegExp(`^${said}:\\s*`, "i"), ""));
   box.prepend(el);
   while (box.children.length > KEPT) box.lastElementChild?.remove();
   setTimeout(() => el.classList.add("old"), FRESH_MS);

@@ -269,7 +269,7 @@ function fileForm(rover, p) {
         value=${x.file} .selected=${x.file === p.file}>${x.name ?? x.file}</option>`)}</select></label></div>
     ${t ? html`<p id="tr-about"><b>${t.name}</b>: ${t.description} <small>(${t.file}, ${t.waypoints?.length ?? 0}
         waypoints)</small></p>
-      <p id="tr-plan" class=${problems.length ? "error" : ""}>${said ? html`From where the rover is: <b>${said}</b>.` : nothing}
+      <p id="tr-plan" class=${problems.length ? "error" : ""}>${said ? html`If sent now, from where the rover is: <b>${said}</b>.` : nothing}
         ${problems.length ? html`<br>The drive would refuse it as the file is: ${problems.map((x) => plainMessage(x)).join("; ")}.`
           : nothing}${!t.plan && listed.data.plan_missing ? html`<br><small>${plainMessage(listed.data.plan_missing)}</small>`
           : nothing}</p>` : html`<p class="help">No traverse file to offer.</p>`}
@@ -317,7 +317,7 @@ function handForm(rover, p) {
         @change=${(/** @type {Event} */ ev) => { p.handBack = /** @type {HTMLInputElement} */ (ev.target).checked; edited(p); changed(); }}>
         and back</label></div>
     <p id="wp-plan" class=${problems.length && p.rows.length ? "error" : ""}>${sum
-      ? html`From where the rover is: <b>${planWords(sum.length, sum.duration, speed, p.handBack)}</b>.`
+      ? html`If sent now, from where the rover is: <b>${planWords(sum.length, sum.duration, speed, p.handBack)}</b>.`
       : p.rows.length ? `${problems.join("; ")}.` : ""}</p>
     <div class="row">${actionButton({action: "traverse-go", label: "Drive through these waypoints", rover, cls: "primary",
                                      run: () => sendHand(rover)})}</div>`;
