@@ -87,6 +87,8 @@ def test_the_page_says_where_it_is_with_the_twin_and_with_each_rover(tmp_path, b
         WebDriverWait(browser, 20).until(lambda d: link(d) == "twin connected")
         tab = f'#rovers [data-rover-pick="{R}"]'
         WebDriverWait(browser, 20).until(lambda d: d.find_elements(By.CSS_SELECTOR, tab))
+        first = WebDriverWait(browser, 10).until(lambda d: text(d, "#clock-t"), "the rover's clock")
+        WebDriverWait(browser, 10).until(lambda d: text(d, "#clock-t") not in ("", first), "ticks")
 
         rover.ticking.clear()  # the rover's link is cut
         lost = '#main [data-link="lost"]'

@@ -110,8 +110,9 @@ export function lengthAndDuration(from, waypoints, speed, back) {
 
 /** @param {number} m a distance as a person says it: "8.5 m", "340 m", "6.8 km" */
 export function metres(m) {
-  if (m >= 1000) return `${num(m / 1000, m >= 10000 ? 0 : 1)} km`;
-  return m < 10 ? `${num(m, 1)} m` : `${num(m)} m`;
+  const km = m / 1000;
+  if (m >= 1000) return `${num(km, m >= 10000 || Number.isInteger(km) ? 0 : 1)} km`;
+  return m < 10 && !Number.isInteger(m) ? `${num(m, 1)} m` : `${num(m)} m`;
 }
 
 /**
