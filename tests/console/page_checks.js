@@ -33,7 +33,7 @@ function layout() {
     if (card.scrollWidth > card.clientWidth + slack)
       out.push(`${name(card)} "${card.querySelector("h2")?.innerText ?? ""}": its content is ${card.scrollWidth} px wide in ${card.clientWidth}`);
     for (const e of card.querySelectorAll("*")) {
-      if (!visible(e)) continue;
+      if (!visible(e) || e.parentElement?.closest("svg")) continue;  // a drawing clips what is inside it
       const r = e.getBoundingClientRect();
       let scrolled = false;
       for (let a = e.parentElement; a && a !== card; a = a.parentElement)

@@ -4,7 +4,8 @@
   viewport's width and inside every box around it that clips (a card that would scroll
   sideways hides it); nothing is wider than its card or sticks out of it; the page itself
   never scrolls sideways. Vertically a control may be anywhere the page, or the box it is in,
-  scrolls to.
+  scrolls to. What is inside a drawing (an ``<svg>``, the map) is clipped by it: the drawing is
+  checked, not its shapes.
 - Touch: on a tablet every control is at least ``TOUCH_PX`` high and wide (its label, for a
   checkbox).
 - Words: the visible text holds no raw JSON object, no ``$.field`` path, no Python repr or

@@ -114,22 +114,23 @@ def _stream(page, message: dict) -> None:
 
 
 def test_a_lost_link_is_said_on_the_rover_s_views(page):
-    """A rover's link state, where the console's stream carries it (``link: "lost" | "ok"``,
-    per rover), shows as a banner on the rover's views and a mark on its button."""
+    """A rover's link state as the console's stream carries it (``links: {rover: {state, since,
+    reason}}``) shows as a banner on the rover's views, with the console's reason, and a mark on
+    its button. (tests/console/test_page_states.py cuts a real link.)"""
     view(page, "live")
     banner, button = "#main .link-lost", f'#rovers [data-rover-pick="{R}"]'
     batch = {"type": "batch", "values": {}, "events": [], "services": {}}
     assert not page.find_elements(By.CSS_SELECTOR, banner)
-    for shape in ({"rovers": {R: {"link": "lost"}}}, {"links": {R: "lost"}}):
-        _stream(page, {**batch, **shape})
-        text = WebDriverWait(page, 10).until(lambda d: d.find_element(By.CSS_SELECTOR, banner).text)
-        assert text.startswith(f"Link to {R} lost")
-        assert "link lost" in page.find_element(By.CSS_SELECTOR, button).text.lower()
-        view(page, "faults")
-        assert page.find_element(By.CSS_SELECTOR, banner).is_displayed()
-        view(page, "live")
-        _stream(page, {**batch, "rovers": {R: {"link": "ok"}}})
-        WebDriverWait(page, 10).until(lambda d: not d.find_elements(By.CSS_SELECTOR, banner))
+    lost = {"state": "lost", "since": 1.0, "reason": "no clock tick since 12:00:01"}
+    _stream(page, {**batch, "links": {R: lost}})
+    text = WebDriverWait(page, 10).until(lambda d: d.find_element(By.CSS_SELECTOR, banner).text)
+    assert text.startswith(f"Link to {R} lost: no clock tick since 12:00:01.")
+    assert "link lost" in page.find_element(By.CSS_SELECTOR, button).text.lower()
+    view(page, "faults")
+    assert page.find_element(By.CSS_SELECTOR, banner).is_displayed()
+    view(page, "live")
+    _stream(page, {**batch, "links": {R: {"state": "up", "since": 2.0, "reason": "clock ticking"}}})
+    WebDriverWait(page, 10).until(lambda d: not d.find_elements(By.CSS_SELECTOR, banner))
     assert "link lost" not in page.find_element(By.CSS_SELECTOR, button).text.lower()
 
 

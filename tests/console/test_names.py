@@ -43,7 +43,9 @@ def forge(p) -> None:
     for name in PANELS:
         p.put(keys.solar_power(R, name), {"t_s": 1.0, "power_w": 10.0, "sun_angle_deg": 60.0, "dust": 0.0})
     for name in RADIOS:
-        p.put(keys.radio_link(R, name), {"t_s": 1.0, "in_range": True, "x_m": 5.0, "y_m": 0.0})
+        p.put(keys.radio_link(R, name), {"t_s": 1.0, "in_range": True, "x_m": 5.0, "y_m": 0.0,
+                                         "site": {"x_m": 30.0, "y_m": 20.0}, "a_m": 100.0, "b_m": 80.0,
+                                         "offset_x_m": 0.0, "offset_y_m": 0.0, "follows_drive": False})
     p.put(keys.faults_active(R, SERVICE), {
         "t_s": 1.0, "service": SERVICE, "faults": [{"key": FAULT, "params": {LOADS[0]: 1}, "since_t_s": 1.0,
                                                     "origin": "injected", "severity": "critical"}]})
@@ -70,7 +72,7 @@ def pick_rover(driver, starts: str) -> None:
 MARKUP = """return {
   pwned: window.pwned === undefined ? null : String(window.pwned),
   markup: [...document.querySelectorAll('img, svg, [onerror], [onload]')]
-    .filter((e) => !e.closest('.uplot')).map((e) => e.outerHTML),
+    .filter((e) => !e.closest('.uplot') && e.id !== 'map-svg').map((e) => e.outerHTML),
 }"""
 
 
@@ -123,11 +125,14 @@ def test_hostile_names_show_as_text_and_never_run(live, browser, artefacts):
     view(browser, "inputs")
     shows(browser, PANELS + RADIOS)
     no_script_ran(browser)
+    view(browser, "map")  # each radio's site and range drawn, its name a label of the drawing
+    shows(browser, [f"{n}: in range" for n in RADIOS], "#map-svg")
+    no_script_ran(browser)
     for other in ("session", "scenarios", "recordings"):
         view(browser, other)
         no_script_ran(browser)
     # The forged rover itself: its button, its views.
     pick_rover(browser, "<img")
-    for other in ("live", "faults", "inputs", "session"):
+    for other in ("live", "map", "faults", "inputs", "session"):
         view(browser, other)
         no_script_ran(browser)

@@ -20,18 +20,18 @@ real browser, at a laptop's 1280x800 and a tablet's 820x1180:
 from __future__ import annotations
 
 import re
+import urllib.request
 from collections.abc import Iterator
 
 import pytest
-from selenium.common.exceptions import StaleElementReferenceException
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support import expected_conditions as ec
-from selenium.webdriver.support.ui import WebDriverWait as _Wait
 
 from common import keys
 from testbed.browser import open_browser, size_viewport
 from tests.console.conftest import Live, save_shot, settle, shoot, start_console
 from tests.console.page_checks import COVERED, LAYOUT, TEXT, TOUCH, TOUCH_PX, field_names, vocabulary
+from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
 from tests.harness import (
     ALL_SERVICES,
     ROOT,
@@ -47,13 +47,9 @@ from tests.harness import (
 pytestmark = pytest.mark.timeout(240)
 
 R = "mapp-1"
-VIEWS = ("live", "faults", "inputs", "session", "scenarios", "recordings")
+VIEWS = ("live", "map", "faults", "inputs", "session", "scenarios", "recordings")
 SIZES = ((1280, 800, ""), (820, 1180, "-tablet"))
 SHIPPED = ROOT / "config" / "scenarios"
-
-
-def WebDriverWait(driver, timeout_s: float) -> _Wait:  # noqa: N802 - selenium's own name
-    return _Wait(driver, timeout_s, poll_frequency=0.05, ignored_exceptions=(StaleElementReferenceException,))
 
 
 @pytest.fixture(scope="module")
@@ -69,7 +65,8 @@ def site(tmp_path_factory) -> Iterator[Live]:
             p.watch(f"{keys.ROOT}/{R}/**")
             p.wait_services(R, services)
             p.wait_value(keys.battery_state(R))
-            console = start_console(endpoint, folder, "--scenarios", str(SHIPPED))
+            console = start_console(endpoint, folder, "--scenarios", str(SHIPPED), "--rover",
+                                    str(ROVERS / "mapp.yaml"))
             try:
                 yield Live(endpoint, twin, p, console, folder)
             finally:
@@ -90,38 +87,6 @@ def page(site) -> Iterator:
         yield driver
     finally:
         driver.quit()
-
-
-def view(driver, name: str) -> None:
-    tab = f'#views [data-view="{name}"]'
-    WebDriverWait(driver, 10).until(lambda d: d.find_element(By.CSS_SELECTOR, tab).click() or True)
-    WebDriverWait(driver, 10).until(lambda d: d.find_element(
-        By.CSS_SELECTOR, f'#views [data-view="{name}"]').get_attribute("class") == "on")
-    settle(driver)
-
-
-def click(driver, selector: str) -> None:
-    clickable = ec.element_to_be_clickable((By.CSS_SELECTOR, selector))
-
-    def clicked(d):
-        element = clickable(d)
-        if not element:
-            return False
-        d.execute_script("arguments[0].scrollIntoView({block: 'center'})", element)
-        element.click()
-        return True
-    WebDriverWait(driver, 10).until(clicked, f"{selector} to be clicked")
-
-
-def answer(driver, verdict: str, timeout_s: float = 10.0) -> str:
-    def check(d):
-        got = d.find_elements(By.CSS_SELECTOR, f'#answers .answer[data-verdict="{verdict}"]')
-        return got[0].get_attribute("textContent") if got else False
-    return WebDriverWait(driver, timeout_s).until(check, f"an answer {verdict!r}")
-
-
-def clear_answers(driver) -> None:
-    driver.execute_script("document.querySelectorAll('#answers .answer').forEach((e) => e.remove())")
 
 
 def steps(driver) -> list[tuple[str, str, str]]:
@@ -229,7 +194,8 @@ def test_every_view_fits_a_laptop_and_a_tablet_and_speaks_plainly(site, page, ar
             view(page, name)
             if name == "live":
                 WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#charts .uplot"))
-            save_shot(page, artefacts, f"{name}{suffix}", doc=name != "scenarios")  # drills: shot playing
+            # drills: shot playing; the map: shot driving (test_map.py); recordings: shot saved, below
+            save_shot(page, artefacts, f"{name}{suffix}", doc=name not in ("scenarios", "map", "recordings"))
 
             at = f"{name}{suffix} ({width}x{height})"
             problems += [f"{at}: {x}" for x in page.execute_script(LAYOUT)]
@@ -250,6 +216,14 @@ def test_every_view_fits_a_laptop_and_a_tablet_and_speaks_plainly(site, page, ar
     status = page.find_element(By.ID, "rec-status").text
     if not re.search(r"Saved views-1\.mcap.*\d MB", status):
         problems.append(f"recordings, stopped: the status does not say what was saved: {status!r}")
+    # The recording saved is offered for download (Foxglove, PlotJuggler): an MCAP file.
+    click(page, "#rec-refresh")
+    link = WebDriverWait(page, 10).until(lambda d: d.find_element(
+        By.CSS_SELECTOR, '[data-recording="views-1.mcap"] a[data-link="download"]'))
+    assert "Foxglove" in link.get_attribute("title") and "Download" in link.text
+    with urllib.request.urlopen(link.get_attribute("href"), timeout=10) as r:
+        assert r.headers["Content-Type"] == "application/vnd.mcap" and r.read(8) == b"\x89MCAP0\r\n"
+    shoot(page, artefacts, "recordings")
     for kind in ("battery/heating", "solar/left/dust", "load/nav_camera/short"):
         p.delete(keys.fault(R, *kind.rsplit("/", 1)))
     assert not problems, "\n".join(problems)

@@ -8,7 +8,10 @@ import {changed, store} from "./state.js";
 /**
  * What the console answers to a write (`PUT`/`DELETE /api/rovers/<rover>/keys/<key>`,
  * `POST /api/scenarios`, `POST /api/recordings`).
- * @typedef {{verdict: "accepted" | "rejected" | "invalid" | "forbidden" | "no answer", message: string,
+ * `not applied` (HTTP 503 / 504): the write could not reach the service that owns the key (its
+ * liveliness gone, the rover's link lost, the console not connected yet) or nothing answered in
+ * time; the twin never applies it later.
+ * @typedef {{verdict: "accepted" | "rejected" | "invalid" | "forbidden" | "not applied" | "no answer", message: string,
  *   event?: import("./types.js").Event | null}} Answer
  */
 
@@ -58,23 +61,25 @@ export async function post(url, body) {
 }
 
 /**
- * A query: its data, or the reason there is none.
+ * A query: its data, or the reason there is none (with the status, and what the console sent
+ * beside its reason: the faults of the owners that answered, with a 502).
  * @template T
  * @param {string} url
- * @returns {Promise<{ok: true, data: T} | {ok: false, message: string}>}
+ * @returns {Promise<{ok: true, data: T} | {ok: false, message: string, status?: number, data?: Record<string, unknown>}>}
  */
 export async function query(url) {
   try {
     const res = await fetch(url);
     const data = await res.json();
-    return res.ok ? {ok: true, data} : {ok: false, message: String(data.message ?? res.statusText)};
+    return res.ok ? {ok: true, data}
+      : {ok: false, message: String(data.message ?? res.statusText), status: res.status, data};
   } catch (err) {
     return {ok: false, message: `the console did not answer (${err})`};
   }
 }
 
 const WORDS = {accepted: "Accepted", rejected: "Refused by the twin", invalid: "Not sent",
-               forbidden: "Not allowed", "no answer": "No answer"};
+               forbidden: "Not allowed", "not applied": "Not applied", "no answer": "No answer"};
 
 /** How long an answer stays bright, then dimmed, on the answer line. */
 const FRESH_MS = 12000;
@@ -91,10 +96,11 @@ export function answer(verdict, message) {
   const box = document.getElementById("answers");
   if (!box) return;
   const el = document.createElement("div"), head = document.createElement("b");
+  const said = WORDS[/** @type {keyof typeof WORDS} */ (verdict)] ?? verdict;
   el.className = `answer ${String(verdict).replace(" ", "")}`;
   el.dataset.verdict = verdict;
-  head.textContent = `${WORDS[/** @type {keyof typeof WORDS} */ (verdict)] ?? verdict}:`;
-  el.append(head, message);
+  head.textContent = `${said}:`;
+  el.append(head, " ", message.replace(new RegExp(`^${said}:\\s*`, "i"), ""));
   box.prepend(el);
   while (box.children.length > KEPT) box.lastElementChild?.remove();
   setTimeout(() => el.classList.add("old"), FRESH_MS);

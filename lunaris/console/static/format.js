@@ -1,5 +1,8 @@
 // How the page writes numbers, times, states and the twin's words: one place for every unit
-// it shows and every plain label it puts on the twin's field names.
+// it shows and every plain label it puts on the twin's field names (a fault's words are the
+// catalogue's: GET /api/catalogue).
+
+import {store} from "./state.js";
 //
 // One time base: simulated time, written hh:mm:ss everywhere (the top bar, events, faults,
 // plots, snapshots). Durations as "2 h 05 min", "3 min 20 s", "45 s".
@@ -82,6 +85,17 @@ export function fmt(value, how) {
   return f(value);
 }
 
+/**
+ * What "empty" means for a rover's battery, in numbers: "the charge reaches 0 % or the pack's
+ * cut-off at 12.8 V" (from battery/state's depleted_soc and cutoff_v; "" before they are known).
+ * @param {import("./types.js").BatteryState | undefined} b
+ */
+export function emptyWords(b) {
+  if (!b || b.depleted_soc === undefined) return "";
+  const soc = `the charge reaches ${num(b.depleted_soc * 100)} %`;
+  return b.cutoff_v === null || b.cutoff_v === undefined ? soc : `${soc} or the pack's cut-off at ${num(b.cutoff_v, 1)} V`;
+}
+
 /** @param {number} t seconds since the epoch, as the browser's local date and time */
 export const wallTime = (t) => new Date(t * 1000).toLocaleString();
 
@@ -90,7 +104,7 @@ export const wallTime = (t) => new Date(t * 1000).toLocaleString();
 /**
  * A payload field as a person says it: its label, its unit, and how a value of it is written
  * (`scale` multiplies the value first: a fraction shown in %).
- * @typedef {{label: string, unit?: string, scale?: number, digits?: number}} FieldWords
+ * @typedef {{label: string, unit?: string, scale?: number, digits?: number, prefix?: string}} FieldWords
  */
 
 /** Fields by name, whatever payload they are in (the same name means the same thing). */
@@ -105,7 +119,7 @@ const FIELD_WORDS = /** @type {Record<string, FieldWords>} */ ({
   power_w: {label: "power", unit: "W", digits: 1},
   heat_w: {label: "extra heat", unit: "W"},
   temperature_c: {label: "temperature", unit: "°C", digits: 1},
-  time_to_empty_s: {label: "time to cut-off", unit: "s", digits: 0},
+  time_to_empty_s: {label: "time to empty", unit: "s", digits: 0},
   fault_code: {label: "fault code"},
   load_power_w: {label: "loads", unit: "W", digits: 1},
   bus_power_w: {label: "bus draw", unit: "W", digits: 1},
@@ -138,47 +152,43 @@ const FIELD_WORDS = /** @type {Record<string, FieldWords>} */ ({
 });
 
 /**
- * A fault's value as the instructor types it: a label, the unit typed (the twin's own), a hint
- * on what it means, and how it reads once injected. Keyed by component/kind/field. The fault
- * catalogue (`GET /api/catalogue`) gives the names and ranges; it has no plain words or units
- * yet, so they are here (the catalogue should carry them: then this table goes).
- * @typedef {{label: string, unit: string, hint: string, shown?: FieldWords}} ParamWords
+ * A fault's value as the instructor types it, from the fault catalogue (`GET /api/catalogue`:
+ * per parameter its `label`, `unit`, `hint`), and how it reads once injected (`shown`): the
+ * label in lower case with its unit, a fraction as a percentage ("dust cover 25 %"), a factor
+ * as "×3".
+ * @typedef {{label: string, unit: string, hint: string, shown: FieldWords}} ParamWords
  */
-export const PARAM_WORDS = /** @type {Record<string, ParamWords>} */ ({
-  "battery/capacity_loss/fraction": {label: "Capacity lost", unit: "fraction",
-    hint: "0 to 1: 0.2 takes a fifth of the capacity away", shown: {label: "capacity lost", unit: "%", scale: 100}},
-  "battery/resistance/factor": {label: "Internal resistance times", unit: "×",
-    hint: "1 is as new; 3 triples it", shown: {label: "internal resistance", unit: "× as new"}},
-  "battery/heating/heat_w": {label: "Extra heat in the pack", unit: "W", hint: "watts of heat, 0 or more",
-    shown: {label: "extra heat", unit: "W"}},
-  "load/short/resistance_ohm": {label: "Resistance of the short", unit: "Ω",
-    hint: "ohms, above 0: the smaller, the larger the current", shown: {label: "resistance of the short", unit: "Ω"}},
-  "load/stuck/power_w": {label: "Power drawn", unit: "W", hint: "what the load draws, whatever it is told",
-    shown: {label: "power drawn", unit: "W"}},
-  "solar/dust/fraction": {label: "Dust cover", unit: "fraction",
-    hint: "0 to 1: 0.25 takes a quarter of the panel's output away", shown: {label: "dust cover", unit: "%", scale: 100}},
-  "radio/degraded/range_scale": {label: "Range kept", unit: "fraction",
-    hint: "0 to 1: 0.5 leaves half the usual range", shown: {label: "range kept", unit: "%", scale: 100}},
-});
 
-/** A fault kind in plain words: its name and what it does. Keyed by component/kind. */
-export const FAULT_WORDS = /** @type {Record<string, {name: string, effect: string}>} */ ({
-  "battery/capacity_loss": {name: "Capacity loss", effect: "Part of the battery's capacity is gone: it holds less energy."},
-  "battery/resistance": {name: "Higher internal resistance", effect:
-    "The battery's internal resistance rises (age, cold): its voltage sags more under load and it warms more."},
-  "battery/heating": {name: "Internal heating", effect: "Extra heat inside the pack (a failed thermal control): it warms up."},
-  "battery/disconnect": {name: "Disconnected", effect: "The pack is off the power bus: nothing runs on the battery."},
-  "load/short": {name: "Short circuit", effect:
-    "The load shorts: it draws a very large current, and its rail trips when that is above the rail's limit."},
-  "load/open": {name: "Open circuit", effect: "The load draws nothing (a broken wire): it stops working."},
-  "load/stuck": {name: "Stuck on", effect: "The load draws a fixed power, whatever it is commanded."},
-  "rail/fail": {name: "Converter failure", effect: "The rail's converter dies: the rail and its loads go off."},
-  "solar/dust": {name: "Dust", effect: "Dust covers the panel: its output drops by the share covered."},
-  "solar/disconnect": {name: "Disconnected", effect: "The panel gives no power."},
-  "umbilical/disconnect": {name: "No supply", effect: "The umbilical supplies nothing, plugged in or not."},
-  "radio/failure": {name: "Failure", effect: "The radio never reaches the rover: always out of range."},
-  "radio/degraded": {name: "Degraded range", effect: "The radio's range shrinks to the share kept."},
-});
+/** @param {string} component @param {string} kind @returns {import("./state.js").CatalogueKind | undefined} */
+const kindOf = (component, kind) => store.cat?.components[component.split("/")[0]]?.kinds[kind];
+
+/** @param {string} text a sentence of the catalogue ("the panel gives no power") as it starts and ends on the page */
+const sentence = (text) => (text ? `${text.charAt(0).toUpperCase()}${text.slice(1)}${/[.!?]$/.test(text) ? "" : "."}` : "");
+
+/** @param {string} component `load/imu` or `load` @param {string} kind */
+export function faultName(component, kind) {
+  return kindOf(component, kind)?.name || words(kind);
+}
+
+/** @param {string} component @param {string} kind @param {string} fallback the model's own description */
+export function faultEffect(component, kind, fallback) {
+  return sentence(kindOf(component, kind)?.effect || fallback);
+}
+
+/**
+ * @param {string} component @param {string} kind @param {string} field
+ * @returns {ParamWords | undefined}
+ */
+export function paramWords(component, kind, field) {
+  const q = kindOf(component, kind)?.params.find((x) => x.name === field);
+  if (!q || !q.label) return undefined;
+  const unit = q.unit ?? "", label = q.label.toLowerCase();
+  /** @type {FieldWords} */
+  const shown = unit === "fraction" ? {label, unit: "%", scale: 100}
+    : unit === "×" ? {label: label.replace(/ times$/, ""), unit: "", prefix: "×"}
+      : {label, unit: unit || undefined};
+  return {label: q.label, unit, hint: q.hint ?? "", shown};
+}
 
 /** The parts of a rover, as the fault form and the faults' list name them. */
 export const PART_WORDS = /** @type {Record<string, string>} */ ({
@@ -191,21 +201,6 @@ export function partName(component) {
   return [PART_WORDS[family] ?? words(family), ...name].join(" ");
 }
 
-/** @param {string} component `load/imu` or `load` @param {string} kind */
-export function faultName(component, kind) {
-  return FAULT_WORDS[`${component.split("/")[0]}/${kind}`]?.name ?? words(kind);
-}
-
-/** @param {string} component @param {string} kind @param {string} fallback the catalogue's own */
-export function faultEffect(component, kind, fallback) {
-  return FAULT_WORDS[`${component.split("/")[0]}/${kind}`]?.effect ?? fallback;
-}
-
-/** @param {string} component @param {string} kind @param {string} field */
-export function paramWords(component, kind, field) {
-  return PARAM_WORDS[`${component.split("/")[0]}/${kind}/${field}`];
-}
-
 /**
  * A value with its unit, as a person writes it: "400 W", "25 %", "on".
  * @param {unknown} value
@@ -215,7 +210,7 @@ export function valueText(value, w) {
   if (typeof value === "boolean") return value ? "yes" : "no";
   if (typeof value !== "number") return words(String(value));
   const v = value * (w?.scale ?? 1);
-  const shown = w?.digits !== undefined ? num(v, w.digits) : plainNumber(v);
+  const shown = `${w?.prefix ?? ""}${w?.digits !== undefined ? num(v, w.digits) : plainNumber(v)}`;
   return w?.unit ? `${shown} ${w.unit}` : shown;
 }
 

@@ -17,7 +17,7 @@ export function roverTabs() {
     return html`<button type="button" data-rover-pick=${r} class=${r === store.rover ? "on" : ""}
         @click=${() => pickRover(r)}>${r} ${b ? fmt(b.soc, "pct") : ""}${f.length
         ? html`<span class="badge ${critical ? "critical" : ""}" title="active faults">${f.length}</span>` : nothing}${linkLost(r)
-        ? html`<span class="badge lost" title="no clock tick of this rover lately">link lost</span>` : nothing}</button>`;
+        ? html`<span class="badge lost" title=${store.links[r]?.reason ?? ""}>link lost</span>` : nothing}</button>`;
   });
 }
 
@@ -33,12 +33,24 @@ export function clockBar() {
     : actionButton({action: "clock-pause", label: "Pause", rover: r, run: () => send("PUT", "clock/control", '{"paused": true}', r)})}`;
 }
 
-/** Whether the console reaches the twin (and the page the console). */
+/**
+ * Where the console is with the twin (and the page with the console), for the top bar: a short
+ * text, its class, and the console's own words as the element's title.
+ * @returns {{cls: string, text: string, title: string}}
+ */
 export function linkState() {
-  if (store.streamError) return {cls: "link bad", text: store.streamError};
-  if (store.connected === null) return {cls: "link wait", text: "connecting…"};
-  return store.connected ? {cls: "link ok", text: "twin connected"}
-    : {cls: "link bad", text: "twin not reachable: values are the last received"};
+  const router = store.router;
+  if (store.streamError) return {cls: "link bad", text: store.streamError, title: "the page lost the console itself"};
+  if (router?.state === "waiting") {
+    return {cls: "link wait", text: `waiting for the twin at ${router.endpoint}`, title: router.message};
+  }
+  if (router?.state === "lost" || (router === null && store.connected === false)) {
+    return {cls: "link bad", text: "connection to the twin lost", title: router?.message ?? ""};
+  }
+  if (router?.state === "connected" || store.connected) {
+    return {cls: "link ok", text: "twin connected", title: router?.message ?? ""};
+  }
+  return {cls: "link wait", text: "connecting…", title: ""};
 }
 
 export function who() {

@@ -17,7 +17,7 @@ import {clockBar, linkState, roverTabs, viewTabs, who} from "./header.js";
 import {changed, onChange, parts, store} from "./state.js";
 import {connect} from "./stream.js";
 import {VIEWS} from "./views/index.js";
-import {linkBanner} from "./widgets.js";
+import {linkBanner, routerBanner} from "./widgets.js";
 
 /** @typedef {import("./views/index.js").View} View */
 /** @typedef {import("./views/index.js").ViewContext} ViewContext */
@@ -43,10 +43,11 @@ function draw() {
   const link = byId("link"), state = linkState();
   link.className = state.cls;
   link.textContent = state.text;
+  link.title = state.title;
   byId("observer").hidden = !store.me || store.me.may_act;
   const main = byId("main"), now = current();
   if (!now) {
-    render(html`<p class="waiting">Waiting for the twin… (is <code>lunaris up</code> running?)</p>`, main);
+    render(html`<p class="waiting" id="waiting">${waitingWords()}</p>`, main);
     return;
   }
   const {view, ctx} = now, which = `${ctx.rover}\n${view.name}`;
@@ -55,9 +56,18 @@ function draw() {
     view.enter?.(ctx);
   }
   main.dataset.rover = ctx.rover;
-  render(html`${linkBanner(ctx.rover)}${keyed(which, view.render(ctx))}`, main);
+  render(html`${routerBanner()}${linkBanner(ctx.rover)}${keyed(which, view.render(ctx))}`, main);
   view.after?.(ctx);
   syncCharts(document.getElementById("charts"), ctx.rover);
+}
+
+/** What the page says while it has no rover to show: the console's own words on the twin. */
+function waitingWords() {
+  const router = store.router;
+  if (!router) return "Connecting to the console…";
+  const said = router.message.charAt(0).toUpperCase() + router.message.slice(1);
+  if (router.state === "connected") return `${said}: no rover has answered yet (are the twin's services running?)`;
+  return `${said}.`;
 }
 
 function everySecond() {

@@ -7,6 +7,7 @@
 /** @typedef {import("./types.js").ActiveFaults} ActiveFaults */
 /** @typedef {import("./types.js").BatteryState} BatteryState */
 /** @typedef {import("./types.js").Clock} Clock */
+/** @typedef {import("./types.js").DriveRoute} DriveRoute */
 /** @typedef {import("./types.js").DriveState} DriveState */
 /** @typedef {import("./types.js").Event} TwinEvent */
 /** @typedef {import("./types.js").LoadPower} LoadPower */
@@ -28,13 +29,23 @@
 /**
  * The fault catalogue the forms are built from (`GET /api/catalogue`).
  * @typedef {{name: string, type: string, ge?: number, gt?: number, le?: number, lt?: number,
- *   default: number | null}} CatalogueParam
- * @typedef {{description: string, params: CatalogueParam[]}} CatalogueKind
+ *   default: number | null, label?: string, unit?: string, hint?: string}} CatalogueParam
+ * @typedef {{name?: string, effect?: string, description: string, params: CatalogueParam[]}} CatalogueKind
  * @typedef {{named: boolean, kinds: Record<string, CatalogueKind>}} CatalogueComponent
  * @typedef {{components: Record<string, CatalogueComponent>, derived: Record<string, unknown>}} Catalogue
  */
 
-/** @typedef {"ok" | "lost"} RoverLink */
+/**
+ * A rover's link to the console, as the console says it: `up`, `lost` (no clock tick for 2 s,
+ * or its clock's liveliness gone) or `unknown` (no tick seen yet); since when (wall time) and why.
+ * @typedef {{state: "up" | "lost" | "unknown", since: number | null, reason: string}} RoverLink
+ */
+
+/**
+ * Where the console is with the twin's router: `waiting` (not reached yet: the page is up
+ * before the twin), `connected` or `lost`; `message` in words.
+ * @typedef {{state: "waiting" | "connected" | "lost", endpoint: string, message: string}} Router
+ */
 
 export const EVENTS_KEPT = 300;
 /** Points of a rover's plots kept; past it, the older half is thinned to every other point. */
@@ -55,6 +66,8 @@ export const store = {
   links: {},
   /** @type {boolean | null} whether the console reaches the twin (null: not known yet) */
   connected: /** @type {boolean | null} */ (null),
+  /** @type {Router | null} where the console is with the twin's router, in words */
+  router: /** @type {Router | null} */ (null),
   /** @type {string} what to say when the page has lost the console itself */
   streamError: "",
   /** @type {string | null} */
@@ -128,6 +141,8 @@ export const panel = (rover, name) => val(rover, `solar/${name}/power`);
 export const radio = (rover, name) => val(rover, `radio/${name}/link`);
 /** @param {string} rover @returns {DriveState | undefined} */
 export const drive = (rover) => val(rover, "drive/state");
+/** @param {string} rover @returns {DriveRoute | undefined} */
+export const route = (rover) => val(rover, "drive/route");
 /** @param {string} rover @returns {UmbilicalState | undefined} */
 export const umbilical = (rover) => val(rover, "umbilical/state");
 
@@ -164,17 +179,24 @@ export function parts(rover) {
           drive: !!drive(rover), umbilical: !!umbilical(rover)};
 }
 
-/** @param {string} rover @returns {ActiveFault[]} every fault in effect, oldest first */
+/**
+ * Every fault in effect, oldest first, each with the service that owns it (its
+ * `faults/active/<service>` key).
+ * @param {string} rover
+ * @returns {(ActiveFault & {service: string})[]}
+ */
 export function activeFaults(rover) {
   const pre = `lunaris/${rover}/faults/active/`, out = [];
   for (const [k, v] of Object.entries(store.values)) {
-    if (k.startsWith(pre)) out.push(.../** @type {ActiveFaults} */ (v).faults);
+    if (!k.startsWith(pre)) continue;
+    const service = k.slice(pre.length);
+    out.push(.../** @type {ActiveFaults} */ (v).faults.map((f) => ({...f, service})));
   }
   return out.sort((a, b) => a.since_t_s - b.since_t_s || a.key.localeCompare(b.key));
 }
 
 /** @param {string} rover @returns {boolean} the console says the rover's link is lost */
-export const linkLost = (rover) => store.links[rover] === "lost";
+export const linkLost = (rover) => store.links[rover]?.state === "lost";
 
 // -- choices --------------------------------------------------------------------------------
 

@@ -10,12 +10,12 @@ import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, powerSummary, rovers, store
 /** @typedef {import("./state.js").RoverLink} RoverLink */
 
 /**
- * A message of the stream. `rovers` / `links` (a rover's link to the console: "ok" or
- * "lost") are read where the console sends them.
+ * A message of the stream (lunaris/console/live.py): a `snapshot` of everything, `batch`es of
+ * what changed (`links`: the rovers whose link changed), `link` when the router comes or goes.
  * @typedef {{type: "snapshot" | "batch" | "link", v?: number, connected?: boolean,
- *   values?: Record<string, unknown>, events?: TwinEvent[], services?: Record<string, string[]>,
- *   history?: Record<string, History>, rover?: string, link?: RoverLink | boolean,
- *   rovers?: Record<string, {link?: RoverLink}>, links?: Record<string, RoverLink | {link?: RoverLink}>}} LiveMessage
+ *   router?: import("./state.js").Router, values?: Record<string, unknown>, events?: TwinEvent[],
+ *   services?: Record<string, string[]>, history?: Record<string, History>,
+ *   links?: Record<string, RoverLink>}} LiveMessage
  */
 
 /** Open the stream; the browser reconnects by itself (and the console sends a snapshot again). */
@@ -31,7 +31,8 @@ export function connect() {
 /** @param {LiveMessage} msg one message of the stream, folded into the state */
 export function receive(msg) {
   store.streamError = "";
-  if (msg.type === "link" && msg.rover === undefined) {
+  if (msg.router) store.router = msg.router;
+  if (msg.type === "link") {
     store.connected = !!msg.connected;
     changed();
     return;
@@ -63,19 +64,11 @@ export function receive(msg) {
   changed();
 }
 
-/** @param {unknown} v @returns {RoverLink | undefined} */
-const linkWord = (v) => (v === "lost" || v === false ? "lost" : v === "ok" || v === true ? "ok" : undefined);
-
-/** @param {LiveMessage} msg the rovers' links, in whichever of its fields it carries them */
+/** @param {LiveMessage} msg the rovers' links that it carries */
 function links(msg) {
-  /** @param {string} rover @param {unknown} v */
-  const set = (rover, v) => {
-    const word = linkWord(v);
-    if (word) store.links[rover] = word;
-  };
-  if (msg.rover !== undefined) set(msg.rover, msg.link);
-  for (const [rover, data] of Object.entries(msg.rovers ?? {})) set(rover, data?.link);
-  for (const [rover, data] of Object.entries(msg.links ?? {})) set(rover, typeof data === "object" ? data?.link : data);
+  for (const [rover, link] of Object.entries(msg.links ?? {})) {
+    if (link && typeof link === "object" && typeof link.state === "string") store.links[rover] = link;
+  }
 }
 
 /**

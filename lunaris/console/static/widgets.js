@@ -2,9 +2,9 @@
 // event log. Templates (lit-html): whatever a name or a message holds is written as text.
 
 import {html, nothing} from "./vendor/lit-html/lit-html.js";
-import {act} from "./api.js";
+import {act, query} from "./api.js";
 import {clockText, faultName, fmt, paramsText, partName, plainMessage, words} from "./format.js";
-import {activeFaults, linkLost, mayAct, store, val} from "./state.js";
+import {activeFaults, changed, linkLost, mayAct, store, val} from "./state.js";
 
 /** @typedef {import("./format.js").Format} Format */
 
@@ -53,26 +53,80 @@ export function actionButton({action, label, run, rover = store.rover ?? "", tar
 const ORIGIN = /** @type {Record<string, string>} */ ({injected: "injected", derived: "raised by the twin"});
 
 /**
+ * What the faults service said when last asked for a rover's faults (`GET .../faults`): the
+ * owners that did not answer, in its words (a 502), or why nobody answered at all.
+ * @typedef {{missing: string[], unanswered: string}} FaultsCheck
+ */
+const checks = /** @type {Record<string, FaultsCheck>} */ ({});
+const asking = new Set();
+/** When each rover's faults were last asked for (ms). */
+const asked = /** @type {Record<string, number>} */ ({});
+/** How often the faults' owners are asked, in seconds, while a view shows the faults. */
+const CHECK_S = 5;
+
+/**
+ * Ask the faults service for a rover's faults, to know which owners answer (the faults cards
+ * say it): at once with `now`, else once every CHECK_S seconds (a view's tick).
+ * @param {string} rover @param {boolean} [now]
+ */
+export async function checkFaults(rover, now = false) {
+  if (asking.has(rover) || (!now && Date.now() - (asked[rover] ?? 0) < CHECK_S * 1000)) return;
+  asking.add(rover);
+  asked[rover] = Date.now();
+  try {
+    const res = await query(`/api/rovers/${encodeURIComponent(rover)}/faults`);
+    const missing = !res.ok && Array.isArray(res.data?.missing) ? /** @type {string[]} */ (res.data.missing) : [];
+    checks[rover] = {missing, unanswered: res.ok || missing.length ? "" : res.message};
+  } finally {
+    asking.delete(rover);
+  }
+  changed();
+}
+
+/** @param {string} rover @param {string} service @returns {boolean} its liveliness token is there */
+const live = (rover, service) => (store.services[rover] ?? []).includes(service);
+
+/** @param {FaultsCheck | undefined} c what is missing from the list, in the faults service's words */
+function missingNote(c) {
+  if (c?.missing.length) {
+    return html`<div class="faults-missing" id="faults-missing" role="alert"><b>Not every part of the rover answered:</b>
+      <ul>${c.missing.map((m) => html`<li>${plainMessage(m)}</li>`)}</ul>
+      Faults of those parts may be missing below; the ones shown for them are the last known.</div>`;
+  }
+  if (c?.unanswered) {
+    return html`<div class="faults-missing" id="faults-missing" role="alert"><b>The list could not be checked:</b>
+      ${plainMessage(c.unanswered)}. The faults below are the last known.</div>`;
+  }
+  return nothing;
+}
+
+/**
  * The active faults of a rover; each injected one with its Clear button. Times are sim time.
+ * A fault whose service does not answer is marked as the last known; the owners that did not
+ * answer the faults service are named (never fewer faults without saying so).
  * @param {string} rover
  * @param {(component: string, kind: string) => unknown} clear
  */
 export function faultsCard(rover, clear) {
-  const pre = `lunaris/${rover}/`;
+  const pre = `lunaris/${rover}/`, check = checks[rover];
   const rows = activeFaults(rover).map((f) => {
     const name = (f.key.startsWith(pre) ? f.key.slice(pre.length) : f.key).replace(/^fault\//, "");
     const bits = name.split("/"), kind = bits.pop() ?? "", component = bits.join("/");
     const values = paramsText(component, kind, f.params);
-    return html`<tr data-fault=${name}>
+    const stale = !live(rover, f.service);
+    return html`<tr data-fault=${name} data-stale=${stale ? "true" : nothing}>
       <td class="sev-${f.severity ?? "warning"} wrap">${partName(component)}: ${faultName(component, kind)}<br>
-        <small>${ORIGIN[f.origin] ?? words(f.origin)}${values ? ` · ${values}` : ""}</small></td>
+        <small>${ORIGIN[f.origin] ?? words(f.origin)}${values ? ` · ${values}` : ""}</small>${stale
+          ? html`<br><small class="sev-warning">last known: its ${f.service} service does not answer</small>` : nothing}</td>
       <td class="num">${clockText(f.since_t_s)}</td>
       <td class="end">${f.origin === "injected" ? actionButton({action: "fault-clear", label: "Clear", rover,
         target: {component, kind}, run: () => clear(component, kind)}) : nothing}</td></tr>`;
   });
-  return html`<section class="card"><h2>Active faults</h2><div id="faults-list" class="faults-list">${rows.length
+  const incomplete = !!(check?.missing.length || check?.unanswered);
+  return html`<section class="card"><h2>Active faults</h2>${missingNote(check)}<div id="faults-list" class="faults-list">${rows.length
     ? html`<table><tr><th>fault</th><th class="num">since (sim time)</th><th></th></tr>${rows}</table>`
-    : html`<p class="none">No active fault.</p>`}</div></section>`;
+    : html`<p class=${incomplete ? "" : "none"}>${incomplete ? "No active fault among the parts that answered." : "No active fault."}</p>`}</div>
+  </section>`;
 }
 
 /** What an event is, in words (its kind). */
@@ -96,10 +150,19 @@ export function eventsCard(rover) {
       <small>[${e.source}]</small></div>`) : html`<p>No event yet.</p>`}</div></section>`;
 }
 
-/** @param {string} rover a banner while the console says the rover's link is lost */
+/** @param {string} rover a banner while the console says the rover's link is lost, and why */
 export function linkBanner(rover) {
-  return linkLost(rover)
-    ? html`<div class="link-lost" role="alert" data-link="lost">Link to ${rover} lost: the values below are the
-        last received, and nothing sent to it is applied until the link is back.</div>`
-    : nothing;
+  const link = store.links[rover];
+  if (!linkLost(rover) || !link) return nothing;
+  return html`<div class="link-lost" role="alert" data-link="lost">Link to ${rover} lost${link.reason
+    ? `: ${link.reason}` : ""}. The values below are the last received, and nothing sent to it is applied until
+    the link is back.</div>`;
+}
+
+/** A banner while the console has lost the twin's router (every rover's values are old). */
+export function routerBanner() {
+  const router = store.router;
+  if (router?.state !== "lost") return nothing;
+  return html`<div class="link-lost" role="alert" data-router="lost">Connection to the twin lost: ${router.message}.
+    The values below are the last received; nothing can be sent until it is back.</div>`;
 }

@@ -7,7 +7,7 @@ import {keyed} from "../vendor/lit-html/directives/keyed.js";
 import {send} from "../api.js";
 import {faultEffect, faultName, paramWords, partName, plainNumber, PART_WORDS, words} from "../format.js";
 import {redraw, store} from "../state.js";
-import {actionButton, eventsCard, faultsCard} from "../widgets.js";
+import {actionButton, checkFaults, eventsCard, faultsCard} from "../widgets.js";
 import {clearFault} from "./live.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
@@ -112,4 +112,8 @@ export const faults = {
         with the reason.</p>${faultForm(rover, parts)}</section>${faultsCard(rover, clearFault)}</div>
     <div class="col">${eventsCard(rover)}<section class="card"><h2>Every fault the twin knows</h2>
       <div id="f-catalogue">${catalogueTable(store.cat)}</div></section></div></div>`,
+  /** @param {{rover: string}} ctx */
+  enter: ({rover}) => checkFaults(rover, true),
+  /** @param {{rover: string}} ctx */
+  tick: ({rover}) => checkFaults(rover),
 };

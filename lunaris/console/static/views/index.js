@@ -5,6 +5,7 @@
 import {faults} from "./faults.js";
 import {inputs} from "./inputs.js";
 import {live} from "./live.js";
+import {map} from "./map.js";
 import {recordings} from "./recordings.js";
 import {scenarios} from "./scenarios.js";
 import {session} from "./session.js";
@@ -18,4 +19,4 @@ import {session} from "./session.js";
  */
 
 /** @type {View[]} */
-export const VIEWS = [live, faults, inputs, session, scenarios, recordings];
+export const VIEWS = [live, map, faults, inputs, session, scenarios, recordings];

@@ -1,10 +1,12 @@
-// Inputs & drive: the sun angle (all panels, or one panel's own), each radio's position,
-// the umbilical, a drive order (to a point, optionally and back) or Stop.
+// Inputs: the sun angle (all panels, or one panel's own), each radio's position (a radio that
+// follows the drive takes none: the rover is moved on the map instead), the umbilical; Stop,
+// and the way to the map, where the rover is driven.
 
-import {html, nothing} from "../vendor/lit-html/lit-html.js";
+import {html} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
-import {panel, radio} from "../state.js";
+import {panel, pickView, radio} from "../state.js";
 import {actionButton, field} from "../widgets.js";
+import {loadRovers, radioInfo} from "./map.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 
@@ -43,18 +45,36 @@ function umbilicalCard(r) {
   </section>`;
 }
 
+/**
+ * Whether a radio follows the drive (the drive sets where the rover is from it, and the twin
+ * refuses a position typed for it): its telemetry's `follows_drive`, else what the console
+ * knows from the rover file (`GET /api/rovers`); null when neither says.
+ * @param {string} r @param {string} n
+ * @returns {boolean | null}
+ */
+function followsDrive(r, n) {
+  const said = radio(r, n)?.follows_drive;
+  if (typeof said === "boolean") return said;
+  const info = radioInfo(r, n);
+  return info ? info.follows_drive : null;
+}
+
 /** @param {string} r @param {Parts} p */
 function radiosCard(r, p) {
   return html`<section class="card"><h2>Where the rover is from each radio</h2>
     <p class="help">A distance, and an angle measured from east, counter-clockwise: 0° east, 90° north, 180° west,
       270° south. (Not a compass bearing: the drive's heading is one, 0° north and clockwise.)</p>
-    ${p.drive ? html`<p class="help">This rover drives: a radio that stands at a site follows the drive by itself,
-      and the twin refuses a position typed for it.</p>` : nothing}
     ${p.radios.length ? p.radios.map((n) => {
       const link = radio(r, n), x = link?.x_m ?? 0, y = link?.y_m ?? 0;
-      const angle = Math.round((Math.atan2(y, x) * 180 / Math.PI + 360) % 360);
-      return html`<div class="row"><b>${n}</b><label>distance [m]<input type="number" id=${`pos-d-${n}`} min="0" step="10"
-          value=${Math.round(Math.hypot(x, y))}></label>
+      const angle = Math.round((Math.atan2(y, x) * 180 / Math.PI + 360) % 360), distance = Math.round(Math.hypot(x, y));
+      if (followsDrive(r, n)) {
+        return html`<div class="radio-follows" data-radio=${n} data-follows-drive="true"><b>${n}</b> ${field(r, `radio/${n}/link`,
+            "in_range", "range")}: now ${distance} m at ${angle}° from east.
+          <p class="help">The drive sets where the rover is: move the rover on the map's drive panel instead.
+            <button type="button" class="act" data-to-map=${n} @click=${() => pickView("map")}>Open the map</button></p></div>`;
+      }
+      return html`<div class="row" data-radio=${n}><b>${n}</b><label>distance [m]<input type="number" id=${`pos-d-${n}`} min="0" step="10"
+          value=${distance}></label>
         <label>angle from east [°]<input type="number" id=${`pos-a-${n}`} min="-360" max="360" step="1"
           value=${angle}></label>
         ${actionButton({action: "input-position", label: "Set", rover: r, target: {radio: n},
@@ -64,31 +84,22 @@ function radiosCard(r, p) {
     }) : html`<p>No radio.</p>`}</section>`;
 }
 
-/** @param {string} r @param {Parts} p */
+/** @param {string} r @param {Parts} p where to drive the rover from */
 function driveCard(r, p) {
-  if (!p.drive) return html`<section class="card"><h2>Drive</h2><p>This rover has no drive section: it does not drive.</p></section>`;
-  const go = () => send("PUT", "input/drive/traverse", JSON.stringify({
-    waypoints: [{x_m: num("tr-x"), y_m: num("tr-y"), z_m: num("tr-z")}], speed_m_per_s: num("tr-v"),
-    return_to_start: /** @type {HTMLInputElement | null} */ (document.getElementById("tr-back"))?.checked ?? false}), r);
-  return html`<section class="card"><h2>Drive</h2>
-    <p class="help">Send the rover straight to a point of the site, in metres from the site's origin, or stop it.</p>
-    <div class="row"><label>east [m]<input type="number" id="tr-x" step="1" value="20"></label>
-      <label>north [m]<input type="number" id="tr-y" step="1" value="0"></label>
-      <label>up [m]<input type="number" id="tr-z" step="0.5" value="0"></label>
-      <label>speed [m/s]<input type="number" id="tr-v" min="0" step="0.01" placeholder="top speed"></label>
-      <label class="check"><input type="checkbox" id="tr-back"> and back</label></div>
-    <div class="row">${actionButton({action: "traverse-go", label: "Drive there", rover: r, cls: "primary", run: go})}
+  if (!p.drive) return html`<section class="card"><h2>Drive</h2><p>${r} has no drive section: it does not drive.</p></section>`;
+  return html`<section class="card"><h2>Drive</h2><p class="help">The rover is driven from the map: a shipped traverse,
+      waypoints typed or clicked on the map, Stop; each shown on the map before it is sent.</p>
+    <div class="row"><button type="button" class="primary" id="to-map" @click=${() => pickView("map")}>Open the map</button>
       ${actionButton({action: "traverse-stop", label: "Stop the rover", rover: r, cls: "danger",
-                      run: () => send("DELETE", "input/drive/traverse", undefined, r)})}</div>
-    <p>Now ${field(r, "drive/state", "status", "text")}, ${field(r, "drive/state", "x_m", "m")} east and
-      ${field(r, "drive/state", "y_m", "m")} north of the origin.</p></section>`;
+                      run: () => send("DELETE", "input/drive/traverse", undefined, r)})}</div></section>`;
 }
 
 export const inputs = {
   name: "inputs",
-  label: "Inputs & drive",
+  label: "Inputs",
   /** @param {{rover: string, parts: Parts}} ctx */
   render: ({rover, parts}) => html`<div class="grid two">
     <div class="col">${sunCard(rover, parts)}${umbilicalCard(rover)}</div>
     <div class="col">${radiosCard(rover, parts)}${driveCard(rover, parts)}</div></div>`,
+  enter: () => loadRovers(),
 };

@@ -4,7 +4,8 @@
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
 import {SPANS, battery, load, powerSummary, rail, redraw, store} from "../state.js";
-import {actionButton, eventsCard, faultsCard, field} from "../widgets.js";
+import {emptyWords} from "../format.js";
+import {actionButton, checkFaults, eventsCard, faultsCard, field} from "../widgets.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 
@@ -25,8 +26,8 @@ function batteryCard(r) {
       <dt>voltage</dt><dd>${field(r, t, "voltage_v", "v")} <small>(at rest ${field(r, t, "ocv_v", "v")})</small></dd>
       <dt>current</dt><dd>${field(r, t, "current_a", "a")} · ${field(r, t, "power_w", "w")} <small>${flow}</small></dd>
       <dt>temperature</dt><dd>${field(r, t, "temperature_c", "c")}</dd>
-      <dt>time to cut-off</dt><dd>${field(r, t, "time_to_empty_s", "dur")} <small>${b?.time_to_empty_s === null ? ""
-        : "at this draw, until the battery cuts off: empty, or its voltage below the cut-off"}</small></dd>
+      <dt>time to empty</dt><dd>${field(r, t, "time_to_empty_s", "dur")} <small id="empty-words">${b?.time_to_empty_s === null ? ""
+        : emptyWords(b) ? `at this draw, until ${emptyWords(b)}` : "at this draw, until the battery cuts off"}</small></dd>
       <dt>status</dt><dd>${field(r, t, "operational", "ok")}</dd>
       <dt>alarms</dt><dd>${field(r, t, "faults", "list")} <small>(code ${field(r, t, "fault_code", "")})</small></dd>
     </dl></section>`;
@@ -139,4 +140,8 @@ export const live = {
     <div class="col">${batteryCard(r)}${powerCard(r, p)}${radioCard(r, p)}${driveCard(r, p)}</div>
     <div class="col">${pdmCard(r, p)}${plotsCard()}</div>
     <div class="col">${faultsCard(r, clearFault)}${eventsCard(r)}</div></div>`,
+  /** @param {{rover: string}} ctx */
+  enter: ({rover}) => checkFaults(rover, true),
+  /** @param {{rover: string}} ctx */
+  tick: ({rover}) => checkFaults(rover),
 };

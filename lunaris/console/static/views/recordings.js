@@ -1,5 +1,5 @@
 // Recordings: Start / Stop a recording of the session (MCAP), the list of recordings, each
-// with its debrief report.
+// with its debrief report and its file to download (for Foxglove or PlotJuggler).
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {answer, post, query} from "../api.js";
@@ -8,7 +8,8 @@ import {changed, mayAct} from "../state.js";
 
 /**
  * `GET /api/recordings`.
- * @typedef {{name: string, bytes: number, modified: number, report: boolean}} RecordingInfo
+ * @typedef {{name: string, bytes: number, modified: number, report: boolean, download?: string,
+ *   report_url?: string}} RecordingInfo
  * @typedef {{file: string | null, running?: boolean, started?: number, lines?: string[]}} Recording
  * @typedef {{recordings: RecordingInfo[], recording: Recording, folder: string | null}} Recordings
  */
@@ -42,10 +43,18 @@ async function record(body) {
 /** @param {Recordings} r */
 function list(r) {
   if (!r.recordings.length) return html`<p>No recording yet in ${r.folder ?? "the console's folder"}.</p>`;
-  return html`<table><tr><th>recording</th><th class="num">size</th><th>made</th><th></th></tr>${r.recordings.map((x) => html`<tr>
-    <td>${x.name}</td><td class="num">${(x.bytes / 1e6).toFixed(1)} MB</td><td>${wallTime(x.modified)}</td>
-    <td><a href=${`/recordings/${encodeURIComponent(x.name)}/report`} target="_blank" rel="noopener">Open the report</a></td>
-  </tr>`)}</table>`;
+  const now = r.recording.running ? r.recording.file : null;
+  return html`<table class="recordings"><tr><th>recording</th><th class="num">size</th><th>made</th><th></th></tr>${r.recordings.map((x) => {
+    const file = x.download ?? `/recordings/${encodeURIComponent(x.name)}`;
+    const report = x.report_url ?? `${file}/report`;
+    return html`<tr data-recording=${x.name}><td class="wrap">${x.name}</td><td class="num">${(x.bytes / 1e6).toFixed(1)} MB</td>
+      <td>${wallTime(x.modified)}</td>
+      <td class="links">${x.name === now ? html`<small>being recorded: stop it to save it</small>` : html`<a href=${report}
+        target="_blank" rel="noopener" data-link="report">Open the report</a>
+        <a href=${file} download=${x.name} data-link="download" title="open in Foxglove or PlotJuggler">Download
+          (MCAP)</a>`}</td></tr>`;
+  })}</table>
+  <p class="help">A downloaded recording opens in Foxglove or PlotJuggler: every value and event of the twin, in time.</p>`;
 }
 
 /** @param {string[]} lines the recorder's last lines @returns {{count: number, mb: number} | null} its progress */
@@ -84,7 +93,8 @@ export const recordings = {
     return html`<div class="grid two"><div class="col"><section class="card"><h2>Record the session</h2>
         <p class="help">Records every value and event of the twin for the debrief. Each recording has a report
           (plots and the event log) that opens here; the recording itself is an MCAP file in the console's folder${
-          r?.folder ? html` (<code>${r.folder}</code>)` : nothing}, which Foxglove and PlotJuggler open.</p>
+          r?.folder ? html` (<code>${r.folder}</code>)` : nothing}, to download from the list and open in Foxglove or
+          PlotJuggler.</p>
         <div class="row"><label>Name<input type="text" id="rec-name" value=${offered}></label>
           <button type="button" class="primary" id="rec-start" ?disabled=${!r || !!rec.running || !may}
             @click=${() => start(name())}>Start recording</button>

@@ -3,8 +3,8 @@
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {answer, query, send} from "../api.js";
-import {clockText, dur, fmt, nameProblem, plainMessage, wallTime} from "../format.js";
-import {changed, clock} from "../state.js";
+import {clockText, dur, emptyWords, fmt, nameProblem, plainMessage, wallTime} from "../format.js";
+import {battery, changed, clock} from "../state.js";
 import {actionButton, eventsCard, field} from "../widgets.js";
 
 /** @typedef {import("../types.js").SnapshotInfo} SnapshotInfo */
@@ -71,8 +71,8 @@ function resetCard(r) {
 /** @param {Percentiles} t @param {"p05" | "p50" | "p95"} p @param {number} horizon */
 const within = (t, p, horizon) => (t[p] === null ? `more than ${dur(horizon)}` : dur(t[p]));
 
-/** @param {Result<Prediction> | "computing" | undefined} res */
-function prediction(res) {
+/** @param {Result<Prediction> | "computing" | undefined} res @param {string} r */
+function prediction(res, r) {
   if (res === undefined) return nothing;
   if (res === "computing") return html`<p>Computing the futures…</p>`;
   if (!res.ok) return html`<p class="error">No prediction: ${plainMessage(res.message)}</p>`;
@@ -82,9 +82,9 @@ function prediction(res) {
       <td class="num">${within(t, "p50", h)}</td><td class="num">${within(t, "p95", h)}</td></tr>
     <tr><td>charge after ${dur(h)}</td><td class="num">${fmt(s.p05, "pct")}</td><td class="num">${fmt(s.p50, "pct")}</td>
       <td class="num">${fmt(s.p95, "pct")}</td></tr></table>
-    <p class="help">The battery cuts off when its charge reaches the rover's empty level, or when its voltage under
-      load falls below the cut-off voltage of its battery management: whichever comes first. So it can cut off with
-      some charge left. Pessimistic: only 1 future in 20 does worse; optimistic: only 1 in 20 does better.</p>
+    <p class="help" id="pr-empty">The battery cuts off when ${emptyWords(battery(r)) || "its charge reaches the rover's empty level, or its voltage under load falls below the cut-off of its battery management"}:
+      whichever comes first (under a heavy draw the voltage can reach the cut-off with some charge left).
+      Pessimistic: only 1 future in 20 does worse; optimistic: only 1 in 20 does better.</p>
     <p class="help">${d.samples} futures from sim time ${clockText(d.t_s)}, computed in ${d.computed_in_s.toFixed(1)} s.
       ${(d.notes ?? []).map((n) => plainMessage(n)).join(" ")}</p>`;
 }
@@ -97,7 +97,7 @@ function predictionCard(r) {
       <label>futures to try<input type="number" id="pr-n" min="1" max="10000" value="1000"></label>
       <button type="button" class="act" id="predict" ?disabled=${answers.prediction[r] === "computing"}
         @click=${() => predict(r)}>Predict</button></div>
-    <div id="prediction">${prediction(answers.prediction[r])}</div></section>`;
+    <div id="prediction">${prediction(answers.prediction[r], r)}</div></section>`;
 }
 
 /** @param {Result<SnapshotInfo[]> | undefined} res @param {string} r */
