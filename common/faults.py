@@ -14,6 +14,7 @@ from typing import Annotated, NamedTuple
 import msgspec
 
 from common.messages import BadInput, decode_input
+from common.reasons import shown
 
 __all__ = [
     "CATALOGUE",
@@ -160,7 +161,7 @@ def parse_params(key: FaultKey, payload: bytes) -> Params:
     if spec.params is NoParams:
         text = bytes(payload).strip()
         if text not in (b"", b"{}"):
-            raise BadInput(f"{key.component} {key.kind} takes no parameters, got {text[:60]!r}")
+            raise BadInput(f"{key.component} {key.kind} takes no parameters (got {shown(text[:60])})")
         return NoParams()
     return decode_input(payload, spec.params, bare=spec.bare)
 

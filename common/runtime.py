@@ -51,7 +51,7 @@ from common import keys
 from common.connection import PRIORITY
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
-from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
+from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode, humane
 from common.session import SessionKeeper, StateGet, StateReset, StateSet
 from common.state_store import StateStore
 from common.worker import POLL_S, Worker
@@ -290,7 +290,7 @@ class Runtime:
             sample = args[0] if args and isinstance(args[0], Sample) else None
             if sample is None:
                 raise
-            self.reject(sample.rover, sample.key, f"not a valid payload for this key: {exc}")
+            self.reject(sample.rover, sample.key, f"not a valid payload for this key: {humane(str(exc))}")
         except Exception as exc:  # a bug must not take a training session down
             traceback.print_exc(file=sys.stderr)
             sample = args[0] if args and isinstance(args[0], Sample) else None

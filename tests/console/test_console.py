@@ -141,7 +141,7 @@ def test_bad_input_is_refused_in_words_and_nothing_is_sent(live, page):
     seen = len(p.samples(keys.event(R)))
     _fault_form(page, "solar/left", "dust", "1.5")
     click(page, '#f-buttons [data-action="fault-inject"]')
-    assert "fraction must be at most 1.0" in last_answer(page, "invalid")
+    assert "fraction must be at most 1" in last_answer(page, "invalid")
     # The twin's own rejection, in its words: clearing a fault that is not active.
     _fault_form(page, "umbilical", "disconnect", None)
     click(page, '#f-buttons [data-action="fault-clear"]')

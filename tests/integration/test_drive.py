@@ -163,8 +163,8 @@ def test_delete_stops_the_rover_where_it_is(probe):
 
 BAD = [
     (b'{"waypoints": []}', "at least one waypoint"),
-    (b'{"waypoints": [{"x_m": NaN, "y_m": 0, "z_m": 0}]}', "malformed JSON"),
-    (b'{"waypoints": [{"x_m": 1e999, "y_m": 0, "z_m": 0}]}', "Number out of range"),
+    (b'{"waypoints": [{"x_m": NaN, "y_m": 0, "z_m": 0}]}', "NaN is not a number"),
+    (b'{"waypoints": [{"x_m": 1e999, "y_m": 0, "z_m": 0}]}', "is too large"),
     (b'{"waypoints": [{"x_m": 50, "y_m": 0, "z_m": 0}], "speed_m_per_s": 0.5}',
      "above the rover's max_speed_m_per_s"),
     (b'{"waypoints": [{"x_m": 50, "y_m": 0, "z_m": 0, "speed_m_per_s": 0.3}]}',
@@ -173,8 +173,8 @@ BAD = [
     (b'{"waypoints": [{"x_m": 6, "y_m": 0}]}', "z_m"),
     (b'{"waypoints": [{"x_m": 6, "y_m": 0, "z_m": 0}], "bogus": 1}', "bogus"),
     (b'{"waypoints": [{"x_m": 6, "y_m": 0, "z_m": 0}], "speed_m_per_s": -1}', "speed_m_per_s"),
-    (b"5", "expected a JSON object"),
-    (b"", "empty payload"),
+    (b"5", "5 is not a JSON object"),
+    (b"", "the payload is empty"),
 ]
 
 

@@ -67,7 +67,7 @@ def test_the_twin_rejecting_is_printed_and_exits_1(live):
 @pytest.mark.parametrize("args, code, message", [
     (["inject", R, "battery", "heating", "hot"], 1, "VALUE must be a number or a JSON object, got 'hot'"),
     (["inject", R, "battery", "heating", "[1]"], 1, "VALUE must be a number or a JSON object"),
-    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: Expected `float` >= 0.0"),
+    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: heat_w must be at least 0 (got -3)"),
     (["inject", R, "battery", "melt"], 1, "unknown battery fault kind 'melt'"),
     (["inject", R, "wheel/left", "flat"], 1, "unknown component 'wheel'"),
     (["inject", R, "battery", "disconnect", "3"], 1, "battery disconnect takes no parameters"),
