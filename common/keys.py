@@ -37,11 +37,13 @@ __all__ = [
     "control_snapshot",
     "drive_state",
     "event",
+    "event_of",
     "families",
     "family_of",
     "family_of_template",
     "fault",
     "fault_prefix",
+    "has_wildcard",
     "faults",
     "faults_active",
     "faults_journal",
@@ -215,8 +217,22 @@ def event(rover: str) -> str:
     return f"{ROOT}/{rover}/event"
 
 
+def event_of(rover: str, service: str) -> str:
+    """The key a service publishes its events of a rover on (``lunaris/<rover>/event/<service>``):
+    the access control lets only that service put there, and the faults service journals what
+    arrives there and relays it on :func:`event` (SPEC §5's key)."""
+    return f"{ROOT}/{rover}/event/{service}"
+
+
 def service(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/service/{name}"
+
+
+def has_wildcard(key: str) -> bool:
+    """Whether a key expression names more than one key: a chunk ``*`` or ``**``, or ``$*``
+    inside a chunk (``sun$*``). A write on such a key is never input (it would reach every
+    owner whose keys it matches)."""
+    return any(chunk in ("*", "**") or "$*" in chunk for chunk in str(key).split("/"))
 
 
 def split(key: str) -> tuple[str, list[str]]:

@@ -110,6 +110,8 @@ class Runtime:
         self._event_seq = 0
         self._inputs: InputLog | None = None
         self._heard: dict[str, Any] = {}  # telemetry key -> its declared key expression
+        self._subscribed: list[zenoh.KeyExpr] = []  # every subscription's key expression, in order
+        self._on_wildcard: Handler | None = None
         self.polled = len(self.rovers) >= POLL_FROM_ROVERS
         self.session: zenoh.Session | None = None
 
@@ -323,6 +325,28 @@ class Runtime:
         """Hold a declared Zenoh entity for the life of the service."""
         self._keep.append(entity)
 
+    def on_wildcard(self, handler: Handler) -> None:
+        """Hand ``handler`` each sample whose key holds a wildcard (``*``, ``**``, ``$*``),
+        once, however many of this service's subscriptions it reaches: the gatekeeper's, which
+        refuses it in words. Every other handler of every service never sees such a sample
+        (:meth:`subscribe`). The sample's ``rover`` is the key's rover chunk as written."""
+        self._on_wildcard = handler
+
+    def _wildcard(self, s: zenoh.Sample, key: str, index: int) -> None:
+        """A sample whose key names more than one key: dropped, or handed to the gatekeeper by
+        the first of this service's subscriptions that hears it (Zenoh gives it to each)."""
+        if self._on_wildcard is None:
+            return
+        expr = zenoh.KeyExpr(key)
+        first = next(i for i, sub in enumerate(self._subscribed) if sub.intersects(expr))
+        if first != index:
+            return
+        chunks = key.split("/")
+        sample = Sample(key, chunks[1] if len(chunks) > 1 else "", chunks[2:], s.payload.to_bytes(),
+                        s.kind == zenoh.SampleKind.DELETE,
+                        s.attachment.to_bytes() if s.attachment is not None else None)
+        self.worker.put(self._on_wildcard, sample)
+
     def subscribe(self, keyexpr: str, handler: Handler, *, any_rover: bool = False,
                   history: bool = False, telemetry: bool = False, urgent: bool = False) -> None:
         """Queue every sample on ``keyexpr`` for ``handler``; samples for rovers this service
@@ -330,16 +354,24 @@ class Runtime:
         caches are replayed first (an advanced subscriber), for a service that joins late.
         ``telemetry``: a tick-rate stream, drained from a channel when the service serves a
         fleet (:attr:`polled`). ``urgent``: handled ahead of everything waiting, the worker
-        breaking off a burst of telemetry for it (a fault: what the crew is trained on)."""
+        breaking off a burst of telemetry for it (a fault: what the crew is trained on).
+
+        A sample whose key holds a wildcard (a put on ``lunaris/**``) is never input: it is
+        dropped here, or handed once to the gatekeeper (:meth:`on_wildcard`)."""
         session = self.zenoh_session
         split_keys: dict[str, tuple[str, list[str]]] = {}  # the served rovers' keys, split
         polled = telemetry and self.polled
+        index = len(self._subscribed)
+        self._subscribed.append(zenoh.KeyExpr(keyexpr))
 
         def convert(s: zenoh.Sample) -> Sample | None:
             key = str(s.key_expr)
             known = split_keys.get(key)
             if known is not None:
                 rover, parts = known
+            elif keys.has_wildcard(key):
+                self._wildcard(s, key, index)
+                return None
             else:
                 try:
                     rover, parts = keys.split(key)
@@ -434,6 +466,9 @@ class Runtime:
         """Publish an event of a rover. Events are never dropped under congestion (the journal
         is complete). A rover this service does not serve (a rejection of a key naming an
         unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
+        if keys.has_wildcard(rover) or "/" in rover:  # never an event on a key naming many
+            print(f"{self.name}: no event for rover {rover!r}: {message}", file=sys.stderr, flush=True)
+            return
         ekey = keys.event(rover)
         self._event_seq += 1
         ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,

@@ -10,8 +10,9 @@
   it, before publishing the effect. Nothing is kept here that could go stale.
 - **The gatekeeper** for what no other service owns: an instructor key for a rover no
   service serves, a fault on an unknown component, an input or command the twin does not
-  have (a traverse for a rover without a ``drive`` section). Each is rejected with an event,
-  like every other bad input.
+  have (a traverse for a rover without a ``drive`` section), a write whose key holds a
+  wildcard (``lunaris/**``: every service drops it, see ``Runtime.on_wildcard``). Each is
+  rejected with an event, like every other bad input, once.
 - **Session controls** (``control/reset``, ``control/snapshot/<name>``,
   ``control/restore/<name>``): every service acts on its own state (``common.session``);
   this one answers each with the one ``session`` event that marks it in the journal, or
@@ -100,6 +101,16 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if family.owner == "drive" and not drives[s.rover]:
             raise BadInput(f"rover {s.rover} has no drive section in its rover file: it does not "
                            "drive, so it cannot follow a traverse")
+
+    def on_wildcard(s: Sample) -> None:
+        """A write on a key naming many (``lunaris/**``): no service took it; refused once, in
+        words, for each rover served here that it reaches."""
+        verb = "delete" if s.deleted else "put"
+        expr = zenoh.KeyExpr(s.key)
+        for rover in sorted(rt.rovers):
+            if zenoh.KeyExpr(keys.under(rover)).intersects(expr):
+                rt.reject(rover, s.key, f"a {verb} on {s.key} names many keys (it holds a wildcard: "
+                                        "*, ** or $*); a write names exactly one key. Nothing changed")
 
     def on_control(s: Sample) -> None:
         if s.parts == ["control", "scenario"]:  # a scenario's progress, for the journal
@@ -191,6 +202,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     consolidation=zenoh.ConsolidationMode.NONE,
                     timeout=GATHER_TIMEOUT_S)
 
+    rt.on_wildcard(on_wildcard)
     rt.subscribe(keys.event("*"), on_event, history=True)
     for rover, journal in journals.items():
         if journal.count == 0:  # a new session: its first line
