@@ -44,6 +44,7 @@ __all__ = [
     "fault",
     "fault_prefix",
     "has_wildcard",
+    "is_write",
     "faults",
     "faults_active",
     "faults_journal",
@@ -228,6 +229,14 @@ def service(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/service/{name}"
 
 
+def is_write(parts: list[str] | tuple[str, ...]) -> bool:
+    """Whether a key's chunks after ``lunaris/<rover>/`` are a write to the twin: a fault, an
+    input, a command, a clock or session control (what instructors, scenarios and dashboards
+    put)."""
+    return bool(parts) and (parts[0] in ("fault", "input", "cmd", "control")
+                            or (parts[0] == "clock" and len(parts) > 1 and parts[1] == "control"))
+
+
 def has_wildcard(key: str) -> bool:
     """Whether a key expression names more than one key: a chunk ``*`` or ``**``, or ``$*``
     inside a chunk (``sun$*``). A write on such a key is never input (it would reach every
@@ -291,7 +300,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("umbilical/state", m.UmbilicalState, "solar"),
     _f("radio/{radio}/link", m.RadioLink, "radio"),
     _f("drive/state", m.DriveState, "drive"),
-    _f("event", m.Event, "*"),
+    _f("event", m.Event, "faults"),  # the journal's relay of every service's event/<service>
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),
     _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),

@@ -219,8 +219,11 @@ class Event(_Msg):
     key: str
     message: str
     params: dict[str, Any] | None = None
-    source_id: str = ""  # the publishing session's Zenoh id: with seq, names an event uniquely
-    seq: int = 0  # counts the events a session has published, from 1
+    source_id: str = ""  # the publishing session's Zenoh id: with seq, names an event of a rover
+    seq: int = 0  # counts the events a session has published for the rover, from 1
+    # who acted: crew, instructor or scenario (the write's attachment), twin (its own:
+    # protection, derived faults, internal errors); "" from a journal written before
+    actor: str = ""
 
 
 FaultOrigin = Literal["injected", "derived"]

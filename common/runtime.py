@@ -25,6 +25,13 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   session (see :meth:`subscribe`); inputs, commands, faults and queries stay callbacks;
 - one way to refuse input: a handler raises :class:`~common.messages.BadInput` and the
   runtime publishes a ``rejected`` event naming the key and the reason;
+- writes name exactly one key: a sample whose key holds a wildcard (``lunaris/**``) is never
+  handed to a handler (the faults service, the gatekeeper, refuses it once:
+  :meth:`on_wildcard`);
+- :meth:`event`: events on the service's own key ``lunaris/<rover>/event/<service>`` (the
+  faults service journals and relays them on ``lunaris/<rover>/event``), each saying who
+  acted: the ``actor`` a write carries as its attachment (``instructor`` without one), or
+  ``twin`` for its own;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
   owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk.
 
@@ -41,17 +48,18 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import msgspec
 import zenoh
 import zenoh.ext as zext
 
 from common import keys
-from common.connection import PRIORITY
+from common.connection import ACTORS, PRIORITY, actor_of
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode, humane
+from common.reasons import shown
 from common.session import SessionKeeper, StateGet, StateReset, StateSet
 from common.state_store import StateStore
 from common.worker import POLL_S, Worker
@@ -84,6 +92,11 @@ class Sample(NamedTuple):
     attachment: bytes | None = None
 
 
+# Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
+TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
+WriteRole = Literal["own", "follow", "gate"]
+
+
 Handler = Callable[[Sample], None]
 TickHandler = Callable[[str, Clock], None]
 
@@ -107,7 +120,8 @@ class Runtime:
         self._session_keeper: SessionKeeper | None = None
         self._zid = ""
         self._lock_file: Any = None
-        self._event_seq = 0
+        self._event_seq: dict[str, int] = {}  # per served rover; "" for the rovers not served
+        self._acting: str | None = None  # the actor of the sample being handled
         self._inputs: InputLog | None = None
         self._heard: dict[str, Any] = {}  # telemetry key -> its declared key expression
         self._subscribed: list[zenoh.KeyExpr] = []  # every subscription's key expression, in order
@@ -279,7 +293,16 @@ class Runtime:
         return self.session
 
     def _guard(self, fn: Callable, *args: Any) -> None:
-        """Run a handler; input errors become rejection events, bugs are reported, never fatal."""
+        """Run a handler; input errors become rejection events, bugs are reported, never fatal.
+        The events published meanwhile carry the actor of the sample handled (a write's)."""
+        acting = self._acting
+        self._acting = self.actor(args[0]) if args and isinstance(args[0], Sample) else None
+        try:
+            self._run(fn, *args)
+        finally:
+            self._acting = acting
+
+    def _run(self, fn: Callable, *args: Any) -> None:
         try:
             fn(*args)
         except BadInput as exc:
@@ -348,7 +371,8 @@ class Runtime:
         self.worker.put(self._on_wildcard, sample)
 
     def subscribe(self, keyexpr: str, handler: Handler, *, any_rover: bool = False,
-                  history: bool = False, telemetry: bool = False, urgent: bool = False) -> None:
+                  history: bool = False, telemetry: bool = False, urgent: bool = False,
+                  writes: WriteRole = "own") -> None:
         """Queue every sample on ``keyexpr`` for ``handler``; samples for rovers this service
         does not serve are dropped unless ``any_rover``. With ``history`` the publishers'
         caches are replayed first (an advanced subscriber), for a service that joins late.
@@ -357,7 +381,16 @@ class Runtime:
         breaking off a burst of telemetry for it (a fault: what the crew is trained on).
 
         A sample whose key holds a wildcard (a put on ``lunaris/**``) is never input: it is
-        dropped here, or handed once to the gatekeeper (:meth:`on_wildcard`)."""
+        dropped here, or handed once to the gatekeeper (:meth:`on_wildcard`).
+
+        ``writes``: what this subscription is to the writes it hears (faults, inputs,
+        commands, controls) that :meth:`refusal` refuses (naming an unknown actor): their owner
+        (``own``: refused with a rejection event, the handler not called), a follower of a
+        write another service answers (``follow``: dropped without a word; so is a session
+        control, which the faults service answers), or the gatekeeper (``gate``: the handler
+        decides, with :meth:`refusal`)."""
+        if writes != "gate":
+            handler = self._writes_checked(handler, answer=writes == "own")
         session = self.zenoh_session
         split_keys: dict[str, tuple[str, list[str]]] = {}  # the served rovers' keys, split
         polled = telemetry and self.polled
@@ -406,6 +439,34 @@ class Runtime:
         if polled:
             self.worker.add_channel(sub, convert, handler)
 
+    def _writes_checked(self, handler: Handler, answer: bool) -> Handler:
+        def checked(sample: Sample) -> None:
+            if keys.is_write(sample.parts):
+                refusal = self.refusal(sample)
+                if refusal is not None:
+                    # a session control is answered by the faults service alone (common.session)
+                    if answer and sample.parts[0] != "control":
+                        raise BadInput(refusal)
+                    return
+            handler(sample)
+        return checked
+
+    def refusal(self, sample: Sample) -> str | None:
+        """Why a write is refused before anything looks at it, in words; None if it is not:
+        its attachment names an unknown actor."""
+        actor = actor_of(sample.attachment)
+        if actor is not None and actor not in ACTORS:
+            return f"actor={shown(actor)} names no actor: a write is by {', '.join(ACTORS)}"
+        return None
+
+    def actor(self, sample: Sample) -> str:
+        """Who sent a sample: the write's ``actor`` attachment, an instructor when it has none;
+        the twin itself for what is not a write (telemetry, ticks)."""
+        actor = actor_of(sample.attachment)
+        if actor in ACTORS:
+            return actor
+        return "instructor" if keys.is_write(sample.parts) or keys.has_wildcard(sample.key) else "twin"
+
     def _declare_heard(self, key: str) -> None:
         """Declare a key this service receives a stream on. Zenoh resolves a sample's key
         against the key expressions the session has declared: for a key it does not know
@@ -430,14 +491,15 @@ class Runtime:
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
                       attachment: bytes | None = None, *, reliable: bool = False,
-                      heartbeat_s: float | None = None) -> None:
+                      heartbeat_s: float | None = None, cache: int = 1) -> None:
         """Publish an already encoded payload (CDR for the bridge), with the same last-value
-        cache as :meth:`publish`. ``heartbeat_s``: the publisher (declared on first use) also
-        sends a sporadic heartbeat, so an advanced subscriber that missed the last sample
-        fetches it from the cache (what rmw_zenoh's transient-local publishers do)."""
+        cache as :meth:`publish` (``cache``: the last so many samples). ``heartbeat_s``: the
+        publisher (declared on first use) also sends a sporadic heartbeat, so an advanced
+        subscriber that missed the last sample fetches it from the cache (what rmw_zenoh's
+        transient-local publishers do)."""
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._declare_publisher(key, 1, encoding, reliable, heartbeat_s)
+            pub = self._declare_publisher(key, cache, encoding, reliable, heartbeat_s)
         pub.put(payload, attachment=attachment)
 
     def _declare_publisher(self, key: str, cache: int,
@@ -462,19 +524,27 @@ class Runtime:
     # -- events and rejection ---------------------------------------------------------------
 
     def event(self, rover: str, severity: Severity, kind: EventKind, key: str, message: str,
-              params: dict | None = None) -> None:
-        """Publish an event of a rover. Events are never dropped under congestion (the journal
-        is complete). A rover this service does not serve (a rejection of a key naming an
-        unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
-        if keys.has_wildcard(rover) or "/" in rover:  # never an event on a key naming many
+              params: dict | None = None, *, actor: str | None = None) -> None:
+        """Publish an event of a rover on this service's own key,
+        ``lunaris/<rover>/event/<service>`` (the faults service journals it and relays it on
+        ``lunaris/<rover>/event``). Events are never dropped under congestion (the journal is
+        complete). ``actor``: by default the actor of the write being handled, ``twin`` for
+        the twin's own (:data:`TWIN_KINDS`, or no write). ``(source_id, seq)`` names the event
+        among the rover's. A rover this service does not serve (a rejection of a key naming
+        an unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
+        if keys.has_wildcard(rover) or "/" in rover or not rover:  # never a key naming many
             print(f"{self.name}: no event for rover {rover!r}: {message}", file=sys.stderr, flush=True)
             return
-        ekey = keys.event(rover)
-        self._event_seq += 1
+        if actor is None:
+            actor = "twin" if kind in TWIN_KINDS else (self._acting or "twin")
+        served = rover in self.rovers
+        slot = rover if served else ""
+        seq = self._event_seq[slot] = self._event_seq.get(slot, 0) + 1
+        ekey = keys.event_of(rover, self.name)
         ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,
-                   key=key, message=message, params=params, source_id=self._zid,
-                   seq=self._event_seq)
-        if rover not in self.rovers:
+                   key=key, message=message, params=params, source_id=self._zid, seq=seq,
+                   actor=actor)
+        if not served:
             self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
                                    congestion_control=zenoh.CongestionControl.BLOCK,
                                    priority=PRIORITY)
@@ -494,8 +564,10 @@ class Runtime:
             self._inputs = InputLog()
             self.every(0.2, lambda: self._input_events(self._inputs.flush(time.monotonic())
                                                        if self._inputs else []))
-        self._input_events(self._inputs.offer(InputNote(rover, key, message, params), time.monotonic()))
+        note = InputNote(rover, key, message, params, self._acting or "")
+        self._input_events(self._inputs.offer(note, time.monotonic()))
 
     def _input_events(self, notes: list[InputNote]) -> None:
         for note in notes:
-            self.event(note.rover, "info", "input", note.key, note.message, note.params)
+            self.event(note.rover, "info", "input", note.key, note.message, note.params,
+                       actor=note.actor or None)

@@ -64,29 +64,31 @@ class Journal:
             return True
         return any(lo <= ev.seq <= hi for lo, hi in self._spans.get(ev.source_id, ()))
 
-    def record(self, ev: Event, now_s: float) -> None:
-        """Journal ``ev``, received at wall time ``now_s``, unless it is already in."""
+    def record(self, ev: Event, now_s: float) -> list[Event]:
+        """Journal ``ev``, received at wall time ``now_s``, unless it is already in; the
+        events written (to relay: it, nothing while a flood is held, a summary)."""
         if self._known(ev):
-            return  # replayed from a cache after a restart
+            return []  # replayed from a cache after a restart
         self._remember(_identity(ev))  # written now, or counted into a summary to come
-        self._write(self.gate.offer(ev, now_s))
+        return self._write(self.gate.offer(ev, now_s))
 
-    def tick(self, now_s: float) -> None:
-        """Write the summary of a flood that has ended."""
-        self._write(self.gate.flush(now_s))
+    def tick(self, now_s: float) -> list[Event]:
+        """Write the summary of a flood that has ended; the events written."""
+        return self._write(self.gate.flush(now_s))
 
-    def _write(self, events: list[Event]) -> None:
+    def _write(self, events: list[Event]) -> list[Event]:
         if not events:
-            return
+            return events
         lines = [msgspec.json.encode(ev) for ev in events]
         for ev in events:
             self._note(ev)
         if self.path is None:
             self._memory.extend(lines)
-            return
+            return events
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with self.path.open("ab") as f:
             f.write(b"".join(line + b"\n" for line in lines))
+        return events
 
     def lines(self) -> list[bytes]:
         """Every journalled event as its JSON text, oldest first."""

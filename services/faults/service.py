@@ -2,7 +2,12 @@
 
 - **The journal**: every event of the rover, kept on disk for the whole session (a flood of
   rejections is summarised, and the summary says so), answered to
-  ``get lunaris/<rover>/faults/journal`` (``?last=N`` for the latest N).
+  ``get lunaris/<rover>/faults/journal`` (``?last=N`` for the latest N). Each service
+  publishes its events on its own key, ``lunaris/<rover>/event/<service>`` (which the access
+  control lets only that service write); an event whose ``source`` is not that service is
+  refused and said in a ``critical`` event. Each event journalled goes out again, unchanged,
+  on ``lunaris/<rover>/event``: the journal's stream (complete, authenticated, floods
+  summarised), which this service's own events join the same way.
 - **The faults in effect**: ``get lunaris/<rover>/faults`` is answered by asking each owning
   service for its own record (``lunaris/<rover>/faults/active/<service>``, see
   ``common.fault_book``) at the time of the query and merging the answers. A fault whose
@@ -40,8 +45,10 @@ from common.messages import (
     SnapshotInfo,
     decode,
     decode_input,
+    encode,
 )
-from common.runtime import Runtime, Sample
+from common.reasons import shown
+from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
 from services.faults.journal import Journal
 
@@ -76,11 +83,27 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         keys.service("*", "*"), on_token, history=True))
 
     def on_event(s: Sample) -> None:
-        journals[s.rover].record(decode(s.payload, Event), time.monotonic())
+        """An event a service published on its own key: journalled and relayed on the rover's
+        ``event`` key if its ``source`` is that service, refused (and said) if not."""
+        ev = decode(s.payload, Event)
+        if len(s.parts) != 2 or ev.source != s.parts[1]:
+            rt.event(s.rover, "critical", "rejected", s.key,
+                     f"forged event refused: published on {s.key}, the key of the "
+                     f"{s.parts[-1]} service, it claims to come from {shown(ev.source)} "
+                     f"({ev.kind}: {shown(ev.message)}); not journalled")
+            return
+        relay(s.rover, journals[s.rover].record(ev, time.monotonic()))
+
+    def relay(rover: str, written: list[Event]) -> None:
+        """What the journal wrote, unchanged, on ``lunaris/<rover>/event``: the journal's
+        stream (complete, authenticated, floods summarised)."""
+        for ev in written:
+            rt.publish_bytes(keys.event(rover), encode(ev), zenoh.Encoding.APPLICATION_JSON,
+                             reliable=True, cache=EVENT_CACHE)
 
     def end_floods(force: bool = False) -> None:
-        for journal in journals.values():
-            journal.tick(time.monotonic() if not force else float("inf"))
+        for rover, journal in journals.items():
+            relay(rover, journal.tick(time.monotonic() if not force else float("inf")))
 
     def on_instructor_key(s: Sample) -> None:
         if s.rover not in rt.rovers and s.rover not in live_rovers:
@@ -90,7 +113,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if s.parts[0] == "fault":
             check_component(s.parts[1:])  # the owner of a known component answers the rest
             return
-        if s.parts[0] == "control":
+        if s.parts[0] == "control":  # answered here alone (the others follow: common.session)
+            refusal = rt.refusal(s)
+            if refusal is not None:
+                raise BadInput(refusal)
             on_control(s)
             return
         family = keys.family_of(s.parts)
@@ -203,7 +229,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     timeout=GATHER_TIMEOUT_S)
 
     rt.on_wildcard(on_wildcard)
-    rt.subscribe(keys.event("*"), on_event, history=True)
+    rt.subscribe(keys.event_of("*", "*"), on_event, history=True)
     for rover, journal in journals.items():
         if journal.count == 0:  # a new session: its first line
             rt.event(rover, "info", "session", keys.faults_journal(rover),
@@ -216,8 +242,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         on_instructor_key(s)
 
     for head in WRITABLE:
-        rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
-    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True, telemetry=True)
+        rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True, writes="gate")
+    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True, telemetry=True, writes="gate")
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
     rt.queryable(keys.snapshots("*"), on_snapshots_query)

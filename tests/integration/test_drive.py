@@ -74,19 +74,19 @@ def probe(twin):
     p.wait_value(keys.clock(R), lambda c: c["epoch"] > epoch)
     state = p.wait_value(STATE, lambda s: s["status"] == "parked" and s["odometer_m"] == 0.0)
     assert (state["x_m"], state["y_m"], state["z_m"]) == START
-    p.history.clear()
+    p.clear_history()
     return p
 
 
 def answer(p: Probe, rover: str, key: str, payload, delete: bool = False) -> dict:
     """Put (or delete) and return the event answering it: ``input`` or ``rejected``."""
-    seen = len(p.samples(keys.event(rover)))
+    seen = len(p.events(rover))
     if delete:
         p.delete(key)
     else:
         p.put(key, payload)
     return p.wait_event(rover, lambda e: e["key"] == key and e["kind"] in ("input", "rejected")
-                        and p.samples(keys.event(rover)).index(e) >= seen)
+                        and p.events(rover).index(e) >= seen)
 
 
 def waypoints(*points: tuple[float, float, float]) -> list[dict]:

@@ -59,7 +59,7 @@ def test_2000_bad_payloads_are_each_rejected_and_change_nothing(whole_twin):
     paused = p.wait_value(keys.clock(R), lambda c: c["paused"])
     for key in (keys.battery_state(R), keys.power_summary(R)):
         p.wait_value(key, lambda v: v["t_s"] == paused["t_s"])
-    p.history.clear()
+    p.clear_history()
     before = state(p)
     sent = fuzz(p, PAYLOADS)
 
