@@ -205,10 +205,10 @@ class DriveState(_Msg):
 
 
 # What an event says happened: a refused input, a fault's life, an accepted command or
-# input, a change of the clock, a bug in a service.
+# input, a change of the clock, a bug in a service, events the journal never received.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error"]
+                    "internal_error", "journal_gap"]
 
 
 class Event(_Msg):

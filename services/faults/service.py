@@ -67,8 +67,8 @@ SESSION_MESSAGES = {
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     folder = rt.store.dir
-    journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None)
-                for r in rovers}
+    journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None,
+                              rover=r.id) for r in rovers}
     drives = {r.id: r.drive is not None for r in rovers}
     live_rovers: set[str] = set()
     session = rt.session
@@ -102,8 +102,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                              reliable=True, cache=EVENT_CACHE)
 
     def end_floods(force: bool = False) -> None:
+        """Summaries of the floods that have ended (all of them, ``force``), and the events
+        that never came back counted."""
         for rover, journal in journals.items():
-            relay(rover, journal.tick(time.monotonic() if not force else float("inf")))
+            relay(rover, journal.tick(time.monotonic(), flood_over=force))
 
     def on_instructor_key(s: Sample) -> None:
         if s.rover not in rt.rovers and s.rover not in live_rovers:
