@@ -27,7 +27,8 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   runtime publishes a ``rejected`` event naming the key and the reason;
 - writes name exactly one key: a sample whose key holds a wildcard (``lunaris/**``) is never
   handed to a handler (the faults service, the gatekeeper, refuses it once:
-  :meth:`on_wildcard`);
+  :meth:`on_wildcard`); a write older than ``WRITE_MAX_AGE_S`` when it arrives (held back by a
+  cut link) is refused by its owner, never applied late (:meth:`refusal`);
 - :meth:`event`: events on the service's own key ``lunaris/<rover>/event/<service>`` (the
   faults service journals and relays them on ``lunaris/<rover>/event``), each saying who
   acted: the ``actor`` a write carries as its attachment (``instructor`` without one), or
@@ -55,7 +56,7 @@ import zenoh
 import zenoh.ext as zext
 
 from common import keys
-from common.connection import ACTORS, PRIORITY, actor_of
+from common.connection import ACTORS, PRIORITY, WRITE_MAX_AGE_S, actor_of
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode, humane
@@ -96,6 +97,8 @@ class Sample(NamedTuple):
     payload: bytes
     deleted: bool
     attachment: bytes | None = None
+    sent_at: float | None = None  # a write's Zenoh timestamp [s since the epoch]; None: none
+    age_s: float = 0.0  # how long after sent_at the write arrived here [s]
 
 
 # Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
@@ -390,7 +393,8 @@ class Runtime:
         dropped here, or handed once to the gatekeeper (:meth:`on_wildcard`).
 
         ``writes``: what this subscription is to the writes it hears (faults, inputs,
-        commands, controls) that :meth:`refusal` refuses (naming an unknown actor): their owner
+        commands, controls) that :meth:`refusal` refuses (sent more than
+        ``WRITE_MAX_AGE_S`` before they arrived, or naming an unknown actor): their owner
         (``own``: refused with a rejection event, the handler not called), a follower of a
         write another service answers (``follow``: dropped without a word; so is a session
         control, which the faults service answers), or the gatekeeper (``gate``: the handler
@@ -424,8 +428,12 @@ class Runtime:
                 elif not any_rover:
                     return None
             att = s.attachment.to_bytes() if s.attachment is not None else None
+            sent_at, age_s = None, 0.0
+            if keys.is_write(parts) and s.timestamp is not None:  # judged as it arrives
+                sent_at = s.timestamp.get_time().timestamp()
+                age_s = time.time() - sent_at
             return Sample(key, rover, parts, s.payload.to_bytes(),
-                          s.kind == zenoh.SampleKind.DELETE, att)
+                          s.kind == zenoh.SampleKind.DELETE, att, sent_at, age_s)
 
         def on_sample(s: zenoh.Sample) -> None:
             sample = convert(s)
@@ -459,7 +467,13 @@ class Runtime:
 
     def refusal(self, sample: Sample) -> str | None:
         """Why a write is refused before anything looks at it, in words; None if it is not:
-        its attachment names an unknown actor."""
+        it arrived more than ``WRITE_MAX_AGE_S`` after it was sent (held back by a cut link:
+        applied now it would be applied late), or its attachment names an unknown actor."""
+        if sample.age_s > WRITE_MAX_AGE_S and sample.sent_at is not None:
+            sent = time.strftime("%H:%M:%S", time.localtime(sample.sent_at))
+            return (f"not applied: sent at {sent}, arrived {sample.age_s:.1f} s late (the link "
+                    f"to the twin was cut; a write older than {WRITE_MAX_AGE_S:g} s is never "
+                    "applied); nothing changed, send it again")
         actor = actor_of(sample.attachment)
         if actor is not None and actor not in ACTORS:
             return f"actor={shown(actor)} names no actor: a write is by {', '.join(ACTORS)}"

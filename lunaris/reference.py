@@ -198,7 +198,8 @@ def keys_page() -> str:
                  "[faults.md](faults.md)"),
                 ("`faults` (query)", "`get` returns the faults in effect, gathered from their "
                  "owners at the time of the query: a list of `ActiveFault` (`key, params, "
-                 "since_t_s, origin, severity`)"),
+                 "since_t_s, origin, severity`), and an error reply naming each owner the rover "
+                 "file implies that did not answer (its faults are not listed)"),
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
                 ("`faults/journal` (query)", "the session's events, oldest first"),

@@ -10,7 +10,9 @@
   summarised), which this service's own events join the same way.
 - **The faults in effect**: ``get lunaris/<rover>/faults`` is answered by asking each owning
   service for its own record (``lunaris/<rover>/faults/active/<service>``, see
-  ``common.fault_book``) at the time of the query and merging the answers. A fault whose
+  ``common.fault_book``) at the time of the query and merging the answers. An owner the rover
+  file implies that does not answer (stopped, or behind a cut link) is named in an error
+  reply beside the list, never left out silently (SPEC §12f). A fault whose
   effect is on the telemetry is therefore in the answer: its owner applied it, and recorded
   it, before publishing the effect. Nothing is kept here that could go stale.
 - **The gatekeeper** for what no other service owns: an instructor key for a rover no
@@ -52,7 +54,7 @@ from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
 from services.faults.journal import Journal
 
-__all__ = ["serve"]
+__all__ = ["fault_owners", "serve"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
 # The heads of the keys that instructors, scenarios and dashboards write.
@@ -65,11 +67,26 @@ SESSION_MESSAGES = {
 }
 
 
+def fault_owners(rover: Rover) -> set[str]:
+    """The services that own the faults of a rover's components, as its file implies them."""
+    owners = {"battery"}
+    if rover.loads:
+        owners.add("loads")
+    if rover.rails:
+        owners.add("power")
+    if rover.solar.panels or rover.umbilical.power_w > 0 or rover.umbilical.connected:
+        owners.add("solar")
+    if rover.radios:
+        owners.add("radio")
+    return owners
+
+
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     folder = rt.store.dir
     journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None,
                               rover=r.id) for r in rovers}
     drives = {r.id: r.drive is not None for r in rovers}
+    owners = {r.id: fault_owners(r) for r in rovers}
     live_rovers: set[str] = set()
     session = rt.session
     assert session is not None
@@ -206,6 +223,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             q.drop()
             return
         gathered: dict[str, list[ActiveFault]] = {r: [] for r in wanted}
+        answered: dict[str, set[str]] = {r: set() for r in wanted}
         lock = threading.Lock()
 
         def on_reply(reply: zenoh.Reply) -> None:
@@ -216,6 +234,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             with lock:
                 if rover in gathered:
                     gathered[rover].extend(answer.faults)
+                    answered[rover].add(answer.service)
 
         def on_done() -> None:
             with q:
@@ -223,6 +242,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     faults = sorted(gathered[rover], key=lambda f: (f.since_t_s, f.key))
                     q.reply(keys.faults(rover), msgspec.json.encode(faults),
                             encoding=zenoh.Encoding.APPLICATION_JSON)
+                    for service in sorted(owners[rover] - answered[rover]):
+                        q.reply_err(f"the {service} service of {rover} did not answer within "
+                                    f"{GATHER_TIMEOUT_S:g} s: its faults are not listed")
 
         rover_chunk = wanted[0] if len(wanted) == 1 else "*"
         session.get(keys.faults_active(rover_chunk, "*"),
