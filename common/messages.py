@@ -321,11 +321,13 @@ class RailCommand(_Input):
 
 class PredictionRequest(_Input):
     """The parameters of a ``prediction`` query: ``?hours=8;samples=1000`` (``seed`` for a
-    repeatable answer)."""
+    repeatable answer; ``timeout_s``: how long the asker waits, after which the battery
+    service stops computing it)."""
 
     hours: Annotated[float, msgspec.Meta(gt=0.0, le=168.0)] = 8.0
     samples: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 1000
     seed: Annotated[int, msgspec.Meta(ge=0)] | None = None
+    timeout_s: Annotated[float, msgspec.Meta(gt=0.0, le=600.0)] = 60.0
 
 
 def decode_parameters(text: str, typ: type[T]) -> T:
