@@ -45,7 +45,10 @@ def shown(value: Any) -> str:
     if isinstance(value, int | float):
         return number(value) if isinstance(value, float) else str(value)
     if isinstance(value, bytes):
-        value = value.decode("utf-8", errors="replace")
+        try:
+            value = value.decode("utf-8")
+        except UnicodeDecodeError:
+            return f"{len(value)} bytes that are not text"
     if isinstance(value, str):
         text = value if len(value) <= _MAX_SHOWN else value[:_MAX_SHOWN] + "..."
         return "'" + "".join(c if c.isprintable() else "?" for c in text) + "'"

@@ -98,7 +98,7 @@ def test_nested_and_enumerated_fields_are_named_plainly(payload, typ, reason):
     ("hours=500", "hours must be at most 168 (got 500)"),
     ("hours=x", "hours must be a number (got 'x')"),
     ("samples=2.5", "samples must be a whole number (got 2.5)"),
-    ("zz=1", "'zz' is not a field of this input (it takes hours, samples, seed)"),
+    ("zz=1", "'zz' is not a field of this input (it takes hours, samples, seed, timeout_s)"),
     ("hours=1;hours=2", "hours is given twice"),
 ])
 def test_query_parameters_are_refused_in_plain_words(text, reason):
@@ -151,6 +151,7 @@ def test_fault_params(path, payload, params):
 
 @pytest.mark.parametrize(("path", "payload", "reason"), [
     ("battery/disconnect", b"1", "battery disconnect takes no parameters (got '1')"),
+    ("battery/disconnect", b"\xff\xfecb'", "takes no parameters (got 5 bytes that are not text)"),
     ("solar/left/dust", b"1.5", "fraction must be at most 1 (got 1.5)"),
     ("battery/resistance", b"0.5", "factor must be at least 1 (got 0.5)"),
     ("load/x/short", b"0", "resistance_ohm must be above 0 (got 0)"),
