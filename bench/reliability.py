@@ -282,10 +282,13 @@ def outage(tmp: Path) -> list[Row]:
     with twin(tmp, "outage") as (p, t, ev):
         _flood(p, sun, 10)
         _settle(p, sun, 10)
+        t0 = time.monotonic()
         t.procs["faults"].kill()
         t.procs["faults"].wait(10)
-        t0 = time.monotonic()
-        _flood(p, sun, 800)
+        wait_for(lambda: "faults" not in _live(p), 10, "the faults service's token to go")
+        for _ in range(8):  # 800 events over ~2 s of outage, as in the finding
+            _flood(p, sun, 100)
+            time.sleep(0.25)
         t.start("faults")
         p.wait_services(R, ("faults",), timeout_s=60)
         down = time.monotonic() - t0
