@@ -300,7 +300,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("umbilical/state", m.UmbilicalState, "solar"),
     _f("radio/{radio}/link", m.RadioLink, "radio"),
     _f("drive/state", m.DriveState, "drive"),
-    _f("event", m.Event, "faults"),  # the journal's relay of every service's event/<service>
+    _f("event", m.Event, "*"),
     _f("faults/active/{service}", m.ActiveFaults, "*"),
     _f("input/sun_angle", m.SunAngle, "solar"),
     _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),
