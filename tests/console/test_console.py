@@ -309,8 +309,10 @@ def test_the_api_checks_every_write_with_the_twin_s_structs(live):
             return exc.code, json.loads(exc.read())
 
     assert put("clock/control", b'{"time_scale": -1}') == (
-        422, {"verdict": "invalid", "message": "not sent: time_scale must be above 0.0", "event": None})
-    assert put("input/sun_angle", b'{"angle": 3}')[1]["message"].startswith("not sent: angle is not")
+        422, {"verdict": "invalid", "message": "not sent: time_scale must be above 0 (got -1)",
+              "event": None})
+    assert put("input/sun_angle", b'{"angle": 3}')[1]["message"].startswith(
+        "not sent: 'angle' is not a field")
     assert put("cmd/nothing", b"1")[0] == 422
     assert put("input/sun_angle", b"", "DELETE")[0] == 422
     code, body = put("input/radio/nosuch/position", b'{"distance_m": 1, "angle_deg": 0}')
