@@ -74,15 +74,18 @@ class Row(NamedTuple):
 
 class Events:
     """Every event of the rovers, from ``lunaris/*/event`` and ``lunaris/*/event/*``, each once
-    (by source_id and seq), with its arrival time; and every sample on a key holding
-    ``event`` (an older twin's storm publishes on ``lunaris/**/event``) for the rates."""
+    (by source_id and seq), with its arrival time; and the arrival of every sample there (an
+    older twin's storm, published on ``lunaris/**/event``, arrives too) for the rates. Only
+    these keys: a subscriber on ``**`` in this process (which holds the router) parsed all of
+    the twin's telemetry as well, and under load a 5 MB journal reply was lost 4 times in 10."""
 
     def __init__(self, session: zenoh.Session):
         self._lock = threading.Lock()
         self.events: list[dict] = []
         self.arrivals: list[float] = []  # every event sample, for the rates
         self._ids: set[tuple] = set()
-        self._subs = [session.declare_subscriber("**", self._on_sample)]
+        self._subs = [session.declare_subscriber(k, self._on_sample)
+                      for k in ("lunaris/*/event", "lunaris/*/event/*")]
 
     def _on_sample(self, s: zenoh.Sample) -> None:
         key = str(s.key_expr)
@@ -347,10 +350,13 @@ def journal_size(tmp: Path, cycles: int = 10_000) -> list[Row]:
         wait_for(lambda: len(ev.since(mark, "fault_cleared", key)) >= cycles, 300, "the cycles",
                  poll_s=0.5)
         took = time.perf_counter() - t0
-        t1 = time.perf_counter()
-        events = journal(p)
-        read = time.perf_counter() - t1
-        held = sum(1 for e in events if e["key"] == key)
+        held, read, events = 0, 0.0, []
+        deadline = time.monotonic() + 120  # the journal may trail the answers
+        while held < 2 * cycles and time.monotonic() < deadline:
+            t1 = time.perf_counter()
+            events = journal(p)
+            read = time.perf_counter() - t1
+            held = sum(1 for e in events if e["key"] == key)
         return [Row(f"journal: {2 * cycles:,} fault events",
                     f"{held:,} held of {2 * cycles:,} ({len(events):,} in all), sent in {took:.1f} s, "
                     f"read back in {read * 1000:.0f} ms", "every one held", held == 2 * cycles)]

@@ -212,8 +212,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     lines = journal.lines()
                     if last is not None:
                         lines = lines[-int(last):] if int(last) else []
+                    # megabytes for a long session: never dropped behind a burst of events
                     q.reply(key, b"[" + b",".join(lines) + b"]",
-                            encoding=zenoh.Encoding.APPLICATION_JSON)
+                            encoding=zenoh.Encoding.APPLICATION_JSON,
+                            congestion_control=zenoh.CongestionControl.BLOCK)
 
     def on_faults_query(q: zenoh.Query) -> None:
         # Answered on Zenoh's thread: the owners are asked at once, and the query is
