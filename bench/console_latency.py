@@ -95,10 +95,10 @@ def main() -> int:
                 seen = wait_for(lambda: driver.execute_script("return window.__seen.tripped || null"), 10,
                                 "the page to show the trip")
                 latencies.append(seen - t0 * 1000.0)
-                n = len(p.samples(keys.event(R)))
+                n = len(p.events(R))
                 p.delete(SHORT)
                 wait_for(lambda n=n: any(e["kind"] == "fault_cleared" and e["key"] == SHORT
-                                         for e in p.samples(keys.event(R))[n:]), 10, "the clearing")
+                                         for e in p.events(R)[n:]), 10, "the clearing")
                 p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
                 wait_for(lambda: driver.execute_script("return window.__seen.on || null"), 10, "back on")
             print(f"fault put by another client -> the page shows the trip: {percentiles(latencies)}")

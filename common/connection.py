@@ -17,8 +17,9 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULT_ENDPOINT", "TX_QUEUE_SIZE", "ConnectionConfigError", "add_connection_args",
-           "config_from_args", "is_demo_password", "make_config", "write"]
+__all__ = ["ACTORS", "DEFAULT_ENDPOINT", "TX_QUEUE_SIZE", "WRITE_MAX_AGE_S", "ConnectionConfigError",
+           "actor_of", "add_connection_args", "config_from_args", "is_demo_password", "make_config",
+           "write"]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 CONFIG_ENV = "LUNARIS_ZENOH_CONFIG"
@@ -121,15 +122,54 @@ def _refuse_demo_password(conf: zenoh.Config, path: Path) -> None:
 PRIORITY = zenoh.Priority.DATA_HIGH
 
 
-def write(session: zenoh.Session, key: str, payload: bytes | str | None) -> None:
+# A write (fault, command, input, clock or session control) is applied only if it arrives
+# within this long of when it was sent, by its Zenoh timestamp (every Lunaris session stamps
+# its samples): one held back by a cut link is refused when the link returns, never applied
+# late (SPEC §12f). The machines' clocks must agree (NTP). A writer waits longer than this
+# for the answer before it says "not applied".
+WRITE_MAX_AGE_S = 2.0
+
+# Who acted, carried by a write as the Zenoh attachment ``actor=<name>`` (ASCII); the owner
+# stamps the events answering it (no attachment: an instructor).
+ACTORS = ("crew", "instructor", "scenario")
+
+
+def actor_of(attachment: bytes | None) -> str | None:
+    """The actor a write's attachment names (``actor=crew``; ``;`` separates more fields), or
+    None when it names none. A name outside :data:`ACTORS` is returned as given, for the
+    owner to refuse."""
+    if not attachment:
+        return None
+    try:
+        text = bytes(attachment).decode("ascii")
+    except UnicodeDecodeError:
+        return None  # not ours (a binary attachment)
+    for field in text.split(";"):
+        name, sep, value = field.partition("=")
+        if sep and name.strip() == "actor":
+            return value.strip()
+    return None
+
+
+def write(session: zenoh.Session, key: str, payload: bytes | str | None, *,
+          actor: str | None = None) -> None:
     """An input, command or fault: a put (``payload``) or a delete (None), never dropped.
 
     Zenoh drops a put under congestion unless it is sent with ``CongestionControl.BLOCK``;
     a burst of instructor actions must arrive whole, so every Lunaris tool writes this way.
     It goes at ``PRIORITY``, ahead of a fleet's telemetry queued on the same links.
+    ``actor`` (one of :data:`ACTORS`; default: the owner takes it for an instructor) goes
+    with it as the attachment ``actor=<actor>``, and the events answering it carry it.
     """
+    attachment = None
+    if actor is not None:
+        if actor not in ACTORS:
+            raise ValueError(f"actor {actor!r} is not one of {', '.join(ACTORS)}")
+        attachment = f"actor={actor}".encode("ascii")
     if payload is None:
-        session.delete(key, congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY)
+        session.delete(key, congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY,
+                       attachment=attachment)
     else:
         session.put(key, payload, encoding=zenoh.Encoding.APPLICATION_JSON,
-                    congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY)
+                    congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY,
+                    attachment=attachment)

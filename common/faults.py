@@ -32,6 +32,7 @@ import msgspec.inspect as mi
 
 from common import keys
 from common.messages import ActiveFault, BadInput, decode_input
+from common.reasons import shown
 
 __all__ = [
     "CATALOGUE",
@@ -280,7 +281,7 @@ def parse_params(key: FaultKey, payload: bytes) -> Fault:
     if issubclass(spec.params, NoParams):
         text = bytes(payload).strip()
         if text not in (b"", b"{}"):
-            raise BadInput(f"{key.component} {key.kind} takes no parameters, got {text[:60]!r}")
+            raise BadInput(f"{key.component} {key.kind} takes no parameters (got {shown(text[:60])})")
         return spec.params()  # type: ignore[return-value]  # a member of Fault
     return decode_input(payload, spec.params, bare=spec.bare)  # type: ignore[return-value]
 

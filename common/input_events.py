@@ -20,6 +20,7 @@ class InputNote(NamedTuple):
     key: str
     message: str
     params: dict[str, Any] | None
+    actor: str = ""  # who sent the input (common.connection.ACTORS)
 
 
 class InputLog:

@@ -39,11 +39,14 @@ __all__ = [
     "drive_route",
     "drive_state",
     "event",
+    "event_of",
     "families",
     "family_of",
     "family_of_template",
     "fault",
     "fault_prefix",
+    "has_wildcard",
+    "is_write",
     "faults",
     "faults_active",
     "faults_journal",
@@ -225,6 +228,13 @@ def event(rover: str) -> str:
     return f"{ROOT}/{rover}/event"
 
 
+def event_of(rover: str, service: str) -> str:
+    """The key a service publishes its events of a rover on (``lunaris/<rover>/event/<service>``):
+    the access control lets only that service put there, and the faults service journals what
+    arrives there and relays it on :func:`event` (SPEC §5's key)."""
+    return f"{ROOT}/{rover}/event/{service}"
+
+
 def service(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/service/{name}"
 
@@ -243,6 +253,21 @@ def service_owner(rover: str, name: str, zid: str) -> str:
 def service_claims(rover: str, name: str) -> str:
     """Every claim and ownership of a service on a rover (liveliness key expression)."""
     return f"{ROOT}/{rover}/service/{name}/*/*"
+
+
+def is_write(parts: list[str] | tuple[str, ...]) -> bool:
+    """Whether a key's chunks after ``lunaris/<rover>/`` are a write to the twin: a fault, an
+    input, a command, a clock or session control (what instructors, scenarios and dashboards
+    put)."""
+    return bool(parts) and (parts[0] in ("fault", "input", "cmd", "control")
+                            or (parts[0] == "clock" and len(parts) > 1 and parts[1] == "control"))
+
+
+def has_wildcard(key: str) -> bool:
+    """Whether a key expression names more than one key: a chunk ``*`` or ``**``, or ``$*``
+    inside a chunk (``sun$*``). A write on such a key is never input (it would reach every
+    owner whose keys it matches)."""
+    return any(chunk in ("*", "**") or "$*" in chunk for chunk in str(key).split("/"))
 
 
 def split(key: str) -> tuple[str, list[str]]:

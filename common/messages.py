@@ -19,6 +19,9 @@ import math
 from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
+import msgspec.inspect
+
+from common.reasons import humane, json_error, shown
 
 __all__ = [
     "BARE_FIELD",
@@ -58,7 +61,9 @@ __all__ = [
     "decode",
     "decode_input",
     "read_json",
+    "convert_input",
     "decode_parameters",
+    "humane",
     "encode",
     "is_telemetry",
 ]
@@ -281,10 +286,10 @@ class DriveRoute(_Msg):
 
 
 # What an event says happened: a refused input, a fault's life, an accepted command or
-# input, a change of the clock, a bug in a service.
+# input, a change of the clock, a bug in a service, events the journal never received.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error", "state_damaged"]
+                    "internal_error", "state_damaged", "journal_gap"]
 
 
 class Event(_Msg):
@@ -295,8 +300,11 @@ class Event(_Msg):
     key: str
     message: str
     params: dict[str, Any] | None = None
-    source_id: str = ""  # the publishing session's Zenoh id: with seq, names an event uniquely
-    seq: int = 0  # counts the events a session has published, from 1
+    source_id: str = ""  # the publishing session's Zenoh id: with seq, names an event of a rover
+    seq: int = 0  # counts the events a session has published for the rover, from 1
+    # who acted: crew, instructor or scenario (the write's attachment), twin (its own:
+    # protection, derived faults, internal errors); "" from a journal written before
+    actor: str = ""
 
 
 FaultOrigin = Literal["injected", "derived"]
@@ -395,11 +403,13 @@ class RailCommand(_Input):
 
 class PredictionRequest(_Input):
     """The parameters of a ``prediction`` query: ``?hours=8;samples=1000`` (``seed`` for a
-    repeatable answer)."""
+    repeatable answer; ``timeout_s``: how long the asker waits, after which the battery
+    service stops computing it)."""
 
     hours: Annotated[float, msgspec.Meta(gt=0.0, le=168.0)] = 8.0
     samples: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 1000
     seed: Annotated[int, msgspec.Meta(ge=0)] | None = None
+    timeout_s: Annotated[float, msgspec.Meta(gt=0.0, le=600.0)] = 60.0
 
 
 def decode_parameters(text: str, typ: type[T]) -> T:
@@ -411,14 +421,11 @@ def decode_parameters(text: str, typ: type[T]) -> T:
         name, sep, value = item.partition("=")
         name = name.strip()
         if not sep or not name:
-            raise BadInput(f"parameter {item!r} is not name=value")
+            raise BadInput(f"{shown(item)} is not name=value")
         if name in raw:
-            raise BadInput(f"parameter {name!r} given twice")
+            raise BadInput(f"{name} is given twice")
         raw[name] = _number(name, value.strip())
-    try:
-        return msgspec.convert(raw, typ)
-    except msgspec.ValidationError as exc:
-        raise BadInput(str(exc)) from None
+    return convert_input(raw, typ)
 
 
 def _number(name: str, value: str) -> int | float:
@@ -428,9 +435,9 @@ def _number(name: str, value: str) -> int | float:
         try:
             number = float(value)
         except ValueError:
-            raise BadInput(f"parameter {name!r} must be a number, got {value!r}") from None
+            raise BadInput(f"{name} must be a number (got {shown(value)})") from None
     if isinstance(number, float) and not math.isfinite(number):
-        raise BadInput(f"parameter {name!r} must be finite, got {value!r}")
+        raise BadInput(f"{name} must be a finite number (got {shown(value)})")
     return number
 
 
@@ -489,20 +496,55 @@ def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
-            raise BadInput(f"malformed JSON: the key {key!r} appears twice")
+            raise BadInput(f"the field {shown(key)} appears twice")
         out[key] = value
     return out
 
 
 def _no_constant(name: str) -> Any:
-    raise BadInput(f"malformed JSON: {name} is not a JSON number")
+    raise BadInput(f"{name} is not a number (JSON has no NaN or infinity)")
 
 
 def _finite(text: str) -> float:
     value = float(text)
     if not math.isfinite(value):
-        raise BadInput(f"Number out of range: {text} overflows to infinity")
+        raise BadInput(f"the number {_abridged(text)} is too large (it overflows to infinity)")
     return value
+
+
+MAX_INT_DIGITS = 100  # no input takes a longer integer (Python refuses beyond 4,300)
+
+
+def _bounded_int(text: str) -> int:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_INT_DIGITS:
+        raise BadInput(f"the number {_abridged(text)} has {digits:,} digits: far too long for "
+                       f"an input (at most {MAX_INT_DIGITS})")
+    return int(text)
+
+
+def _abridged(text: str) -> str:
+    return text if len(text) <= 24 else f"{text[:10]}...{text[-6:]}"
+
+
+def _no_surrogate(value: Any) -> None:
+    """Refuse text holding a lone surrogate (``"\\ud800"``): JSON lets it be written, but it is
+    no character, and nothing can encode it again."""
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, str):
+            try:
+                item.encode("utf-8")
+            except UnicodeEncodeError as exc:
+                code = ord(item[exc.start])
+                raise BadInput(f"a text holds \\u{code:04x}, half of a character (a lone "
+                               "surrogate): not valid Unicode") from None
+        elif isinstance(item, dict):
+            stack.extend(item.keys())
+            stack.extend(item.values())
+        elif isinstance(item, list):
+            stack.extend(item)
 
 
 def _depth(text: bytes) -> int:
@@ -526,31 +568,42 @@ def _depth(text: bytes) -> int:
     return deepest
 
 
-def read_json(payload: bytes) -> Any:
-    """JSON from an untrusted input, strictly: UTF-8 text (no encoded surrogates), no NaN or
-    infinity, no key twice in an object, at most ``_MAX_DEPTH`` levels deep and
-    ``MAX_INPUT_BYTES`` long. Anything else is :class:`BadInput` saying what is wrong."""
+def read_json(payload: bytes, *, bare: bool = False) -> Any:
+    """JSON from an untrusted input, strictly: UTF-8 text (no encoded or escaped lone
+    surrogates), no NaN or infinity, no integer longer than ``MAX_INT_DIGITS``, no key twice in
+    an object, at most ``_MAX_DEPTH`` levels deep and ``MAX_INPUT_BYTES`` long. Anything else is
+    :class:`BadInput` saying in plain words what is wrong (``bare``: a bare number or boolean
+    would do, and the words say so)."""
     data = bytes(payload)
     if len(data) > MAX_INPUT_BYTES:
-        raise BadInput(f"payload of {len(data)} bytes is too large for an input "
-                       f"(at most {MAX_INPUT_BYTES})")
+        raise BadInput(f"the payload is {len(data):,} bytes: too large for an input "
+                       f"(at most {MAX_INPUT_BYTES:,})")
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise BadInput(f"not UTF-8 text: {exc.reason} at byte {exc.start}") from None
+        raise BadInput(f"not text: byte {exc.start + 1} is not UTF-8 ({exc.reason})") from None
     if _depth(data) > _MAX_DEPTH:
-        raise BadInput(f"malformed JSON: nested more than {_MAX_DEPTH} levels deep")
+        raise BadInput(f"nested more than {_MAX_DEPTH} levels deep: an input is an object of a "
+                       "few values")
     try:
-        return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant,
-                          parse_float=_finite)
+        value = json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant,
+                           parse_float=_finite, parse_int=_bounded_int)
     except json.JSONDecodeError as exc:
-        raise BadInput(f"malformed JSON: {exc}") from None
+        raise BadInput(json_error(text, exc.msg, exc.pos, bare)) from None
     except RecursionError:
-        raise BadInput("malformed JSON: nested too deep") from None
+        raise BadInput(f"nested more than {_MAX_DEPTH} levels deep: an input is an object of a "
+                       "few values") from None
+    except ValueError as exc:  # BadInput is one; anything else the parser raises is bad input too
+        if isinstance(exc, BadInput):
+            raise
+        raise BadInput(f"not valid JSON: {exc}") from None
+    _no_surrogate(value)
+    return value
 
 
 def decode_input(payload: bytes, typ: type[T], *, bare: str | None = None) -> T:
-    """Decode an input strictly, raising :class:`BadInput` naming the problem.
+    """Decode an input strictly, raising :class:`BadInput` saying in plain words what is wrong
+    (``fraction must be at most 1 (got 30)``).
 
     ``bare`` names the field a bare JSON number (or boolean) stands for. An empty
     payload decodes to the Struct's defaults when every field has one.
@@ -560,13 +613,33 @@ def decode_input(payload: bytes, typ: type[T], *, bare: str | None = None) -> T:
         try:
             return typ()
         except TypeError:
-            raise BadInput("empty payload; expected a JSON object") from None
-    raw = read_json(text)
+            raise BadInput("the payload is empty: give a JSON object"
+                           + (f" or a bare value of {bare}" if bare else "")) from None
+    raw = read_json(text, bare=bare is not None)
     if bare is not None and not isinstance(raw, dict | list | str) and raw is not None:
         raw = {bare: raw}
     if not isinstance(raw, dict):
-        raise BadInput(f"expected a JSON object, got {type(raw).__name__}")
+        wanted = "a number, true/false or a JSON object" if bare else "a JSON object"
+        raise BadInput(f"{shown(raw)} is not {wanted}")
+    return convert_input(raw, typ)
+
+
+def convert_input(raw: Any, typ: type[T]) -> T:
+    """``raw`` (decoded JSON) as the input Struct ``typ``; :class:`BadInput` in plain words."""
     try:
         return msgspec.convert(raw, typ)
     except msgspec.ValidationError as exc:
-        raise BadInput(str(exc)) from None
+        raise BadInput(humane(str(exc), raw, list(typ.__struct_fields__), _choices(typ))) from None
+
+
+def _choices(typ: type[msgspec.Struct]) -> dict[str, list[Any]]:
+    """The values of each field of ``typ`` that takes one of a fixed set (a Literal)."""
+    out: dict[str, list[Any]] = {}
+    info = msgspec.inspect.type_info(typ)
+    for f in getattr(info, "fields", ()):
+        t = f.type
+        options = t.types if isinstance(t, msgspec.inspect.UnionType) else (t,)
+        for option in options:
+            if isinstance(option, msgspec.inspect.LiteralType):
+                out[f.name] = list(option.values)
+    return out

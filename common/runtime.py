@@ -25,6 +25,14 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   session (see :meth:`subscribe`); inputs, commands, faults and queries stay callbacks;
 - one way to refuse input: a handler raises :class:`~common.messages.BadInput` and the
   runtime publishes a ``rejected`` event naming the key and the reason;
+- writes name exactly one key: a sample whose key holds a wildcard (``lunaris/**``) is never
+  handed to a handler (the faults service, the gatekeeper, refuses it once:
+  :meth:`on_wildcard`); a write older than ``WRITE_MAX_AGE_S`` when it arrives (held back by a
+  cut link) is refused by its owner, never applied late (:meth:`refusal`);
+- :meth:`event`: events on the service's own key ``lunaris/<rover>/event/<service>`` (the
+  faults service journals and relays them on ``lunaris/<rover>/event``), each saying who
+  acted: the ``actor`` a write carries as its attachment (``instructor`` without one), or
+  ``twin`` for its own;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
   owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk;
 - time that never goes back within an epoch: the sim time a service has reached (and its
@@ -48,24 +56,31 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterable
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import msgspec
 import zenoh
 import zenoh.ext as zext
 
 from common import keys
-from common.connection import PRIORITY
+from common.connection import ACTORS, PRIORITY, WRITE_MAX_AGE_S, actor_of
 from common.fault_book import FaultBook
 from common.input_events import InputLog, InputNote
-from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode
+from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode, humane
+from common.reasons import shown
 from common.session import SessionKeeper, StateCheck, StateDamaged, StateGet, StateReset, StateSet
 from common.state_store import Damaged, StateStore, not_finite
 from common.worker import POLL_S, Worker
 
 __all__ = ["AlreadyRunning", "Runtime", "Sample"]
 
-EVENT_CACHE = 256  # recent events kept for a late joiner
+EVENT_CACHE = 256  # recent events kept for a late joiner (the journal's relay)
+# The events a service keeps for the journal, shared among the rovers it serves (at least
+# EVENT_CACHE each): a faults service that comes back after an outage or a kill -9 asks every
+# publisher for them (an advanced subscriber) and journals what it missed; what is older is
+# counted lost (services.faults.ledger). At ~0.5 kB an event, ~8 MB when full. Measured: with
+# 256, 800 events published during a 2 s outage of the faults service left 544 unaccounted.
+EVENT_HISTORY = 16384
 # A fleet's telemetry is drained from channels: from this many rovers the samples of a tick
 # (hundreds to thousands a second per service) cost less polled than called back one by one.
 POLL_FROM_ROVERS = 20
@@ -94,6 +109,13 @@ class Sample(NamedTuple):
     payload: bytes
     deleted: bool
     attachment: bytes | None = None
+    sent_at: float | None = None  # a write's Zenoh timestamp [s since the epoch]; None: none
+    age_s: float = 0.0  # how long after sent_at the write arrived here [s]
+
+
+# Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
+TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
+WriteRole = Literal["own", "follow", "gate"]
 
 
 Handler = Callable[[Sample], None]
@@ -129,9 +151,12 @@ class Runtime:
         self._session_keeper: SessionKeeper | None = None
         self._zid = ""
         self._lock_file: Any = None
-        self._event_seq = 0
+        self._event_seq: dict[str, int] = {}  # per served rover; "" for the rovers not served
+        self._acting: str | None = None  # the actor of the sample being handled
         self._inputs: InputLog | None = None
         self._heard: dict[str, Any] = {}  # telemetry key -> its declared key expression
+        self._subscribed: list[zenoh.KeyExpr] = []  # every subscription's key expression, in order
+        self._on_wildcard: Handler | None = None
         self.polled = len(self.rovers) >= POLL_FROM_ROVERS
         self.session: zenoh.Session | None = None
 
@@ -470,7 +495,16 @@ class Runtime:
         return self.session
 
     def _guard(self, fn: Callable, *args: Any) -> None:
-        """Run a handler; input errors become rejection events, bugs are reported, never fatal."""
+        """Run a handler; input errors become rejection events, bugs are reported, never fatal.
+        The events published meanwhile carry the actor of the sample handled (a write's)."""
+        acting = self._acting
+        self._acting = self.actor(args[0]) if args and isinstance(args[0], Sample) else None
+        try:
+            self._run(fn, *args)
+        finally:
+            self._acting = acting
+
+    def _run(self, fn: Callable, *args: Any) -> None:
         try:
             fn(*args)
         except BadInput as exc:
@@ -483,7 +517,7 @@ class Runtime:
             sample = args[0] if args and isinstance(args[0], Sample) else None
             if sample is None:
                 raise
-            self.reject(sample.rover, sample.key, f"not a valid payload for this key: {exc}")
+            self.reject(sample.rover, sample.key, f"not a valid payload for this key: {humane(str(exc))}")
         except Exception as exc:  # a bug must not take a training session down
             traceback.print_exc(file=sys.stderr)
             sample = args[0] if args and isinstance(args[0], Sample) else None
@@ -516,23 +550,64 @@ class Runtime:
         """Hold a declared Zenoh entity for the life of the service."""
         self._keep.append(entity)
 
+    def on_wildcard(self, handler: Handler) -> None:
+        """Hand ``handler`` each sample whose key holds a wildcard (``*``, ``**``, ``$*``),
+        once, however many of this service's subscriptions it reaches: the gatekeeper's, which
+        refuses it in words. Every other handler of every service never sees such a sample
+        (:meth:`subscribe`). The sample's ``rover`` is the key's rover chunk as written."""
+        self._on_wildcard = handler
+
+    def _wildcard(self, s: zenoh.Sample, key: str, index: int) -> None:
+        """A sample whose key names more than one key: dropped, or handed to the gatekeeper by
+        the first of this service's subscriptions that hears it (Zenoh gives it to each)."""
+        if self._on_wildcard is None:
+            return
+        expr = zenoh.KeyExpr(key)
+        first = next(i for i, sub in enumerate(self._subscribed) if sub.intersects(expr))
+        if first != index:
+            return
+        chunks = key.split("/")
+        sample = Sample(key, chunks[1] if len(chunks) > 1 else "", chunks[2:], s.payload.to_bytes(),
+                        s.kind == zenoh.SampleKind.DELETE,
+                        s.attachment.to_bytes() if s.attachment is not None else None)
+        self.worker.put(self._on_wildcard, sample)
+
     def subscribe(self, keyexpr: str, handler: Handler, *, any_rover: bool = False,
-                  history: bool = False, telemetry: bool = False, urgent: bool = False) -> None:
+                  history: bool = False, telemetry: bool = False, urgent: bool = False,
+                  writes: WriteRole = "own") -> None:
         """Queue every sample on ``keyexpr`` for ``handler``; samples for rovers this service
         does not serve are dropped unless ``any_rover``. With ``history`` the publishers'
         caches are replayed first (an advanced subscriber), for a service that joins late.
         ``telemetry``: a tick-rate stream, drained from a channel when the service serves a
         fleet (:attr:`polled`). ``urgent``: handled ahead of everything waiting, the worker
-        breaking off a burst of telemetry for it (a fault: what the crew is trained on)."""
+        breaking off a burst of telemetry for it (a fault: what the crew is trained on).
+
+        A sample whose key holds a wildcard (a put on ``lunaris/**``) is never input: it is
+        dropped here, or handed once to the gatekeeper (:meth:`on_wildcard`).
+
+        ``writes``: what this subscription is to the writes it hears (faults, inputs,
+        commands, controls) that :meth:`refusal` refuses (sent more than
+        ``WRITE_MAX_AGE_S`` before they arrived, or naming an unknown actor): their owner
+        (``own``: refused with a rejection event, the handler not called), a follower of a
+        write another service answers (``follow``: dropped without a word; so is a session
+        control, which the faults service answers), or the gatekeeper (``gate``: the handler
+        decides, with :meth:`refusal`)."""
+        if writes != "gate":
+            handler = self._writes_checked(handler, answer=writes == "own")
         session = self.zenoh_session
         split_keys: dict[str, tuple[str, list[str]]] = {}  # the served rovers' keys, split
         polled = telemetry and self.polled
+        index = len(self._subscribed)
+        self._subscribed.append(zenoh.KeyExpr(keyexpr))
 
         def convert(s: zenoh.Sample) -> Sample | None:
             key = str(s.key_expr)
             known = split_keys.get(key)
             if known is not None:
                 rover, parts = known
+            elif keys.has_wildcard(key):
+                self._wildcard(s, key, index)
+                return None
             else:
                 try:
                     rover, parts = keys.split(key)
@@ -546,8 +621,12 @@ class Runtime:
                 elif not any_rover:
                     return None
             att = s.attachment.to_bytes() if s.attachment is not None else None
+            sent_at, age_s = None, 0.0
+            if keys.is_write(parts) and s.timestamp is not None:  # judged as it arrives
+                sent_at = s.timestamp.get_time().timestamp()
+                age_s = time.time() - sent_at
             return Sample(key, rover, parts, s.payload.to_bytes(),
-                          s.kind == zenoh.SampleKind.DELETE, att)
+                          s.kind == zenoh.SampleKind.DELETE, att, sent_at, age_s)
 
         def on_sample(s: zenoh.Sample) -> None:
             sample = convert(s)
@@ -566,6 +645,40 @@ class Runtime:
         self._keep.append(sub)
         if polled:
             self.worker.add_channel(sub, convert, handler)
+
+    def _writes_checked(self, handler: Handler, answer: bool) -> Handler:
+        def checked(sample: Sample) -> None:
+            if keys.is_write(sample.parts):
+                refusal = self.refusal(sample)
+                if refusal is not None:
+                    # a session control is answered by the faults service alone (common.session)
+                    if answer and sample.parts[0] != "control":
+                        raise BadInput(refusal)
+                    return
+            handler(sample)
+        return checked
+
+    def refusal(self, sample: Sample) -> str | None:
+        """Why a write is refused before anything looks at it, in words; None if it is not:
+        it arrived more than ``WRITE_MAX_AGE_S`` after it was sent (held back by a cut link:
+        applied now it would be applied late), or its attachment names an unknown actor."""
+        if sample.age_s > WRITE_MAX_AGE_S and sample.sent_at is not None:
+            sent = time.strftime("%H:%M:%S", time.localtime(sample.sent_at))
+            return (f"not applied: sent at {sent}, arrived {sample.age_s:.1f} s late (the link "
+                    f"to the twin was cut; a write older than {WRITE_MAX_AGE_S:g} s is never "
+                    "applied); nothing changed, send it again")
+        actor = actor_of(sample.attachment)
+        if actor is not None and actor not in ACTORS:
+            return f"actor={shown(actor)} names no actor: a write is by {', '.join(ACTORS)}"
+        return None
+
+    def actor(self, sample: Sample) -> str:
+        """Who sent a sample: the write's ``actor`` attachment, an instructor when it has none;
+        the twin itself for what is not a write (telemetry, ticks)."""
+        actor = actor_of(sample.attachment)
+        if actor in ACTORS:
+            return actor
+        return "instructor" if keys.is_write(sample.parts) or keys.has_wildcard(sample.key) else "twin"
 
     def _declare_heard(self, key: str) -> None:
         """Declare a key this service receives a stream on. Zenoh resolves a sample's key
@@ -591,16 +704,17 @@ class Runtime:
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
                       attachment: bytes | None = None, *, reliable: bool = False,
-                      heartbeat_s: float | None = None) -> None:
+                      heartbeat_s: float | None = None, cache: int = 1) -> None:
         """Publish an already encoded payload (CDR for the bridge), with the same last-value
-        cache as :meth:`publish`. ``heartbeat_s``: the publisher (declared on first use) also
-        sends a sporadic heartbeat, so an advanced subscriber that missed the last sample
-        fetches it from the cache (what rmw_zenoh's transient-local publishers do)."""
+        cache as :meth:`publish` (``cache``: the last so many samples). ``heartbeat_s``: the
+        publisher (declared on first use) also sends a sporadic heartbeat, so an advanced
+        subscriber that missed the last sample fetches it from the cache (what rmw_zenoh's
+        transient-local publishers do)."""
         if self._waiting and self._waits(key):
             return  # stamped with a time from the disk: the first tick republishes
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._declare_publisher(key, 1, encoding, reliable, heartbeat_s)
+            pub = self._declare_publisher(key, cache, encoding, reliable, heartbeat_s)
         pub.put(payload, attachment=attachment)
 
     def _waits(self, key: str) -> bool:
@@ -634,22 +748,34 @@ class Runtime:
     # -- events and rejection ---------------------------------------------------------------
 
     def event(self, rover: str, severity: Severity, kind: EventKind, key: str, message: str,
-              params: dict | None = None) -> None:
-        """Publish an event of a rover. Events are never dropped under congestion (the journal
-        is complete). A rover this service does not serve (a rejection of a key naming an
-        unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
-        ekey = keys.event(rover)
-        self._event_seq += 1
+              params: dict | None = None, *, actor: str | None = None) -> None:
+        """Publish an event of a rover on this service's own key,
+        ``lunaris/<rover>/event/<service>`` (the faults service journals it and relays it on
+        ``lunaris/<rover>/event``). Events are never dropped under congestion (the journal is
+        complete). ``actor``: by default the actor of the write being handled, ``twin`` for
+        the twin's own (:data:`TWIN_KINDS`, or no write). ``(source_id, seq)`` names the event
+        among the rover's. A rover this service does not serve (a rejection of a key naming
+        an unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
+        if keys.has_wildcard(rover) or "/" in rover or not rover:  # never a key naming many
+            print(f"{self.name}: no event for rover {rover!r}: {message}", file=sys.stderr, flush=True)
+            return
+        if actor is None:
+            actor = "twin" if kind in TWIN_KINDS else (self._acting or "twin")
+        served = rover in self.rovers
+        slot = rover if served else ""
+        seq = self._event_seq[slot] = self._event_seq.get(slot, 0) + 1
+        ekey = keys.event_of(rover, self.name)
         ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,
-                   key=key, message=message, params=params, source_id=self._zid,
-                   seq=self._event_seq)
-        if rover not in self.rovers:
+                   key=key, message=message, params=params, source_id=self._zid, seq=seq,
+                   actor=actor)
+        if not served:
             self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
                                    congestion_control=zenoh.CongestionControl.BLOCK,
                                    priority=PRIORITY)
             return
         if ekey not in self._publishers:
-            self._declare_publisher(ekey, EVENT_CACHE, reliable=True)
+            self._declare_publisher(ekey, max(EVENT_CACHE, EVENT_HISTORY // len(self.rovers)),
+                                    reliable=True)
         self.publish(ekey, ev)
 
     def reject(self, rover: str, key: str, reason: str) -> None:
@@ -663,8 +789,10 @@ class Runtime:
             self._inputs = InputLog()
             self.every(0.2, lambda: self._input_events(self._inputs.flush(time.monotonic())
                                                        if self._inputs else []))
-        self._input_events(self._inputs.offer(InputNote(rover, key, message, params), time.monotonic()))
+        note = InputNote(rover, key, message, params, self._acting or "")
+        self._input_events(self._inputs.offer(note, time.monotonic()))
 
     def _input_events(self, notes: list[InputNote]) -> None:
         for note in notes:
-            self.event(note.rover, "info", "input", note.key, note.message, note.params)
+            self.event(note.rover, "info", "input", note.key, note.message, note.params,
+                       actor=note.actor or None)

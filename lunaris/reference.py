@@ -198,10 +198,14 @@ def keys_page() -> str:
                  "[faults.md](faults.md)"),
                 ("`faults` (query)", "`get` returns the faults in effect, gathered from their "
                  "owners at the time of the query: a list of `ActiveFault` (`key, params, "
-                 "since_t_s, origin, severity`)"),
+                 "since_t_s, origin, severity`), and an error reply naming each owner the rover "
+                 "file implies that did not answer (its faults are not listed)"),
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
                 ("`faults/journal` (query)", "the session's events, oldest first"),
+                ("`event/<service>`", "each service's own events (`Event`), which the faults "
+                 "service journals and relays unchanged on `event`; an event whose `source` is "
+                 "not the service its key names is refused and said in a `critical` event"),
                 ("`prediction` (query)", "`get lunaris/<rover>/prediction?hours=8;samples=1000` "
                  "(parameters, defaults 8 h and 1000 samples: " + _payload_fields(PredictionRequest)
                  + "; an unknown or bad "

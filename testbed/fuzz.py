@@ -1,9 +1,10 @@
 """Bad payloads for every key an instructor, scenario or dashboard may write (seeded, bounded).
 
 Each payload is wrong for its key by construction, so the twin must answer every one with
-a rejection event and change nothing: malformed or non-UTF-8 text, encoded surrogates, NaN
-and infinity, overflowing numbers, duplicate keys, nesting a thousand deep, oversized,
-wrong types, unknown fields, values out of range, deletes of what is not there.
+a rejection event and change nothing: malformed or non-UTF-8 text, encoded and escaped lone
+surrogates, NaN and infinity, overflowing numbers, integers of thousands of digits, duplicate
+keys, nesting a thousand deep, oversized, wrong types, unknown fields, values out of range,
+deletes of what is not there.
 """
 
 from __future__ import annotations
@@ -50,6 +51,10 @@ def bad_payloads(key: str, rng: random.Random) -> bytes | None:
         lambda: b"[" * 1000 + b"]" * 1000,
         lambda: b'{"x":' * 1000 + b"1" + b"}" * 1000,
         lambda: b'"\xed\xa0\x80"',  # a UTF-8 encoded surrogate
+        lambda: rng.choice([b'"\\ud800"', b'{"x": "\\udfff"}', b'{"\\ud83d": 1}',
+                            b'{"angle_deg": "a\\ud800"}', b'{"fraction": ["\\udbff"]}']),  # escaped, lone
+        lambda: rng.choice([b"", b"-"]) + b"9" * rng.choice([4301, 5000, 20_000]),  # int beyond Python's
+        lambda: b'{"angle_deg": ' + b"1" * rng.randint(101, 4400) + b"}",
         lambda: b"\xff\xfe" + rng.randbytes(8),
         lambda: b'{"filler": "' + b"x" * 70_000 + b'"}',
         lambda: json.dumps(rng.choice(["text", [1, 2], {"zz_unknown": 1}, {"": None}])).encode(),

@@ -181,6 +181,8 @@ class Probe:
         self.session = zenoh.open(make_config("client", connect=[endpoint]))
         self.latest: dict[str, Any] = {}
         self.history: dict[str, list[Any]] = {}
+        self._events: dict[str, list[dict]] = {}  # rover -> its events, each once (events())
+        self._event_ids: set[tuple] = set()
         self._lock = threading.Lock()
         self._subs: list[Any] = []
 
@@ -206,7 +208,15 @@ class Probe:
             with self._lock:
                 self.latest[key] = value
                 self.history.setdefault(key, []).append(value)
+                self._note_event(key, value)
         self._subs.append(self.session.declare_subscriber(keyexpr, on_sample))
+
+    def clear_history(self) -> None:
+        """Forget the samples and events seen so far (the latest value of each key is kept)."""
+        with self._lock:
+            self.history.clear()
+            self._events.clear()
+            self._event_ids.clear()
 
     def value(self, key: str) -> Any:
         with self._lock:
@@ -225,12 +235,30 @@ class Probe:
         return wait_for(check, timeout_s,
                         lambda: f"{key} to satisfy the condition (last: {self.value(key)!r})")[0]
 
+    def events(self, rover: str) -> list[dict]:
+        """The events of ``rover`` watched, in the order they arrived, each once: from the
+        journal's stream (``event``) and from each service's own key (``event/<service>``, so
+        without the faults service too), told apart by ``source_id`` and ``seq``."""
+        with self._lock:
+            return list(self._events.get(rover, []))
+
+    def _note_event(self, key: str, value: Any) -> None:
+        """(Holding the lock.) Keep an event sample of ``event`` or ``event/<service>``."""
+        parts = key.split("/")
+        if not (3 <= len(parts) <= 4 and parts[2] == "event" and isinstance(value, dict)):
+            return
+        ident = (parts[1], value.get("source_id"), value.get("seq")) if value.get("source_id") \
+            else (parts[1], len(self._event_ids))
+        if ident not in self._event_ids:
+            self._event_ids.add(ident)
+            self._events.setdefault(parts[1], []).append(value)
+
     def wait_event(self, rover: str, predicate: Callable[[dict], bool],
                    timeout_s: float = 10.0) -> dict:
-        key = keys.event(rover)
+        """The first event of ``rover`` (on ``event`` or ``event/*``) that satisfies ``predicate``."""
         def check() -> Any:
-            return next((e for e in self.samples(key) if predicate(e)), None)
-        return wait_for(check, timeout_s, lambda: f"an event on {key} (seen: {self.samples(key)!r})")
+            return next((e for e in self.events(rover) if predicate(e)), None)
+        return wait_for(check, timeout_s, lambda: f"an event of {rover} (seen: {self.events(rover)!r})")
 
     def wait_services(self, rover: str, services: tuple[str, ...], timeout_s: float = 20.0) -> None:
         def live() -> bool:

@@ -1,76 +1,10 @@
-"""The twin's reasons in words a person uses: ``heat_w must be at least 0.0``, not
-``Expected `float` >= 0.0 - at `$.heat_w```.
-
-:func:`humane` is ``common.messages.humane`` (the harden-input branch moves it there); until
-that lands, the copy below, which was the console's, stands in for it. Delete the copy once
-``common.messages`` has it.
-"""
+"""The twin's reasons in words a person uses (``heat_w must be at least 0 (got -3)``, not
+``Expected `float` >= 0.0 - at `$.heat_w```): the one copy is :mod:`common.reasons`, which
+the services' own rejections use too; the tools take it from here."""
 
 from __future__ import annotations
 
-import re
-from typing import Any
+from common.messages import humane
+from common.reasons import shown
 
 __all__ = ["humane", "shown"]
-
-try:
-    from common.reasons import shown  # type: ignore[import-not-found, import-untyped, unused-ignore]
-except ImportError:  # until common.reasons is there (the harden-input branch)
-
-    def shown(value: Any) -> str:  # type: ignore[misc, unused-ignore]
-        """A value the user gave, as a person reads it: text quoted, what is not printable
-        (bytes that are not text, control characters) as '?', at most 40 characters."""
-        if isinstance(value, bytes):
-            value = value.decode("utf-8", errors="replace")
-        if not isinstance(value, str):
-            return str(value)
-        text = value if len(value) <= 40 else value[:40] + "..."
-        return "'" + "".join(c if c.isprintable() and not 0xDC80 <= ord(c) <= 0xDCFF else "?"
-                             for c in text) + "'"
-
-try:
-    from common.messages import humane  # type: ignore[attr-defined, unused-ignore]
-except ImportError:  # until common.messages has it (the harden-input branch)
-
-    def humane(message: str) -> str:  # type: ignore[misc, unused-ignore]
-        """A validation message in plain words: ``Expected `float` <= 1.0 - at `$.fraction```
-        becomes ``fraction must be at most 1.0``."""
-        words = {"<=": "at most", ">=": "at least", "<": "below", ">": "above"}
-        kinds = {"float": "a number", "int": "a whole number", "bool": "true or false",
-                 "str": "text", "object": "an object", "array": "a list", "null": "null",
-                 "list": "a list", "dict": "an object"}
-        message = re.sub(r"got b'([^']*)'", r"got \1", message)  # bytes shown as Python writes them
-        message = re.sub(r"(\\x[0-9a-f]{2})+", "?", message)  # ... and their escapes
-        m = re.search(r"expected a JSON object, got (\w+)", message)
-        if m:
-            got = {"int": "a number", "float": "a number"}.get(m.group(1), kinds.get(m.group(1), m.group(1)))
-            return message[:m.start()] + f"a JSON object is expected here, not {got}"
-        named = re.match(r"(\w+): (Expected .*)$", message)
-        if named and re.search(r"- at `\$`$", message):  # a bare value of a named parameter
-            message = named.group(2).replace("- at `$`", f"- at `$.{named.group(1)}`")
-        m = re.search(r"Expected `\w+` (<=|>=|<|>) (\S+) - at `\$\.?(\w*)`", message)
-        if m:
-            field = m.group(3) or "the value"
-            return message[:m.start()] + f"{field} must be {words[m.group(1)]} {m.group(2)}"
-        m = re.search(r"Expected `([\w |]+)`, got `(\w+)` - at `\$\.?(\w*)`", message)
-        if m:
-            wanted = [kinds.get(t.strip(), t.strip()) for t in m.group(1).split("|") if t.strip() != "null"]
-            got = {"int": "a number", "float": "a number"}.get(m.group(2), kinds.get(m.group(2), m.group(2)))
-            field = m.group(3) or "the value"
-            return message[:m.start()] + f"{field} must be {' or '.join(wanted) or 'null'}, not {got}"
-        m = re.search(r"Object missing required field `(\w+)`(?: - at `\$(.*)`)?", message)
-        if m:
-            return message[:m.start()] + f"{m.group(1)} is missing"
-        m = re.search(r"Object contains unknown field `(\w+)`(?: - at `\$(.*)`)?", message)
-        if m:
-            return message[:m.start()] + f"{m.group(1)} is not a field of this input"
-        m = re.search(r"malformed JSON: Expecting value: line 1 column 1 \(char 0\)", message)
-        if m:
-            return message[:m.start()] + "not a number, true/false or a JSON object"
-        m = re.search(r"malformed JSON: .*\(char (\d+)\)", message)
-        if m:
-            return message[:m.start()] + f"not valid JSON (at character {int(m.group(1)) + 1})"
-        m = re.search(r"malformed JSON: ", message)
-        if m:
-            return message[:m.start()] + "not valid JSON: " + message[m.end():]
-        return message

@@ -25,7 +25,6 @@ of the rover. Thread-safe; :meth:`Writer.awrite` for asyncio.
 from __future__ import annotations
 
 import asyncio
-import inspect
 import threading
 import time
 from collections.abc import Callable
@@ -48,9 +47,6 @@ __all__ = ["ANSWER_S", "Accepted", "Actor", "Answer", "NotApplied", "Pending", "
 
 ANSWER_S = 3.0  # how long a write waits for its answer: longer than the 2 s of WRITE_MAX_AGE_S
 Actor = Literal["crew", "instructor", "scenario"]
-# common.connection.write takes actor= once the runtime reads it (D4, the harden-input
-# branch); until then the write goes without it and the owner counts it as the instructor's.
-_WRITE_TAKES_ACTOR = "actor" in inspect.signature(put_or_delete).parameters
 
 
 @dataclass(frozen=True)
@@ -235,10 +231,7 @@ class Writer:
         return p.answer or answer
 
     def _send(self, write: Write) -> None:
-        if _WRITE_TAKES_ACTOR:
-            put_or_delete(self.session, write.key, write.payload, actor=self.actor)  # type: ignore[call-arg]
-        else:
-            put_or_delete(self.session, write.key, write.payload)
+        put_or_delete(self.session, write.key, write.payload, actor=self.actor)
 
     def _settle(self, p: Pending, answer: Answer) -> None:
         with self._lock:

@@ -6,10 +6,13 @@ survives restarts of any service. A damaged journal (a last line cut short by a 
 mid-write, a line that is not an event, a folder in place of the file) never keeps the
 service down: the intact lines are kept, the file as found is moved aside
 (``.damaged-<time>``), a new one holds the intact lines, and :attr:`Journal.damage` says
-what was found, for the service to say in a ``critical`` event. A flood of rejections is summarised
-(:class:`~services.faults.model.FloodGate`). Events replayed from the publishers' caches
-after a restart are recognised and not written twice. Without a state directory the
-journal is kept in memory for the life of the service.
+what was found, for the service to say in a ``critical`` event. A flood of rejections is
+summarised (:class:`~services.faults.model.FloodGate`). Every event is accounted for by its
+``(source_id, seq)`` (:class:`~services.faults.ledger.Ledger`): events replayed from the
+publishers' caches after a restart are recognised and not written twice, and those that
+never come back (beyond what a cache kept) are counted and said in a ``journal_gap`` event:
+every event journalled one by one, summarised, or counted lost. Without a state directory
+the journal is kept in memory for the life of the service.
 """
 
 from __future__ import annotations
@@ -20,8 +23,10 @@ from pathlib import Path
 
 import msgspec
 
+from common import keys
 from common.messages import Event
 from common.state_store import set_aside, write_atomically
+from services.faults.ledger import Gap, Ledger
 from services.faults.model import FloodGate
 
 __all__ = ["Journal"]
@@ -34,15 +39,19 @@ def _identity(ev: Event) -> tuple:
 
 
 class Journal:
-    def __init__(self, path: Path | None = None, gate: FloodGate | None = None):
+    def __init__(self, path: Path | None = None, gate: FloodGate | None = None, rover: str = "",
+                 ledger: Ledger | None = None):
         self.path = path
+        self.rover = rover
         self.gate = gate or FloodGate()
+        self.ledger = ledger or Ledger()
         self._memory: list[bytes] = []
-        self._recent: deque[tuple] = deque(maxlen=_RECENT)
+        self._recent: deque[tuple] = deque(maxlen=_RECENT)  # events without a source_id
         self._recent_set: set[tuple] = set()
-        self._spans: dict[str, list[tuple[int, int]]] = {}  # summarised seqs per source
+        self._last_t_s = 0.0
         self.count = 0
         self.summarised = 0
+        self.lost = 0  # events counted lost in journal_gap events
         self.damage: str | None = None  # what was wrong with the file read back, in words
         if path is not None and os.path.lexists(path):
             self._read_back(path)
@@ -70,7 +79,7 @@ class Journal:
             except (msgspec.DecodeError, msgspec.ValidationError):
                 bad += 1
                 continue
-            self._note(ev)
+            self._note(ev, 0.0)
             good.append(line)
         if not bad and not tail.strip():
             return
@@ -86,52 +95,79 @@ class Journal:
         self.damage = (f"{path.name}: {what}; {len(good)} event{'s' if len(good) != 1 else ''} "
                        f"kept{', the damaged lines left out' if bad else ''}; {_where(moved)}")
 
-    def _note(self, ev: Event) -> None:
-        self._remember(_identity(ev))
+    def _note(self, ev: Event, now_s: float) -> None:
+        """A written event, accounted for (and what a summary or a gap counts)."""
+        self._account(ev, now_s)
         self.count += 1
+        self._last_t_s = max(self._last_t_s, ev.t_s)
         params = ev.params or {}
         if ev.kind == "rejected" and "summarised" in params:
             self.summarised += int(params["summarised"])
             for source_id, (lo, hi) in (params.get("seq") or {}).items():
-                self._spans.setdefault(source_id, []).append((int(lo), int(hi)))
+                self.ledger.account(source_id, ev.source, int(lo), int(hi), now_s)
+        elif ev.kind == "journal_gap":
+            self.lost += int(params.get("lost", 0))
+            self.ledger.account(str(params.get("source_id", "")), str(params.get("source", "")),
+                                int(params.get("from_seq", 0)), int(params.get("to_seq", 0)), now_s)
 
-    def _remember(self, ident: tuple) -> None:
+    def _account(self, ev: Event, now_s: float) -> None:
+        if ev.source_id:
+            self.ledger.account(ev.source_id, ev.source, ev.seq, ev.seq, now_s)
+            return
+        ident = _identity(ev)
         if len(self._recent) == self._recent.maxlen:
             self._recent_set.discard(self._recent[0])
         self._recent.append(ident)
         self._recent_set.add(ident)
 
     def _known(self, ev: Event) -> bool:
-        """Already journalled, one by one or in a summary (a cache replayed after a restart)."""
-        if not ev.source_id:
-            return False
-        if _identity(ev) in self._recent_set:
-            return True
-        return any(lo <= ev.seq <= hi for lo, hi in self._spans.get(ev.source_id, ()))
+        """Already accounted for: journalled one by one, in a summary, or counted lost (a
+        cache replayed after a restart)."""
+        if ev.source_id:
+            return self.ledger.known(ev.source_id, ev.seq)
+        return _identity(ev) in self._recent_set
 
-    def record(self, ev: Event, now_s: float) -> None:
-        """Journal ``ev``, received at wall time ``now_s``, unless it is already in."""
+    def record(self, ev: Event, now_s: float) -> list[Event]:
+        """Journal ``ev``, received at wall time ``now_s``, unless it is already in; the
+        events written (to relay: it, nothing while a flood is held, a summary)."""
         if self._known(ev):
-            return  # replayed from a cache after a restart
-        self._remember(_identity(ev))  # written now, or counted into a summary to come
-        self._write(self.gate.offer(ev, now_s))
+            return []  # replayed from a cache after a restart
+        self._account(ev, now_s)  # written now, or counted into a summary to come
+        return self._write(self.gate.offer(ev, now_s), now_s)
 
-    def tick(self, now_s: float) -> None:
-        """Write the summary of a flood that has ended."""
-        self._write(self.gate.flush(now_s))
+    def tick(self, now_s: float, flood_over: bool = False) -> list[Event]:
+        """Write the summary of a flood that has ended (``flood_over``: any flood held) and
+        count the events that have not come back within the ledger's wait; the events
+        written."""
+        written = self.gate.flush(now_s, force=flood_over)
+        written += [self._gap_event(gap) for gap in self.ledger.gaps(now_s)]
+        return self._write(written, now_s)
 
-    def _write(self, events: list[Event]) -> None:
+    def _gap_event(self, gap: Gap) -> Event:
+        n = gap.last - gap.first + 1
+        what = f"{n} event{'s' if n > 1 else ''} of the {gap.source} service"
+        return Event(
+            t_s=self._last_t_s, severity="warning", source="faults", kind="journal_gap",
+            key=keys.event_of(self.rover or "?", gap.source or "?"),
+            message=f"{what} (seq {gap.first} to {gap.last}) never reached the journal: lost "
+                    "while the faults service was down or cut off, beyond what the service "
+                    "kept for it; counted here, not listed",
+            params={"lost": n, "source": gap.source, "source_id": gap.source_id,
+                    "from_seq": gap.first, "to_seq": gap.last})
+
+    def _write(self, events: list[Event], now_s: float) -> list[Event]:
         if not events:
-            return
+            return events
         lines = [msgspec.json.encode(ev) for ev in events]
         for ev in events:
-            self._note(ev)
+            self._note(ev, now_s)
         if self.path is None:
             self._memory.extend(lines)
-            return
+            return events
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with self.path.open("ab") as f:
             f.write(b"".join(line + b"\n" for line in lines))
+        return events
 
     def lines(self) -> list[bytes]:
         """Every journalled event as its JSON text, oldest first."""

@@ -2,16 +2,24 @@
 
 - **The journal**: every event of the rover, kept on disk for the whole session (a flood of
   rejections is summarised, and the summary says so), answered to
-  ``get lunaris/<rover>/faults/journal`` (``?last=N`` for the latest N).
+  ``get lunaris/<rover>/faults/journal`` (``?last=N`` for the latest N). Each service
+  publishes its events on its own key, ``lunaris/<rover>/event/<service>`` (which the access
+  control lets only that service write); an event whose ``source`` is not that service is
+  refused and said in a ``critical`` event. Each event journalled goes out again, unchanged,
+  on ``lunaris/<rover>/event``: the journal's stream (complete, authenticated, floods
+  summarised), which this service's own events join the same way.
 - **The faults in effect**: ``get lunaris/<rover>/faults`` is answered by asking each owning
   service for its own record (``lunaris/<rover>/faults/active/<service>``, see
-  ``common.fault_book``) at the time of the query and merging the answers. A fault whose
+  ``common.fault_book``) at the time of the query and merging the answers. An owner the rover
+  file implies that does not answer (stopped, or behind a cut link) is named in an error
+  reply beside the list, never left out silently (SPEC §12f). A fault whose
   effect is on the telemetry is therefore in the answer: its owner applied it, and recorded
   it, before publishing the effect. Nothing is kept here that could go stale.
 - **The gatekeeper** for what no other service owns: an instructor key for a rover no
   service serves, a fault on an unknown component, an input or command the twin does not
-  have (a traverse for a rover without a ``drive`` section). Each is rejected with an event,
-  like every other bad input.
+  have (a traverse for a rover without a ``drive`` section), a write whose key holds a
+  wildcard (``lunaris/**``: every service drops it, see ``Runtime.on_wildcard``). Each is
+  rejected with an event, like every other bad input, once.
 - **Session controls** (``control/reset``, ``control/snapshot/<name>``,
   ``control/restore/<name>``): every service acts on its own state (``common.session``);
   this one answers a reset or a snapshot with the one ``session`` event that marks it in the
@@ -41,12 +49,14 @@ from common.messages import (
     SnapshotInfo,
     decode,
     decode_input,
+    encode,
 )
-from common.runtime import Runtime, Sample
+from common.reasons import shown
+from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
 from services.faults.journal import Journal
 
-__all__ = ["serve"]
+__all__ = ["fault_owners", "serve"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
 # The heads of the keys that instructors, scenarios and dashboards write.
@@ -58,11 +68,26 @@ SESSION_MESSAGES = {
 }
 
 
+def fault_owners(rover: Rover) -> set[str]:
+    """The services that own the faults of a rover's components, as its file implies them."""
+    owners = {"battery"}
+    if rover.loads:
+        owners.add("loads")
+    if rover.rails:
+        owners.add("power")
+    if rover.solar.panels or rover.umbilical.power_w > 0 or rover.umbilical.connected:
+        owners.add("solar")
+    if rover.radios:
+        owners.add("radio")
+    return owners
+
+
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     folder = rt.store.dir
-    journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None)
-                for r in rovers}
+    journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None,
+                              rover=r.id) for r in rovers}
     drives = {r.id: r.drive is not None for r in rovers}
+    owners = {r.id: fault_owners(r) for r in rovers}
     live_rovers: set[str] = set()
     session = rt.session
     assert session is not None
@@ -76,11 +101,29 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         keys.service("*", "*"), on_token, history=True))
 
     def on_event(s: Sample) -> None:
-        journals[s.rover].record(decode(s.payload, Event), time.monotonic())
+        """An event a service published on its own key: journalled and relayed on the rover's
+        ``event`` key if its ``source`` is that service, refused (and said) if not."""
+        ev = decode(s.payload, Event)
+        if len(s.parts) != 2 or ev.source != s.parts[1]:
+            rt.event(s.rover, "critical", "rejected", s.key,
+                     f"forged event refused: published on {s.key}, the key of the "
+                     f"{s.parts[-1]} service, it claims to come from {shown(ev.source)} "
+                     f"({ev.kind}: {shown(ev.message)}); not journalled")
+            return
+        relay(s.rover, journals[s.rover].record(ev, time.monotonic()))
+
+    def relay(rover: str, written: list[Event]) -> None:
+        """What the journal wrote, unchanged, on ``lunaris/<rover>/event``: the journal's
+        stream (complete, authenticated, floods summarised)."""
+        for ev in written:
+            rt.publish_bytes(keys.event(rover), encode(ev), zenoh.Encoding.APPLICATION_JSON,
+                             reliable=True, cache=EVENT_CACHE)
 
     def end_floods(force: bool = False) -> None:
-        for journal in journals.values():
-            journal.tick(time.monotonic() if not force else float("inf"))
+        """Summaries of the floods that have ended (all of them, ``force``), and the events
+        that never came back counted."""
+        for rover, journal in journals.items():
+            relay(rover, journal.tick(time.monotonic(), flood_over=force))
 
     def on_instructor_key(s: Sample) -> None:
         if s.rover not in rt.rovers and s.rover not in live_rovers:
@@ -90,7 +133,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if s.parts[0] == "fault":
             check_component(s.parts[1:])  # the owner of a known component answers the rest
             return
-        if s.parts[0] == "control":
+        if s.parts[0] == "control":  # answered here alone (the others follow: common.session)
+            refusal = rt.refusal(s)
+            if refusal is not None:
+                raise BadInput(refusal)
             on_control(s)
             return
         family = keys.family_of(s.parts)
@@ -101,6 +147,16 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if family.owner == "drive" and not drives[s.rover]:
             raise BadInput(f"rover {s.rover} has no drive section in its rover file: it does not "
                            "drive, so it cannot follow a traverse")
+
+    def on_wildcard(s: Sample) -> None:
+        """A write on a key naming many (``lunaris/**``): no service took it; refused once, in
+        words, for each rover served here that it reaches."""
+        verb = "delete" if s.deleted else "put"
+        expr = zenoh.KeyExpr(s.key)
+        for rover in sorted(rt.rovers):
+            if zenoh.KeyExpr(keys.under(rover)).intersects(expr):
+                rt.reject(rover, s.key, f"a {verb} on {s.key} names many keys (it holds a wildcard: "
+                                        "*, ** or $*); a write names exactly one key. Nothing changed")
 
     def on_control(s: Sample) -> None:
         if s.parts == ["control", "scenario"]:  # a scenario's progress, for the journal
@@ -154,8 +210,10 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     lines = journal.lines()
                     if last is not None:
                         lines = lines[-int(last):] if int(last) else []
+                    # megabytes for a long session: never dropped behind a burst of events
                     q.reply(key, b"[" + b",".join(lines) + b"]",
-                            encoding=zenoh.Encoding.APPLICATION_JSON)
+                            encoding=zenoh.Encoding.APPLICATION_JSON,
+                            congestion_control=zenoh.CongestionControl.BLOCK)
 
     def on_faults_query(q: zenoh.Query) -> None:
         # Answered on Zenoh's thread: the owners are asked at once, and the query is
@@ -165,6 +223,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             q.drop()
             return
         gathered: dict[str, list[ActiveFault]] = {r: [] for r in wanted}
+        answered: dict[str, set[str]] = {r: set() for r in wanted}
         lock = threading.Lock()
 
         def on_reply(reply: zenoh.Reply) -> None:
@@ -175,6 +234,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             with lock:
                 if rover in gathered:
                     gathered[rover].extend(answer.faults)
+                    answered[rover].add(answer.service)
 
         def on_done() -> None:
             with q:
@@ -182,6 +242,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     faults = sorted(gathered[rover], key=lambda f: (f.since_t_s, f.key))
                     q.reply(keys.faults(rover), msgspec.json.encode(faults),
                             encoding=zenoh.Encoding.APPLICATION_JSON)
+                    for service in sorted(owners[rover] - answered[rover]):
+                        q.reply_err(f"the {service} service of {rover} did not answer within "
+                                    f"{GATHER_TIMEOUT_S:g} s: its faults are not listed")
 
         rover_chunk = wanted[0] if len(wanted) == 1 else "*"
         session.get(keys.faults_active(rover_chunk, "*"),
@@ -189,7 +252,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     consolidation=zenoh.ConsolidationMode.NONE,
                     timeout=GATHER_TIMEOUT_S)
 
-    rt.subscribe(keys.event("*"), on_event, history=True)
+    rt.on_wildcard(on_wildcard)
+    rt.subscribe(keys.event_of("*", "*"), on_event, history=True)
     for rover, journal in journals.items():
         if journal.damage:
             rt.state_damaged(rover, f"faults journal of {rover} damaged: {journal.damage}",
@@ -205,8 +269,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         on_instructor_key(s)
 
     for head in WRITABLE:
-        rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True)
-    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True, telemetry=True)
+        rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True, writes="gate")
+    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True, telemetry=True, writes="gate")
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
     rt.queryable(keys.snapshots("*"), on_snapshots_query)

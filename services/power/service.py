@@ -50,6 +50,7 @@ class _Held(NamedTuple):
     cmd: RailCommand
     tick_t: float | None  # the rover's newest tick of loads when it came
     until: float  # monotonic time it is applied anyway
+    actor: str = "instructor"  # who sent it (its answer says so)
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
@@ -103,7 +104,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                                          "reset" if c.cmd.reset else None) if w)
             now = states.get(c.rail, "?")
             rt.event(rover, "info", "command", c.key, f"rail {c.rail}: {what}; the rail is now {now}",
-                     {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now})
+                     {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now}, actor=c.actor)
 
     def on_load(s: Sample) -> None:
         m = models[s.rover]
@@ -152,7 +153,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         cmd = decode_input(s.payload, RailCommand, bare=BARE_FIELD[RailCommand])
         if cmd.on is None and not cmd.reset:
             raise BadInput('give {"on": true|false} or {"reset": true}')
-        c = _Held(s.key, rail, cmd, newest.get(s.rover), time.monotonic() + RESET_HOLD_S)
+        c = _Held(s.key, rail, cmd, newest.get(s.rover), time.monotonic() + RESET_HOLD_S, rt.actor(s))
         if cmd.reset or s.rover in held:  # judged on the next tick's loads (in order)
             held.setdefault(s.rover, []).append(c)
             return

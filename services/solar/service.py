@@ -106,11 +106,11 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         distance_m = m.move_rover(state.x_m, state.y_m, state.z_m)
         if distance_m is not None:
             publish(s.rover)
-            # TODO(lead): actor="twin" once Event.actor lands (harden-input, D4)
             rt.event(s.rover, "warning", "input", keys.input_umbilical(s.rover),
                      f"umbilical unplugged: the rover drove {distance_m:.1f} m from where it was "
                      f"plugged in, past its {m.cable_m:g} m cable",
-                     {"connected": False, "distance_m": distance_m, "cable_m": m.cable_m})
+                     {"connected": False, "distance_m": distance_m, "cable_m": m.cable_m},
+                     actor="twin")
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.input_sun_angle("*"), on_sun)

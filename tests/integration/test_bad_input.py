@@ -108,24 +108,24 @@ def test_bad_input_is_rejected_and_changes_nothing(probe, key, payload):
     rover = key.split("/")[1]
     fresh_tick(probe)
     before = snapshot(probe)
-    seen = len(probe.samples(keys.event(rover)))
+    seen = len(probe.events(rover))
     probe.put(key, payload)
     rejection = probe.wait_event(rover, lambda e: e["kind"] == "rejected" and e["key"] == key
-                                 and probe.samples(keys.event(rover)).index(e) >= seen)
+                                 and probe.events(rover).index(e) >= seen)
     assert rejection["severity"] == "warning" and rejection["message"].startswith("rejected: ")
     assert len(rejection["message"]) > len("rejected: ") + 5  # a reason, in words
     fresh_tick(probe)
     assert snapshot(probe) == before
-    accepted = [e for e in probe.samples(keys.event(rover))[seen:]
+    accepted = [e for e in probe.events(rover)[seen:]
                 if e["kind"] in ("fault_injected", "command", "clock")]
     assert accepted == []
 
 
 def test_clearing_a_fault_that_is_not_active_is_rejected(probe):
     key = f"{P}/fault/battery/heating"
-    seen = len(probe.samples(keys.event(R)))
+    seen = len(probe.events(R))
     probe.delete(key)
-    e = probe.wait_event(R, lambda e: e["key"] == key and probe.samples(keys.event(R)).index(e) >= seen)
+    e = probe.wait_event(R, lambda e: e["key"] == key and probe.events(R).index(e) >= seen)
     assert e["kind"] == "rejected" and "no active fault" in e["message"]
 
 
@@ -137,4 +137,4 @@ def test_every_service_is_alive_and_publishing_after_all_that(probe, mapp_twin):
     probe.wait_value(keys.battery_state(R), lambda b: b["t_s"] > t)
     (faults,) = probe.get_json(keys.faults(R))
     assert faults == []
-    assert "internal_error" not in {e["kind"] for e in probe.samples(keys.event(R))}
+    assert "internal_error" not in {e["kind"] for e in probe.events(R)}

@@ -27,7 +27,7 @@ PANEL_W = 1361 * 0.12 * 0.29 * 0.5  # 23.68 W at the 60 deg sun of mapp.yaml
 @pytest.fixture
 def probe(mapp_twin):
     p, _ = mapp_twin
-    p.history.clear()
+    p.clear_history()
     yield p
 
 
@@ -38,10 +38,10 @@ def fault_key(component: str, kind: str) -> str:
 def inject(p: Probe, component: str, kind: str, payload=b"") -> dict:
     """Put the fault and return the event that answers this very put."""
     key = fault_key(component, kind)
-    seen = len(p.samples(keys.event(R)))
+    seen = len(p.events(R))
     p.put(key, payload)
     return p.wait_event(R, lambda e: e["key"] == key and e["kind"] in ("fault_injected", "rejected")
-                        and p.samples(keys.event(R)).index(e) >= seen)
+                        and p.events(R).index(e) >= seen)
 
 
 def clear(p: Probe, component: str, kind: str) -> None:
@@ -291,7 +291,7 @@ def test_a_restarted_service_keeps_its_injected_faults(twin_factory, probe_solo,
     p.wait_value(keys.load_power(R, "drive_motors"), lambda v: v["power_w"] == 77.5)
     twin.procs["loads"].kill()
     twin.procs["loads"].wait()
-    p.history.clear()
+    p.clear_history()
     twin.start("loads")  # same state folder, as lunaris up restarts it
     wait_for(lambda: [s["power_w"] for s in p.samples(keys.load_power(R, "drive_motors"))][-3:]
              == [77.5] * 3, what="the restarted loads service to keep drive_motors stuck")

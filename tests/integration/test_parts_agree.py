@@ -71,6 +71,7 @@ def test_a_rover_that_drives_past_its_cable_is_unplugged_with_an_event(twin_fact
     event = p.wait_event(R, lambda e: e["key"] == keys.input_umbilical(R)
                          and "unplugged" in e["message"], timeout_s=30)
     assert event["source"] == "solar" and event["params"]["connected"] is False
+    assert event["actor"] == "twin"  # the twin unplugged it, not the instructor (SPEC §12e)
     assert 1.5 < event["params"]["distance_m"] < 1.6 and event["params"]["cable_m"] == 1.5
     p.wait_value(keys.umbilical_state(R), lambda v: not v["connected"] and v["power_w"] == 0)
     drive = p.value(keys.drive_state(R))

@@ -55,7 +55,7 @@ def test_reset_puts_every_service_back_to_the_rover_file(twin):
     p.wait_value(keys.solar_power(R, "left"), lambda s: s["sun_angle_deg"] == 60)
     p.wait_value(keys.radio_link(R, "lander"), lambda r: r["in_range"] and r["x_m"] == 0)
     wait_for(lambda: p.get_json(keys.faults(R)) == [[]], 5, "no fault in effect")
-    cleared = {e["key"] for e in p.samples(keys.event(R)) if e["kind"] == "fault_cleared"}
+    cleared = {e["key"] for e in p.events(R) if e["kind"] == "fault_cleared"}
     assert {keys.fault(R, "battery", "heating"), keys.fault(R, "load/nav_camera", "short")} <= cleared
 
 

@@ -69,8 +69,8 @@ def test_the_twin_rejecting_is_printed_and_exits_1(live):
 @pytest.mark.parametrize("args, code, message", [
     (["inject", R, "battery", "heating", "hot"], 1, "VALUE must be a number or a JSON object, got 'hot'"),
     (["inject", R, "battery", "heating", "[1]"], 1, "VALUE must be a number or a JSON object"),
-    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: heat_w must be at least 0.0"),
-    (["inject", R, "solar/left", "dust", "30"], 1, "solar/left dust: fraction must be at most 1.0"),
+    (["inject", R, "battery", "heating", "-3"], 1, "battery heating: heat_w must be at least 0 (got -3)"),
+    (["inject", R, "solar/left", "dust", "30"], 1, "solar/left dust: fraction must be at most 1 (got 30)"),
     (["inject", R, "fault/*", "heating", "3"], 1, "is a wildcard: a write names exactly one key"),
     (["inject", R, "battery", "melt"], 1, "unknown battery fault kind 'melt'"),
     (["inject", R, "wheel/left", "flat"], 1, "unknown component 'wheel'"),

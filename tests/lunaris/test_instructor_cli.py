@@ -76,7 +76,7 @@ def test_inputs_sun_panel_position_umbilical(live):
     assert run_tool("input", R, "radio/lander/position", "0", "0", "--connect", ep).returncode == 0
     # Refused before sending, in the Struct's words; refused by the twin, in its words.
     bad = run_tool("input", R, "sun_angle", "500", "--connect", ep)
-    assert bad.returncode == 1 and "angle_deg must be at most 360" in bad.stderr
+    assert bad.returncode == 1 and "angle_deg must be at most 360 (got 500)" in bad.stderr
     bad = run_tool("input", R, "solar/middle/sun_angle", "5", "--connect", ep)
     assert bad.returncode == 1 and "has no panel 'middle'" in bad.stdout
     bad = run_tool("input", R, "drive/traverse", '{"waypoints": [{"x_m": 1, "y_m": 0, "z_m": 0}]}',

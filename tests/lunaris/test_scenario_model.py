@@ -140,7 +140,7 @@ def test_a_bad_scenario_reports_every_problem_with_its_path():
         "steps[0]: give at_s or after_s, not both",
         "steps[0].inject.component: rover mapp-1 has no load 'nav_cam'",
         "steps[1]: give a trigger: at_s, after_s or when",
-        "steps[1].inject.value: Expected `float` >= 0.0",
+        "steps[1].inject.value: heat_w must be at least 0",
         "steps[2].timeout_s: must be > 0.0, got 0",
         "steps[2]: give an action",
         "steps[2].when: unknown field 'charge' of battery",

@@ -70,7 +70,7 @@ def _run(path: Path, *args: str, timeout_s: float = 60) -> tuple[subprocess.Comp
 
 def test_a_scenario_plays_every_step_at_its_time_or_condition(live, tmp_path):
     p, ep = live.probe, live.endpoint
-    p.history.clear()
+    p.clear_history()
     path = tmp_path / "drill.yaml"
     path.write_text(SCENARIO)
     try:
@@ -106,7 +106,7 @@ def test_a_scenario_plays_every_step_at_its_time_or_condition(live, tmp_path):
         }
 
         # the twin's own journal agrees with the player's times
-        journal = {(e["kind"], e["key"]): e["t_s"] - t0 for e in p.samples(keys.event(R))}
+        journal = {(e["kind"], e["key"]): e["t_s"] - t0 for e in p.events(R)}
         for kind, key, label in (
                 ("fault_injected", keys.fault(R, "solar/left", "dust"), "dust"),
                 ("fault_injected", keys.fault(R, "load/nav_camera", "short"), "short once the sun is low"),
@@ -172,7 +172,7 @@ steps:
 
 def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_path):
     p, ep = live.probe, live.endpoint
-    p.history.clear()
+    p.clear_history()
     scenario = ROOT / "config" / "scenarios" / "shorted-camera.yaml"
     summary_path = tmp_path / "summary.json"
     proc = subprocess.Popen(lunaris_cmd("scenario", "run", str(scenario), "--time-scale", "30",

@@ -54,7 +54,7 @@ def whole_twin(twin_factory, probe_solo, tmp_path):
 
 
 def events(p: Probe, kind: str | None = None, key: str | None = None) -> list[dict]:
-    return [e for e in p.samples(keys.event(R))
+    return [e for e in p.events(R)
             if (kind is None or e["kind"] == kind) and (key is None or e["key"] == key)]
 
 

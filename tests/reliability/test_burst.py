@@ -43,7 +43,8 @@ def test_every_write_of_the_tools_and_every_event_blocks_rather_than_drops(whole
     p, _ = whole_twin
     seen: list = []
     subs = [p.session.declare_subscriber(k, seen.append)
-            for k in (keys.under(R, "fault/**"), keys.event(R), keys.under(R, "input/**"))]
+            for k in (keys.under(R, "fault/**"), keys.event(R), keys.event_of(R, "*"),
+                      keys.under(R, "input/**"))]
     try:
         out = subprocess.run(lunaris_cmd("fault", "inject", R, "battery", "heating", "3",
                                          "--connect", p.endpoint),

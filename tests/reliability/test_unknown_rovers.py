@@ -29,7 +29,8 @@ def flood(p: Probe, prefix: str, n: int) -> None:
     """Put on n rover ids nobody serves and wait for every rejection."""
     rejected: set[str] = set()
     sub = p.session.declare_subscriber(
-        keys.event("*"), lambda s: rejected.add(str(s.key_expr)) if prefix in str(s.key_expr) else None)
+        keys.event_of("*", "faults"),
+        lambda s: rejected.add(str(s.key_expr)) if prefix in str(s.key_expr) else None)
     try:
         for i in range(n):
             write(p.session, keys.input_sun_angle(f"{prefix}-{i}"), "10")

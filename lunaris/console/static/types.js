@@ -91,12 +91,13 @@
  * @property {number} t_s
  * @property {"critical" | "info" | "warning"} severity
  * @property {string} source
- * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "rejected" | "scenario" | "session" | "state_damaged"} kind
+ * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "journal_gap" | "rejected" | "scenario" | "session" | "state_damaged"} kind
  * @property {string} key
  * @property {string} message
  * @property {Record<string, unknown> | null} [params]
  * @property {string} [source_id]
  * @property {number} [seq]
+ * @property {string} [actor]
  */
 /**
  * @typedef {Object} LoadPower
