@@ -18,7 +18,7 @@ import pytest
 import zenoh
 
 from common import keys
-from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router, static_rover
+from tests.harness import ALL_SERVICES, Probe, Twin, open_router, router_endpoint, static_rover
 
 # Tests never read an operator's Zenoh configuration.
 os.environ.pop("LUNARIS_ZENOH_CONFIG", None)
@@ -91,11 +91,11 @@ def _unit_tests_stay_in_process(request: pytest.FixtureRequest, monkeypatch: pyt
 
 @pytest.fixture
 def router():
-    """An embedded Zenoh router on a free loopback port; yields its endpoint."""
-    endpoint = free_endpoint()
-    session = open_router(endpoint)
+    """An embedded Zenoh router on a loopback port of the system's choosing; yields its
+    endpoint."""
+    session = open_router()
     try:
-        yield endpoint
+        yield router_endpoint(session)
     finally:
         session.close()
 
@@ -153,9 +153,9 @@ def mapp_twin(tmp_path_factory, static_mapp_file):
     """(probe, twin): every service for mapp-1 (without its drive) on a router of their own,
     shared by one module. The probe watches every lunaris key; tests must undo what they
     change."""
-    endpoint = free_endpoint()
-    router = open_router(endpoint)
+    router = open_router()
     try:
+        endpoint = router_endpoint(router)
         with Twin(endpoint, [static_mapp_file], tmp_path_factory.mktemp("twin")) as t, \
                 Probe(endpoint) as p:
             p.watch("lunaris/**")
