@@ -64,7 +64,7 @@ reference: $(TEST_STAMP)
 # says how long make test took, set-up included.
 test: $(TEST_STAMP) system-deps lint typecheck
 	rm -f .coverage .coverage.*
-	@status=0; $(BIN)/pytest -n $(WORKERS) --dist loadscope --cov --cov-report=term || status=$$?; \
+	@status=0; $(BIN)/pytest -n $(WORKERS) --dist loadgroup --cov --cov-report=term || status=$$?; \
 	  took=$$(( $$(date +%s) - $(START) )); \
 	  echo "make test took $$((took / 60)) min $$((took % 60)) s ($$took s, $(WORKERS) workers)"; \
 	  exit $$status

@@ -2,7 +2,7 @@
 
 Every test is ``unit`` (in this process: no Zenoh session, no Lunaris process) or ``twin``
 (real processes: a router, the services, the CLI); ``browser`` and ``ros2`` also mark the twin tests
-that drive Chromium or real ROS 2 software. ``pytest -m unit`` runs in seconds. A test's kind
+that drive Chromium or real ROS 2 software. ``pytest -m unit`` waits on nothing. A test's kind
 is its own mark or its module's ``pytestmark``, else :data:`KINDS` by its path; a module in no
 folder listed is taken as ``twin`` (slow is the safe guess). A ``unit`` test that opens a Zenoh
 session or runs Lunaris in a process fails, saying so.
@@ -54,11 +54,30 @@ def kinds_of(path: Path) -> tuple[str, ...]:
     return KINDS[max(found, key=len)] if found else ("twin",)
 
 
+# Folders in the order their tests are handed out: the longest first (the models' CPU-bound
+# tests, then the long twin tests), so that on parallel workers no long test starts last.
+FIRST = ("services", "reliability", "lunaris", "integration", "deploy", "console")
+
+
+def _rank(item: pytest.Item) -> int:
+    folder = item.path.resolve().relative_to(TESTS).parts[0]
+    return FIRST.index(folder) if folder in FIRST else len(FIRST)
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Each test's kinds; on parallel workers (``--dist loadgroup``) the tests of a module that
+    share a fixture of a wider scope than the test's (a module's twin) go to one worker, which
+    starts it once; the rest are handed out one by one, in the order of :data:`FIRST`."""
     for item in items:
         if not any(item.get_closest_marker(k) for k in KIND_MARKS):
             for kind in kinds_of(item.path):
                 item.add_marker(kind)
+        info = getattr(item, "_fixtureinfo", None)
+        defs = info.name2fixturedefs.values() if info is not None else ()
+        if any(d.scope in ("class", "module", "package") for fds in defs for d in fds):
+            item.add_marker(pytest.mark.xdist_group(item.path.resolve().relative_to(TESTS).as_posix()))
+    items.sort(key=_rank)  # stable: a module's tests stay together, in their order
 
 
 def _lunaris_process(args: object) -> bool:
