@@ -9,6 +9,7 @@ requirements pyproject.toml lists and the installed packages declare.
 
 from __future__ import annotations
 
+import os
 import re
 import shlex
 import shutil
@@ -31,9 +32,11 @@ if shutil.which("make") is None:
 
 
 def dry_run(target: str, tmp_path: Path, *variables: str) -> list[str]:
-    """The commands ``make -n target`` would run on a fresh clone (no virtual environment)."""
+    """The commands ``make -n target`` would run on a fresh clone (no virtual environment), as
+    typed in a shell (not the settings of a make that runs these tests)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MAKEFLAGS", "MFLAGS", "MAKELEVEL")}
     out = subprocess.run(["make", "-n", target, f"VENV={tmp_path / 'venv'}", *variables], cwd=ROOT,
-                         capture_output=True, text=True, timeout=30, check=True)
+                         capture_output=True, text=True, timeout=30, check=True, env=env)
     return out.stdout.splitlines()
 
 
