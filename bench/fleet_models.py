@@ -59,7 +59,7 @@ def measure(rovers: list[Rover]) -> tuple[float, float, float, float]:
         m = fleet.models[rover]
         for key, (name, power_w, rail, on) in zip(load_keys[rover], m.powers(), strict=True):
             (key, encode(LoadPower(t_s=1.0, power_w=power_w, rail=rail, on=on,
-                                   faults=m.fault_names(name))))
+                                   faults=m.alarms(name, power_w))))
 
     pdms = {r.id: PowerModel(r) for r in rovers}
     for rover, pdm in pdms.items():

@@ -210,10 +210,20 @@ class Solar(Strict, frozen=True):
 
 
 class Umbilical(Strict, frozen=True):
-    """A wired supply from the lander or a charging station."""
+    """A wired supply from the lander or a charging station: a cable. A rover that drives
+    farther than cable_m from where it was plugged in pulls it out (the twin unplugs it, with
+    an event); a traverse does not start while it is plugged in, unless the cable follows the
+    rover (follows_rover)."""
 
     connected: Annotated[bool, doc("plugged in at the start")] = False
     power_w: Annotated[NonNegative, doc("what the connection can supply [W]")] = 0.0
+    cable_m: Annotated[NonNegative | None, doc(
+        "the cable's reach from where it was plugged in [m, straight line in the site frame]; "
+        "none: no slack, the rover cannot drive while plugged in")] = None
+    follows_rover: Annotated[bool, doc(
+        "the cable pays out behind the rover (a tether): a traverse may start while plugged "
+        "in, and the rover is unplugged once farther than cable_m from where it was plugged "
+        "in (needs cable_m); false: a traverse is refused while plugged in")] = False
 
 
 class RadioSite(Strict, frozen=True):
@@ -232,6 +242,10 @@ class Radio(Strict, frozen=True):
     b_m: Annotated[Positive, doc("ellipse semi-axis along y [m]")]
     offset_x_m: Annotated[float, doc("ellipse centre offset along x [m]")] = 0.0
     offset_y_m: Annotated[float, doc("ellipse centre offset along y [m]")] = 0.0
+    load: Annotated[Name | None, doc(
+        "the load that powers the rover's end of this link: while it has no power (its rail "
+        "off, tripped, failed or shed, or the load's circuit open) the radio is out of range; "
+        "none: always powered")] = None
     site: Annotated[RadioSite | None, doc(
         "where the radio stands in the site frame; on a rover with a drive section the radio "
         "then follows the rover's position (drive/state) and refuses the position input")] = None
@@ -348,29 +362,45 @@ def _semantic_problems(d: dict) -> list[str]:
         _curve_rules(curve, problems)
     if raw_battery is not None and isinstance(raw_battery, dict):
         _circuit_rules(battery, curve, problems)
-    rails = [r for r in (_typed(x, Rail) for x in _list(d.get("rails"))) if r is not None]
-    loads = [x for x in (_typed(x, Load) for x in _list(d.get("loads"))) if x is not None]
-    solar = _typed(d.get("solar"), Solar)
-    radios = [x for x in (_typed(x, Radio) for x in _list(d.get("radios"))) if x is not None]
+    # Names are read from every entry that has one, well formed or not: a load on a rail
+    # that does not exist is reported beside whatever else is wrong in the file.
+    rail_names = _names(d.get("rails"))
+    load_names = _names(d.get("loads"))
     for i, raw in enumerate(_list(d.get("rails"))):
         rail = _typed(raw, Rail)
         if rail is not None:
             _rail_rules(i, rail, problems)
-    all_rails_typed = len(rails) == len(_list(d.get("rails")))
     for i, raw in enumerate(_list(d.get("loads"))):
-        load = _typed(raw, Load)
-        if load is not None:
-            _load_rules(i, load, [r.name for r in rails], all_rails_typed, problems)
-    rail_names = [r.name for r in rails] + ([solar.rail.name] if solar is not None else [])
+        _load_rules(i, raw, rail_names, problems)
+    solar = _typed(d.get("solar"), Solar)
+    raw_solar = d.get("solar")
+    solar_rail = raw_solar.get("rail") if isinstance(raw_solar, dict) else None
+    if isinstance(solar_rail, dict) and isinstance(solar_rail.get("name"), str):
+        rail_names = [*rail_names, solar_rail["name"]]
     _unique("rails", rail_names, problems)
-    _unique("loads", [ld.name for ld in loads], problems)
+    _unique("loads", load_names, problems)
     if solar is not None:
         _unique("solar.panels", [p.name for p in solar.panels], problems)
-    _unique("radios", [r.name for r in radios], problems)
+    _unique("radios", _names(d.get("radios")), problems)
+    for i, raw in enumerate(_list(d.get("radios"))):
+        load = raw.get("load") if isinstance(raw, dict) else None
+        if isinstance(load, str) and load not in load_names:
+            problems.append(f"radios[{i}].load: no load named {load!r} "
+                            f"(loads: {', '.join(load_names) or 'none'})")
+    umbilical = _typed(d.get("umbilical"), Umbilical)
+    if umbilical is not None and umbilical.follows_rover and umbilical.cable_m is None:
+        problems.append("umbilical.follows_rover: a cable that follows the rover needs its "
+                        "length, cable_m")
     drive = _typed(d.get("drive"), Drive)
-    if drive is not None and len(loads) == len(_list(d.get("loads"))):
-        _drive_rules(drive, loads, problems)
+    if drive is not None:
+        loads = [x for x in (_typed(x, Load) for x in _list(d.get("loads"))) if x is not None]
+        _drive_rules(drive, load_names, loads, problems)
     return problems
+
+
+def _names(value: object) -> list[str]:
+    """The names of a list section's entries that have one (a string)."""
+    return [x["name"] for x in _list(value) if isinstance(x, dict) and isinstance(x.get("name"), str)]
 
 
 def _list(value: object) -> list:
@@ -451,22 +481,27 @@ def _rail_rules(i: int, r: Rail, problems: list[str]) -> None:
         problems.append(f"rails[{i}].shed_below_soc: an essential rail is never shed")
 
 
-def _load_rules(i: int, ld: Load, rail_names: list[str], rails_known: bool,
-                problems: list[str]) -> None:
-    if rails_known and ld.rail not in rail_names:
-        problems.append(f"loads[{i}].rail: no rail named {ld.rail!r} "
+def _load_rules(i: int, raw: object, rail_names: list[str], problems: list[str]) -> None:
+    rail = raw.get("rail") if isinstance(raw, dict) else None
+    if isinstance(rail, str) and rail not in rail_names:
+        problems.append(f"loads[{i}].rail: no rail named {rail!r} "
                         f"(rails: {', '.join(rail_names) or 'none'})")
-    if ld.nominal_w > ld.max_w:
+    ld = _typed(raw, Load)
+    if ld is not None and ld.nominal_w > ld.max_w:
         problems.append(f"loads[{i}].nominal_w: must not exceed max_w ({ld.max_w}), "
                         f"got {ld.nominal_w}")
 
 
-def _drive_rules(drive: Drive, loads: list[Load], problems: list[str]) -> None:
-    load = next((ld for ld in loads if ld.name == drive.load), None)
-    if load is None:
+def _drive_rules(drive: Drive, load_names: list[str], loads: list[Load],
+                 problems: list[str]) -> None:
+    """``loads``: the loads that are well formed (the idle power is checked against the drive
+    load's max_w when that load is one of them)."""
+    if drive.load not in load_names:
         problems.append(f"drive.load: no load named {drive.load!r} "
-                        f"(loads: {', '.join(ld.name for ld in loads) or 'none'})")
-    elif drive.idle_w >= load.max_w:
+                        f"(loads: {', '.join(load_names) or 'none'})")
+        return
+    load = next((ld for ld in loads if ld.name == drive.load), None)
+    if load is not None and drive.idle_w >= load.max_w:
         problems.append(f"drive.idle_w: must be below the max_w of load {load.name} "
                         f"({load.max_w:g} W), or the rover could never move; got {drive.idle_w:g}")
 

@@ -12,12 +12,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 from pathlib import Path
 
 import zenoh
 
 __all__ = ["DEFAULT_ENDPOINT", "TX_QUEUE_SIZE", "ConnectionConfigError", "add_connection_args",
-           "config_from_args", "make_config", "write"]
+           "config_from_args", "is_demo_password", "make_config", "write"]
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 CONFIG_ENV = "LUNARIS_ZENOH_CONFIG"
@@ -94,6 +95,13 @@ def config_from_args(args: argparse.Namespace, mode: str = "client") -> zenoh.Co
 
 
 DEMO_MARK = "CHANGE-ME"
+_DEMO = re.compile(r"(^|[^a-z0-9])demo|change-?me", re.IGNORECASE)
+
+
+def is_demo_password(password: str) -> bool:
+    """A password marked as a shipped demo one, in any case: ``demo-...``, ``Demo-...``,
+    ``...-demo-...``, anything holding ``CHANGE-ME``."""
+    return _DEMO.search(password) is not None
 
 
 def _refuse_demo_password(conf: zenoh.Config, path: Path) -> None:
@@ -102,7 +110,7 @@ def _refuse_demo_password(conf: zenoh.Config, path: Path) -> None:
         password = json.loads(conf.get_json("transport/auth/usrpwd/password"))
     except (zenoh.ZError, ValueError):
         return
-    if isinstance(password, str) and DEMO_MARK in password:
+    if isinstance(password, str) and is_demo_password(password):
         raise ConnectionConfigError(
             f"{path} holds a shipped demo password: make the deployment's secrets with "
             "`lunaris deploy secrets DIR` and use its client configurations")

@@ -4,9 +4,10 @@ A fault's whole life happens in the service that owns its component (SPEC §6): 
 battery service owns ``fault/battery/**``, the loads service ``fault/load/**`` and so
 on. Its :class:`FaultBook`
 
-- validates an injection or clearing (the component's name, the kind, the parameters),
-  has the model apply it (``apply(rover, key, params)``; ``params`` None clears), and
-  journals it as an event;
+- validates an injection or clearing (the component's name, the kind, the parameters,
+  decoded once into the kind's typed Struct, :data:`common.faults.Fault`), hands the model
+  the faults now in effect on that component (``apply(rover, name, faults)``: the model
+  applies them and keeps no record of its own), and journals it as an event;
 - raises and resolves the faults the models derive themselves, on transitions;
 - persists the injected faults, so a restarted service re-applies them;
 - publishes ``lunaris/<rover>/faults/active/<service>`` on every change (cached for late
@@ -27,7 +28,7 @@ import msgspec
 import zenoh
 
 from common import keys
-from common.faults import FaultKey, Params, params_from_dict, parse_fault_key, parse_params
+from common.faults import Fault, FaultKey, params_from_dict, parse_fault_key, parse_params
 from common.messages import ActiveFault, ActiveFaults, BadInput, Severity, encode
 
 if TYPE_CHECKING:
@@ -35,14 +36,22 @@ if TYPE_CHECKING:
 
 __all__ = ["FaultApply", "FaultBook"]
 
-FaultApply = Callable[[str, FaultKey, Params | None], None]  # rover, key, params (None: clear)
+# rover, the component's name (None for battery and umbilical), every fault in effect on it
+FaultApply = Callable[[str, str | None, tuple[Fault, ...]], None]
 Names = Callable[[str], Iterable[str]]
+
+
+def _target(path: str) -> tuple[str, str | None]:
+    """The component a fault's path names: ``load/nav_camera/short`` -> ``(load, nav_camera)``,
+    ``battery/heating`` -> ``(battery, None)``."""
+    parts = path.split("/")
+    return parts[0], (parts[1] if len(parts) == 3 else None)
 
 
 class FaultBook:
     def __init__(self, rt: Runtime):
         self.rt = rt
-        self.injected: dict[str, dict[str, tuple[ActiveFault, Params]]] = {r: {} for r in rt.rovers}
+        self.injected: dict[str, dict[str, tuple[ActiveFault, Fault]]] = {r: {} for r in rt.rovers}
         self.derived: dict[str, dict[str, ActiveFault]] = {r: {} for r in rt.rovers}
         self._appliers: dict[str, FaultApply] = {}
         self._declared = False
@@ -51,7 +60,8 @@ class FaultBook:
 
     def own(self, component: str, names: Names | None, apply: FaultApply) -> None:
         """Own the faults of one component type (``battery``, ``load`` ...). ``names(rover)``
-        lists the instances of a named type; ``apply`` changes the model."""
+        lists the instances of a named type; ``apply(rover, name, faults)`` gives the model
+        every fault in effect on one instance, after each injection or clearing."""
         self._declare()
         self._appliers[component] = apply
 
@@ -68,7 +78,16 @@ class FaultBook:
         # The owner answers for every key of its component, well formed or not.
         self.rt.subscribe(keys.fault_prefix("*", component), on_fault, urgent=True)
 
-    def _inject(self, rover: str, key: str, fk: FaultKey, params: Params) -> None:
+    def in_effect(self, rover: str, component: str, name: str | None) -> tuple[Fault, ...]:
+        """The injected faults in effect on one component (``load``, ``nav_camera``), in the
+        order they were first injected: what its model is given."""
+        return tuple(params for path, (_, params) in self.injected[rover].items()
+                     if _target(path) == (component, name))
+
+    def _apply(self, rover: str, fk: FaultKey) -> None:
+        self._appliers[fk.component](rover, fk.name, self.in_effect(rover, fk.component, fk.name))
+
+    def _inject(self, rover: str, key: str, fk: FaultKey, params: Fault) -> None:
         active = self.injected[rover]
         previous = active.get(fk.path)
         # Injecting again replaces the parameters; the fault has been active since the first.
@@ -79,7 +98,7 @@ class FaultBook:
         active[fk.path] = (ActiveFault(key, as_dict, since, "injected"), params)
         self._publish(rover)
         try:
-            self._appliers[fk.component](rover, fk, params)
+            self._apply(rover, fk)
         except BaseException:
             if previous is None:
                 del active[fk.path]
@@ -96,8 +115,12 @@ class FaultBook:
         active = self.injected[rover]
         if fk.path not in active:
             raise BadInput(f"no active fault {fk.path} to clear")
-        self._appliers[fk.component](rover, fk, None)
-        del active[fk.path]
+        cleared = active.pop(fk.path)
+        try:
+            self._apply(rover, fk)
+        except BaseException:
+            active[fk.path] = cleared
+            raise
         self._changed(rover)
         self.rt.event(rover, "info", "fault_cleared", key, f"cleared {fk.path}")
 
@@ -121,15 +144,16 @@ class FaultBook:
         for rover, faults in saved.items():
             if rover not in self.injected:
                 continue
+            touched: dict[tuple[str, str | None], FaultKey] = {}
             for path, raw in faults.items():
                 fault = msgspec.convert(raw, ActiveFault)
                 fk = parse_fault_key(path.split("/"))
-                apply = self._appliers.get(fk.component)
-                if apply is None:
+                if fk.component not in self._appliers:
                     continue
-                params = params_from_dict(fk, fault.params)
-                apply(rover, fk, params)
-                self.injected[rover][path] = (fault, params)
+                self.injected[rover][path] = (fault, params_from_dict(fk, fault.params))
+                touched[(fk.component, fk.name)] = fk
+            for fk in touched.values():  # each component once, given all of its faults
+                self._apply(rover, fk)
             self._publish(rover)
 
     # -- derived faults ----------------------------------------------------------------------
@@ -181,10 +205,6 @@ class FaultBook:
 
     def _message(self, rover: str) -> ActiveFaults:
         return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover))
-
-    def publish_all(self) -> None:
-        for rover in sorted(self.injected):
-            self._publish(rover)
 
     def _declare(self) -> None:
         if self._declared:

@@ -1,109 +1,165 @@
-"""The fault catalogue of SPEC §6 and the battery ``fault_code`` table.
+"""The fault catalogue of SPEC §6, each kind's typed parameters, and the ``fault_code`` table.
 
 A fault key is ``lunaris/<rover>/fault/<component>/<kind>`` where ``<component>``
 is ``battery``, ``umbilical`` or ``<type>/<name>`` for ``load``, ``rail``,
-``solar`` and ``radio``. Each kind has a parameter Struct; one-parameter kinds
-also accept a bare JSON number; parameterless kinds accept only an empty payload
-(or ``{}``).
+``solar`` and ``radio``. Each kind has its parameter Struct, named after it
+(``Dust(fraction)``, ``Heating(heat_w)``, ``Short(resistance_ohm)``, ``Disconnect()`` ...),
+all members of one tagged union, :data:`Fault`, whose tags are the kinds' names: the
+catalogue (:data:`CATALOGUE`) is built from the Structs, so a kind is named in one place.
+An injection's payload is decoded once, at the boundary (:func:`parse_params`: one-parameter
+kinds also accept a bare JSON number; parameterless kinds accept only an empty payload or
+``{}``), and from there on a fault is a value of :data:`Fault`: the fault book
+(:mod:`common.fault_book`) keeps it, and hands a model the faults in effect on each of its
+components, which the model applies with ``match`` (``case Dust(fraction=f): ...``).
+
+On the wire a fault's parameters are a JSON object without the tag (``{"fraction": 0.3}``,
+``msgspec.structs.asdict``): the kind is the last chunk of its key.
 """
 
 from __future__ import annotations
 
-from typing import Annotated, NamedTuple
+from collections.abc import Iterable
+from typing import Annotated, NamedTuple, TypeAlias
 
 import msgspec
 
-from common.messages import BadInput, decode_input
+from common import keys
+from common.messages import ActiveFault, BadInput, decode_input
 
 __all__ = [
     "CATALOGUE",
     "DERIVED",
     "FAULT_CODES",
     "NAMED_COMPONENTS",
-    "FactorParams",
+    "RETIRED_CODES",
+    "CapacityLoss",
+    "Degraded",
+    "Disconnect",
+    "Dust",
+    "Fail",
+    "Failure",
+    "Fault",
     "FaultKey",
-    "FractionParams",
-    "HeatParams",
+    "FaultParams",
+    "Heating",
     "KindSpec",
     "NoParams",
-    "Params",
-    "RangeScaleParams",
-    "ShortParams",
-    "StuckParams",
+    "Open",
+    "Resistance",
+    "Short",
+    "Stuck",
     "battery_fault_code",
     "check_component",
-    "fault_of",
+    "injected",
+    "kind_of",
     "params_from_dict",
     "parse_fault_key",
     "parse_params",
+    "supplies_device",
 ]
 
 
-class Params(msgspec.Struct, forbid_unknown_fields=True, frozen=True):
-    """The parameters of one fault kind; the model that owns the component reads them."""
+class FaultParams(msgspec.Struct, forbid_unknown_fields=True, frozen=True, tag_field="kind"):
+    """The parameters of one fault kind; the Struct's tag is the kind's name."""
 
 
-_Params = Params
+class NoParams(FaultParams, frozen=True):
+    """Base of the kinds that take no parameters."""
 
 
-class NoParams(_Params, frozen=True):
-    pass
-
-
-class FractionParams(_Params, frozen=True):
+class CapacityLoss(FaultParams, frozen=True, tag="capacity_loss"):
     fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 
 
-class FactorParams(_Params, frozen=True):
+class Resistance(FaultParams, frozen=True, tag="resistance"):
     factor: Annotated[float, msgspec.Meta(ge=1.0, le=1e6)]
 
 
-class HeatParams(_Params, frozen=True):
+class Heating(FaultParams, frozen=True, tag="heating"):
     heat_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
 
 
-class ShortParams(_Params, frozen=True):
+class Disconnect(NoParams, frozen=True, tag="disconnect"):
+    pass
+
+
+class Short(FaultParams, frozen=True, tag="short"):
     resistance_ohm: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)] = 0.05
 
 
-class StuckParams(_Params, frozen=True):
+class Open(NoParams, frozen=True, tag="open"):
+    pass
+
+
+class Stuck(FaultParams, frozen=True, tag="stuck"):
     power_w: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
 
 
-class RangeScaleParams(_Params, frozen=True):
+class Fail(NoParams, frozen=True, tag="fail"):
+    pass
+
+
+class Dust(FaultParams, frozen=True, tag="dust"):
+    fraction: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+
+
+class Failure(NoParams, frozen=True, tag="failure"):
+    pass
+
+
+class Degraded(FaultParams, frozen=True, tag="degraded"):
     range_scale: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
 
 
+# Every fault of the catalogue: what the fault book keeps and the models match on.
+Fault: TypeAlias = (CapacityLoss | Resistance | Heating | Disconnect | Short | Open | Stuck | Fail
+                    | Dust | Failure | Degraded)
+
+
 class KindSpec(NamedTuple):
-    params: type[_Params]
+    params: type[FaultParams]
     bare: str | None  # the field a bare JSON number stands for
     description: str
 
+    @property
+    def kind(self) -> str:
+        """The kind's name: its Struct's tag."""
+        return kind_of(self.params)
 
-_NONE = NoParams
+
+def kind_of(params: FaultParams | type[FaultParams]) -> str:
+    """The name of a fault kind (``dust``), from its Struct or a value of it."""
+    tag = params.__struct_config__.tag
+    assert isinstance(tag, str)
+    return tag
+
+
+def _kinds(*specs: KindSpec) -> dict[str, KindSpec]:
+    return {spec.kind: spec for spec in specs}
+
 
 CATALOGUE: dict[str, dict[str, KindSpec]] = {
-    "battery": {
-        "capacity_loss": KindSpec(FractionParams, "fraction", "usable capacity shrinks"),
-        "resistance": KindSpec(FactorParams, "factor", "internal resistance multiplied"),
-        "heating": KindSpec(HeatParams, "heat_w", "extra internal heat"),
-        "disconnect": KindSpec(_NONE, None, "pack off the bus"),
-    },
-    "load": {
-        "short": KindSpec(ShortParams, "resistance_ohm", "draws V_rail^2 / R"),
-        "open": KindSpec(_NONE, None, "draws nothing"),
-        "stuck": KindSpec(StuckParams, "power_w", "draws a constant power"),
-    },
-    "rail": {"fail": KindSpec(_NONE, None, "converter dead")},
-    "solar": {
-        "dust": KindSpec(FractionParams, "fraction", "output scaled by 1 - fraction"),
-        "disconnect": KindSpec(_NONE, None, "no output"),
-    },
-    "umbilical": {"disconnect": KindSpec(_NONE, None, "no supply")},
-    "radio": {
-        "failure": KindSpec(_NONE, None, "never in range"),
-        "degraded": KindSpec(RangeScaleParams, "range_scale", "ellipse axes scaled"),
-    },
+    "battery": _kinds(
+        KindSpec(CapacityLoss, "fraction", "usable capacity shrinks"),
+        KindSpec(Resistance, "factor", "internal resistance multiplied"),
+        KindSpec(Heating, "heat_w", "extra internal heat"),
+        KindSpec(Disconnect, None, "pack off the bus"),
+    ),
+    "load": _kinds(
+        KindSpec(Short, "resistance_ohm", "draws V_rail^2 / R (the device behind it gets nothing)"),
+        KindSpec(Open, None, "draws nothing (the device behind it gets nothing)"),
+        KindSpec(Stuck, "power_w", "draws a constant power"),
+    ),
+    "rail": _kinds(KindSpec(Fail, None, "converter dead")),
+    "solar": _kinds(
+        KindSpec(Dust, "fraction", "output scaled by 1 - fraction"),
+        KindSpec(Disconnect, None, "no output"),
+    ),
+    "umbilical": _kinds(KindSpec(Disconnect, None, "no supply")),
+    "radio": _kinds(
+        KindSpec(Failure, None, "never in range"),
+        KindSpec(Degraded, "range_scale", "ellipse axes scaled"),
+    ),
 }
 
 NAMED_COMPONENTS = frozenset({"load", "rail", "solar", "radio"})
@@ -146,38 +202,66 @@ def parse_fault_key(parts: list[str]) -> FaultKey:
     return FaultKey(component, parts[1] if named else None, kind)
 
 
-def fault_of(path: str, params: dict | None = None) -> tuple[FaultKey, Params | None]:
-    """A fault and its typed parameters from its path (``load/nav_camera/short``) and JSON
-    parameters; ``params`` None stands for a clearing. For callers that hold a model directly
-    (the composed twin, tests)."""
-    fk = parse_fault_key(path.split("/"))
-    return fk, None if params is None else params_from_dict(fk, params)
-
-
-def parse_params(key: FaultKey, payload: bytes) -> Params:
-    """Decode and validate the parameters of an injection into the kind's Struct."""
+def parse_params(key: FaultKey, payload: bytes) -> Fault:
+    """Decode and validate the parameters of an injection into its kind's Struct."""
     spec = CATALOGUE[key.component][key.kind]
-    if spec.params is NoParams:
+    if issubclass(spec.params, NoParams):
         text = bytes(payload).strip()
         if text not in (b"", b"{}"):
             raise BadInput(f"{key.component} {key.kind} takes no parameters, got {text[:60]!r}")
-        return NoParams()
-    return decode_input(payload, spec.params, bare=spec.bare)
+        return spec.params()  # type: ignore[return-value]  # a member of Fault
+    return decode_input(payload, spec.params, bare=spec.bare)  # type: ignore[return-value]
 
 
-def params_from_dict(key: FaultKey, params: dict) -> Params:
-    """The typed parameters of a fault from their JSON object (a persisted fault)."""
+def params_from_dict(key: FaultKey, params: dict) -> Fault:
+    """The typed parameters of a fault from their JSON object (a persisted fault, a record
+    read back from ``faults/active/<service>``)."""
     try:
-        return msgspec.convert(params, CATALOGUE[key.component][key.kind].params)
+        return msgspec.convert(params, CATALOGUE[key.component][key.kind].params)  # type: ignore[return-value]
     except msgspec.ValidationError as exc:
         raise BadInput(f"{key.path}: {exc}") from None
 
 
+def injected(record: Iterable[ActiveFault], component: str, name: str | None = None) -> list[Fault]:
+    """The injected faults a record of faults in effect (``faults/active/<service>``, the
+    fault book's) holds for one component (``load``, ``nav_camera``), typed; derived faults
+    and other components' are left out."""
+    out = []
+    for fault in record:
+        if fault.origin != "injected":
+            continue
+        _, parts = keys.split(fault.key)
+        parts = parts[1:]  # after fault/
+        if parts[:1] != [component] or (name is not None and parts[1:2] != [name]):
+            continue
+        fk = parse_fault_key(parts)
+        out.append(params_from_dict(fk, fault.params))
+    return out
+
+
+def supplies_device(load_on: bool, faults: Iterable[FaultParams]) -> bool:
+    """Whether the device behind a load (a radio, the drive's motors) has power: its rail is
+    on, and no fault cuts it off (an open circuit, or a short across it; a ``stuck`` load
+    misreports its power, the device still runs)."""
+    if not load_on:
+        return False
+    for fault in faults:
+        match fault:
+            case Open() | Short():
+                return False
+    return True
+
+
 # -- derived faults: raised by the models themselves ----------------------------------------
+# These, and only these, are what telemetry's ``faults`` fields and ``fault_code`` carry (SPEC
+# §12b): what the rover's own sensors and protection would report. The injected faults live
+# in the fault book (``faults/active/<service>``, ``get faults``), which the crew never reads.
 
 DERIVED: dict[str, dict[str, str]] = {
     "battery": {
         "thermal_cutoff": "pack above cutoff_c: it disconnected itself (back on below max_c)",
+        "no_output": "the pack supplies nothing though none of its protections switched it off "
+                     "(its connection to the bus is open): bus at 0 V",
         "depleted": "state of charge at or below depleted_soc (back on line with hysteresis)",
         "brownout": "demand beyond what the pack can deliver (P > V_oc^2 / 4R, or the current "
                     "limit)",
@@ -192,16 +276,24 @@ DERIVED: dict[str, dict[str, str]] = {
         "tripped": "current above current_limit_a: off until reset",
         "shed": "shed below shed_below_soc (restored at restore_above_soc)",
     },
+    "load/<name>": {
+        "over_current": "drawing more than its max_w (normally for a moment: its rail trips)",
+    },
+    "radio/<name>": {
+        "unpowered": "the radio's load has no power (rail off, tripped, failed or shed, or the "
+                     "load's circuit open): never in range",
+    },
 }
 
 
 # -- the battery fault_code table (SPEC §6: 0 nominal and 5 depleted are fixed) --------------
-# When several faults are active the battery reports the most severe: the first in this table.
+# Only the pack's own alarms (DERIVED["battery"]) have a code. When several are active the
+# battery reports the most severe: the first in this table.
 
 FAULT_CODES: list[tuple[str, int, str]] = [
-    # (fault name, code, meaning)
+    # (alarm, code, meaning)
     ("thermal_cutoff", 6, "pack above cutoff_c: disconnected itself"),
-    ("disconnected", 7, "pack off the bus (injected disconnect)"),
+    ("no_output", 7, "pack off the bus: it supplies nothing, none of its protections tripped"),
     ("depleted", 5, "state of charge at or below depleted_soc"),
     ("under_voltage_cutoff", 12, "terminal voltage under load below the cut-off: pack switched off"),
     ("brownout", 4, "demand beyond what the pack can deliver (P > Voc^2 / 4R)"),
@@ -209,16 +301,19 @@ FAULT_CODES: list[tuple[str, int, str]] = [
     ("under_voltage", 3, "terminal voltage below the empty-cell voltage"),
     ("over_temperature", 1, "pack above max_c"),
     ("under_temperature", 2, "pack below min_c"),
-    ("heating", 11, "injected extra heat (failed thermal control)"),
-    ("resistance", 10, "injected internal resistance increase"),
-    ("capacity_loss", 9, "injected capacity loss"),
 ]
-_CODE = {name: code for name, code, _ in FAULT_CODES}
+# Codes no longer sent, never to be given another meaning (a recording may hold them).
+RETIRED_CODES: list[tuple[int, str]] = [
+    (9, "was: an injected capacity loss (now seen as a smaller capacity_j)"),
+    (10, "was: an injected resistance increase (now seen as a deeper voltage sag)"),
+    (11, "was: injected heating (now seen as a rising temperature, then over_temperature)"),
+]
 
 
-def battery_fault_code(active: list[str] | set[str]) -> int:
-    """The dashboard's single integer for a set of active battery faults (0 when nominal)."""
+def battery_fault_code(active: Iterable[str]) -> int:
+    """The dashboard's single integer for the pack's active alarms (0 when nominal)."""
+    names = set(active)
     for name, code, _ in FAULT_CODES:
-        if name in active:
+        if name in names:
             return code
     return 0

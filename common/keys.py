@@ -20,6 +20,7 @@ from typing import Literal, NamedTuple
 import msgspec
 
 from common import messages as m
+from common.scenario_progress import ScenarioProgress
 
 __all__ = [
     "FAMILIES",
@@ -286,6 +287,7 @@ FAMILIES: tuple[Family, ...] = (
     _f("cmd/rail/{rail}", m.RailCommand, "power"),
     _f("clock/control", m.ClockControl, "clock"),
     _f("prediction", m.Prediction, "battery", "query"),
+    _f("scenario/progress", ScenarioProgress, "*", "out"),  # put by the scenario runner (a tool)
 )
 
 

@@ -2,7 +2,7 @@
 
 :class:`Player` is stepped with the simulated time and a lookup of the latest telemetry
 and returns the writes to make, so a scenario can be played in a test without a twin.
-The shell that plays it against the running twin is ``lunaris scenario run``.
+The runner that plays it against the running twin is :class:`lunaris.client.runner.Runner`.
 """
 
 from __future__ import annotations
@@ -15,22 +15,53 @@ import msgspec
 
 from common import keys
 from common.conditions import Lookup, parse_condition
+from common.messages import (
+    ClockControl,
+    RadioPosition,
+    RailCommand,
+    SunAngle,
+    UmbilicalInput,
+)
 from common.scenario import Scenario, Step
+from common.writes import Write, answer_of
 
-__all__ = ["Player", "StepResult", "StepStatus", "Write", "describe_action", "describe_trigger"]
+__all__ = ["Player", "StepResult", "StepStatus", "StepWrite", "describe_action", "describe_trigger"]
 
 StepStatus = Literal["waiting", "armed", "fired", "ramping", "done", "timed out", "not fired"]
 
 
 @dataclass(frozen=True)
-class Write:
-    """A put (``payload`` bytes) or a delete (``payload`` None) the player asks for."""
+class StepWrite:
+    """A write the player asks for (:class:`common.writes.Write`: the key, the payload, None
+    for a delete, the event that accepts it and who sends it), for step ``step``; ``final`` is
+    False for the values of a ramp before its last."""
 
-    key: str
-    payload: bytes | None
+    write: Write
     step: int
-    answer: str | None = None  # the event kind that accepts it (fault_injected ...), if any
-    final: bool = True  # False for the intermediate values of a ramp
+    final: bool = True
+
+    @property
+    def key(self) -> str:
+        return self.write.key
+
+    @property
+    def payload(self) -> bytes | None:
+        return self.write.payload
+
+    @property
+    def accepted(self) -> str:
+        return self.write.accepted
+
+
+def _write(rover: str, tail: str, payload: bytes | None, step: int, final: bool = True) -> StepWrite:
+    parts = tail.split("/")
+    accepted, owner = answer_of(parts, payload is None)
+    return StepWrite(Write(keys.under(rover, tail), payload, accepted, owner), step, final)
+
+
+def _encode(struct: msgspec.Struct) -> bytes:
+    """A typed input, with the fields it does not set left out."""
+    return msgspec.json.encode({k: v for k, v in msgspec.structs.asdict(struct).items() if v is not None})
 
 
 @dataclass
@@ -42,7 +73,7 @@ class StepResult:
     armed_t_s: float | None = None  # when its time gate opened (relative to the start)
     fired_t_s: float | None = None  # relative to the start
     status: StepStatus = "waiting"
-    outcome: str = ""  # accepted, rejected, sent, no answer ... (set by the shell)
+    outcome: str = ""  # accepted, rejected, not applied, reached (set by the runner)
     detail: str = ""
 
 
@@ -144,13 +175,13 @@ class Player:
             return None if prev is None else prev + step.after_s
         return 0.0
 
-    def tick(self, t_s: float, lookup: Lookup) -> list[Write]:
+    def tick(self, t_s: float, lookup: Lookup) -> list[StepWrite]:
         if self.finished:
             return []
         if self.t0 is None:
             self.t0 = t_s
         t = self.t_rel = t_s - self.t0
-        writes: list[Write] = []
+        writes: list[StepWrite] = []
         for i, step in enumerate(self.scenario.steps):
             r = self.results[i]
             if r.status not in ("waiting", "armed"):
@@ -252,36 +283,33 @@ class Player:
                 r.status = "fired"
                 r.detail = (r.detail + "; " if r.detail else "") + "ramp cut short"
 
-    def writes_of(self, i: int, since_s: float, final: bool = True) -> list[Write]:
-        """The writes of step ``i``'s action, ``since_s`` after it fired (for ramps)."""
+    def writes_of(self, i: int, since_s: float, final: bool = True) -> list[StepWrite]:
+        """The writes of step ``i``'s action, ``since_s`` after it fired (for ramps). The twin
+        checks them as it checks every write, and answers."""
         rover, step = self.rover, self.scenario.steps[i]
         if step.inject is not None:
-            key = keys.fault(rover, step.inject.component.strip("/"), step.inject.kind)
             value = step.inject.value
-            payload = b"" if value is None else json.dumps(value).encode()
-            return [Write(key, payload, i, "fault_injected")]
+            payload = b"" if value is None else msgspec.json.encode(value)
+            return [_write(rover, f"fault/{step.inject.component.strip('/')}/{step.inject.kind}", payload, i)]
         if step.clear is not None:
-            return [Write(keys.fault(rover, step.clear.component.strip("/"), step.clear.kind), None, i,
-                          "fault_cleared")]
+            return [_write(rover, f"fault/{step.clear.component.strip('/')}/{step.clear.kind}", None, i)]
         if step.sun_angle is not None:
-            body = {"angle_deg": _at(step.sun_angle, since_s)}
-            return [Write(keys.input_sun_angle(rover), json.dumps(body).encode(), i, None, final)]
+            body = _encode(SunAngle(angle_deg=_at(step.sun_angle, since_s)))
+            return [_write(rover, "input/sun_angle", body, i, final)]
         if step.position is not None:
             p = step.position
-            body = {"distance_m": _at(p.distance_m, since_s), "angle_deg": _at(p.angle_deg, since_s)}
-            return [Write(keys.input_radio_position(rover, p.radio), json.dumps(body).encode(), i, None,
-                          final)]
+            body = _encode(RadioPosition(distance_m=_at(p.distance_m, since_s),
+                                         angle_deg=_at(p.angle_deg, since_s)))
+            return [_write(rover, f"input/radio/{p.radio}/position", body, i, final)]
         if step.umbilical is not None:
-            body = {"connected": step.umbilical}
-            return [Write(keys.input_umbilical(rover), json.dumps(body).encode(), i)]
+            return [_write(rover, "input/umbilical", _encode(UmbilicalInput(connected=step.umbilical)), i)]
         if step.clock is not None:
-            body = {k: v for k, v in msgspec.structs.asdict(step.clock).items() if v is not None}
-            return [Write(keys.clock_control(rover), json.dumps(body).encode(), i, "clock")]
+            body = _encode(ClockControl(time_scale=step.clock.time_scale, paused=step.clock.paused))
+            return [_write(rover, "clock/control", body, i)]
         if step.rail is not None:
-            body = {k: v for k, v in msgspec.structs.asdict(step.rail).items()
-                    if k != "name" and v is not None}
-            return [Write(keys.cmd_rail(rover, step.rail.name), json.dumps(body).encode(), i, "command")]
+            body = _encode(RailCommand(on=step.rail.on, reset=step.rail.reset))
+            return [_write(rover, f"cmd/rail/{step.rail.name}", body, i)]
         if step.traverse is not None:
-            traverse = json.dumps(step.traverse).encode() if isinstance(step.traverse, dict) else None
-            return [Write(keys.input_drive_traverse(rover), traverse, i, "input")]
+            traverse = msgspec.json.encode(step.traverse) if isinstance(step.traverse, dict) else None
+            return [_write(rover, "input/drive/traverse", traverse, i)]
         return []

@@ -1,72 +1,143 @@
 """An instructor's write on the twin, checked as the twin will check it, before it is sent.
 
-Every tool that writes on the twin's keys (``lunaris rail``, ``clock``, ``input``, the
-console's HTTP API) validates the write here with the very Structs and catalogue the
-services decode it with (:mod:`common.messages`, :mod:`common.faults`,
-:func:`common.session.parse_control`), so what the tool refuses the twin would have refused,
-for the same reason, in the same words. What only the twin knows (the names of its loads,
-rails, panels and radios, whether it drives) is the twin's to refuse, with a ``rejected``
-event.
+Every tool that writes on the twin's keys (``lunaris fault``, ``rail``, ``clock``, ``input``,
+``reset``, ``snapshot``, ``traverse``, the scenario player, the console's HTTP API) plans the
+write here: :func:`plan_write` checks the key (exactly one key: no wildcard chunk, DECISIONS
+D2) and the payload with the very Structs and catalogue the services decode it with
+(:mod:`common.messages`, :mod:`common.faults`, :func:`common.session.parse_control`), so what
+the tool refuses the twin would have refused, for the same reason. What only the twin knows
+(the names of its loads, rails, panels and radios, whether it drives) is the twin's to
+refuse, with a ``rejected`` event.
+
+:func:`answer_of` is the one table of which event answers a write, and which service sends it.
 """
 
 from __future__ import annotations
 
+import re
 from typing import NamedTuple
 
 import msgspec
 
 from common import keys
+from common.datafile import ID_PATTERN, NAME_PATTERN
 from common.faults import parse_fault_key, parse_params
 from common.messages import BARE_FIELD, BadInput, ScenarioMark, decode_input
 from common.session import parse_control
 
-__all__ = ["DELETABLE", "Write", "check_write"]
+__all__ = ["DELETABLE", "FAULT_OWNERS", "Write", "answer_of", "check_chunks", "plan_write"]
 
 # The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
 # gone, the rover stopped.
 DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
+# The service that owns (and answers for) each component type of the fault catalogue.
+FAULT_OWNERS = {"battery": "battery", "load": "loads", "rail": "power", "solar": "solar",
+                "umbilical": "solar", "radio": "radio"}
 _ACCEPTED = {"cmd": "command", "clock": "clock", "input": "input"}
+_CHUNK = re.compile(NAME_PATTERN)
+_ROVER = re.compile(ID_PATTERN)
 
 
 class Write(NamedTuple):
-    """A checked write: the payload to send (None: a delete) and the event that accepts it."""
+    """A write on one key of the twin: the key, the payload to send (None: a delete), the
+    event kind that accepts it and the service that answers it."""
 
+    key: str
     payload: bytes | None
     accepted: str
+    owner: str
+
+    @property
+    def rover(self) -> str:
+        return keys.split(self.key)[0]
+
+    @property
+    def tail(self) -> str:
+        """The key under ``lunaris/<rover>/``: ``fault/battery/heating``."""
+        return "/".join(keys.split(self.key)[1])
 
 
-def check_write(parts: list[str], payload: bytes | None) -> Write:
-    """Check a put (``payload`` bytes) or delete (None) on ``lunaris/<rover>/<parts>``; raise
-    :class:`BadInput` saying what is wrong. The payload returned is the checked one, re-encoded."""
+def check_chunks(rover: str, parts: list[str]) -> None:
+    """Refuse a key that is not exactly one key of a rover: a wildcard chunk (``*``, ``**``,
+    ``$*``), a verbatim (``@``) chunk, or any character a key of the twin never holds."""
+    for chunk in [rover, *parts]:
+        if "*" in chunk:
+            raise BadInput(f"the key chunk {chunk!r} is a wildcard: a write names exactly one key "
+                           "(no '*', '**' or '$*')")
+        if chunk.startswith("@"):
+            raise BadInput(f"the key chunk {chunk!r} is a verbatim chunk ('@'): no key of the twin "
+                           "has one")
+        if not _CHUNK.match(chunk):
+            raise BadInput(f"the key chunk {chunk!r} holds characters no key of the twin has "
+                           "(letters, digits, '_', '-' and '.' only)")
+    if not _ROVER.match(rover):
+        raise BadInput(f"bad rover id {rover!r}: lower-case letters, digits, '_' and '-'")
+
+
+def answer_of(parts: list[str] | tuple[str, ...], delete: bool) -> tuple[str, str]:
+    """(event kind that accepts, service that answers) a write on ``lunaris/<rover>/<parts>``;
+    :class:`BadInput` for a key no service reads. The one table every writer uses."""
     if not parts:
         raise BadInput("no key")
     head = parts[0]
     if head == "fault":
+        fk = parse_fault_key(list(parts[1:]))
+        return ("fault_cleared" if delete else "fault_injected"), FAULT_OWNERS[fk.component]
+    if head == "control":
+        return ("scenario" if list(parts) == ["control", "scenario"] else "session"), "faults"
+    family = keys.family_of(list(parts))
+    if family is None or family.direction != "in" or head not in _ACCEPTED:
+        writable = ", ".join(f.name for f in keys.families("in"))
+        raise BadInput(f"no such input or command {'/'.join(parts)!r} (the twin reads: {writable}, "
+                       "fault/..., control/...)")
+    return _ACCEPTED[head], family.owner
+
+
+def plan_write(rover: str, parts: list[str] | str, payload: bytes | None) -> Write:
+    """Check a put (``payload`` bytes) or delete (None) on ``lunaris/<rover>/<parts>``; raise
+    :class:`BadInput` saying what is wrong. The payload planned is the checked one, re-encoded."""
+    if isinstance(parts, str):
+        parts = [p for p in parts.split("/") if p]
+    try:
+        return _plan(rover, list(parts), payload)
+    except BadInput:
+        raise
+    except UnicodeError:
+        raise BadInput("the payload holds text that is not valid Unicode (a lone surrogate)") from None
+    except (ValueError, OverflowError, RecursionError) as exc:
+        if "digits" in str(exc):
+            raise BadInput("the payload holds a number with thousands of digits: no input takes "
+                           "one") from None
+        raise BadInput(f"the payload cannot be read: {exc}") from None
+
+
+def _plan(rover: str, parts: list[str], payload: bytes | None) -> Write:
+    check_chunks(rover, parts)
+    accepted, owner = answer_of(parts, payload is None)
+    key = keys.under(rover, "/".join(parts))
+    head = parts[0]
+    if head == "fault":
         fk = parse_fault_key(parts[1:])
         if payload is None:
-            return Write(None, "fault_cleared")
-        params = parse_params(fk, payload)
-        return Write(msgspec.json.encode(params), "fault_injected")
+            return Write(key, None, accepted, owner)
+        return Write(key, msgspec.json.encode(parse_params(fk, payload)), accepted, owner)
     if head == "control":
         if parts == ["control", "scenario"]:
             if payload is None:
                 raise BadInput("a scenario mark is a put")
-            return Write(msgspec.json.encode(decode_input(payload, ScenarioMark)), "scenario")
+            return Write(key, msgspec.json.encode(decode_input(payload, ScenarioMark)), accepted, owner)
         if parse_control(parts) is None:
             raise BadInput(f"no such control {'/'.join(parts)!r} (control/reset, "
                            "control/snapshot/<name>, control/restore/<name>; a name is letters, "
                            "digits, '_', '-' and '.', at most 64)")
         if payload is None:
             raise BadInput("a session control is a put, not a delete")
-        return Write(b"", "session")
+        return Write(key, b"", accepted, owner)
     family = keys.family_of(parts)
-    if family is None or family.direction != "in":
-        writable = ", ".join(f.name for f in keys.families("in"))
-        raise BadInput(f"no such input or command {'/'.join(parts)!r} (the twin reads: {writable}, "
-                       "fault/..., control/...)")
+    assert family is not None  # answer_of refused the rest
     if payload is None:
         if family.name not in DELETABLE:
             raise BadInput(f"{family.name} takes a put, not a delete")
-        return Write(None, _ACCEPTED[head])
+        return Write(key, None, accepted, owner)
     value = decode_input(payload, family.payload, bare=BARE_FIELD.get(family.payload))
-    return Write(msgspec.json.encode(value), _ACCEPTED[head])
+    return Write(key, msgspec.json.encode(value), accepted, owner)

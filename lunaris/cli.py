@@ -1,14 +1,15 @@
 """The ``lunaris`` command line (SPEC §8).
 
 Each command is a module of this package with ``add_arguments(parser)`` and
-``main(args) -> int``; they are imported only when used, so ``lunaris check``
-does not pay for Zenoh and ``lunaris watch`` does not pay for the services.
+``main(args) -> int``; they are imported only when used, so ``lunaris watch`` does not pay for
+the services. A command whose reader goes away (``lunaris pdm | head``) ends quietly.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import re
 import sys
 
@@ -54,14 +55,32 @@ def main(argv: list[str] | None = None) -> int:
         p = sub.add_parser(name, help=help_text, description=help_text)
         if name == chosen:  # only the chosen command's module is imported
             importlib.import_module(module).add_arguments(p)
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except BrokenPipeError:  # the help, read by a reader that went
+        _quiet_stdout()
+        return 0
     try:
         return int(importlib.import_module(COMMANDS[args.command][0]).main(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader of our output has gone (| head): nothing more to say
+        _quiet_stdout()
+        return 0
     except (zenoh.ZError, ConnectionConfigError) as exc:  # a port in use, a bad endpoint or file
         print(f"lunaris {args.command}: {_zenoh_message(exc)}", file=sys.stderr)
         return 1
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's last flush does not fail again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    finally:
+        os.close(devnull)
 
 
 def _zenoh_message(exc: Exception) -> str:

@@ -10,10 +10,8 @@ import argparse
 
 import msgspec
 
-from common import keys
-from common.messages import BadInput, ClockControl, decode_input
-from lunaris.confirm import add_common_arguments, confirm, tool_main
-from lunaris.tooling import ToolError
+from lunaris.client import ToolError
+from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
 __all__ = ["add_arguments", "main", "payload"]
 
@@ -27,7 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def payload(action: str, factor: float | None) -> bytes:
-    """The ``clock/control`` payload of an action, checked against :class:`ClockControl`."""
+    """The ``clock/control`` payload of an action (checked when the write is planned)."""
     if action == "scale":
         if factor is None:
             raise ToolError("scale needs a factor: lunaris clock ROVER scale 10", 1)
@@ -36,13 +34,9 @@ def payload(action: str, factor: float | None) -> bytes:
         raise ToolError(f"{action} takes no factor", 1)
     else:
         body = msgspec.json.encode({"paused": action == "pause"})
-    try:
-        decode_input(body, ClockControl)
-    except BadInput as exc:
-        raise ToolError(f"time_scale: {exc}", 1) from None
     return body
 
 
 def main(args: argparse.Namespace) -> int:
-    return tool_main("clock", lambda a: confirm(a, a.rover, keys.clock_control(a.rover),
-                                                payload(a.action, a.factor), "clock"), args)
+    return tool_main("clock", lambda a: confirm(a, "clock", plan(a.rover, "clock/control",
+                                                                 payload(a.action, a.factor))), args)

@@ -1,385 +1,58 @@
 """``lunaris deploy acl|secrets|check``: who may do what in a deployment, and its secrets.
 
-- ``acl`` writes ``deploy/zenohd.json5``: the router's configuration, its access control
-  derived from the code's own table of key families (:data:`common.keys.FAMILIES`: which
-  service publishes which key) and from the bridge mapping (which topics the dashboard
-  reads and writes). Each service kind has its own identity and may publish, answer and
-  announce only its own keys, so no client can forge another's telemetry, ticks, tokens
-  or queryables. ``tests/deploy`` fails when the committed file is stale.
-- ``secrets DIR`` makes what a deployment must not share with anyone: a random password
-  for every identity (``credentials.txt``, the router's dictionary), one client
-  configuration per identity (``client-<identity>.json5``, TLS with the CA inlined) and a
-  certificate authority with the router's certificate (``tls/``, by ``openssl``).
-  ``--rotate USER`` gives one identity a new password and leaves the others. It also makes
-  the console's accounts file, empty (``lunaris console users add`` fills it), and never
-  overwrites it.
-- ``check DIR`` refuses secrets that cannot be trusted: a missing file, a shipped demo
-  password, a short password, a client whose password is not the router's. The
-  deployment runs it first and starts nothing when it fails.
+- ``acl`` writes ``deploy/zenohd.json5``, the router's configuration with its access control
+  (:mod:`lunaris.deploy_acl`); ``tests/deploy`` fails when the committed file is stale.
+  ``--secrets-dir`` points it at the secrets' folder of a machine, to run it outside Docker.
+- ``secrets DIR`` makes the passwords, client configurations and certificates, ``check DIR``
+  refuses what cannot be trusted (:mod:`lunaris.deploy_secrets`).
+- ``--site FILE``: a deployment of several machines, each with a router of its own, from one
+  description (``deploy/site.yaml``, :mod:`lunaris.deploy_site`): every router's identity,
+  certificate, dictionary and configuration, made, rotated and checked
+  (:mod:`lunaris.deploy_routers`).
 """
 
 from __future__ import annotations
 
 import argparse
-import base64
-import json
-import re
-import secrets as random_secrets
-import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
-from common import keys
-from common.connection import TX_QUEUE_SIZE
-from lunaris.deploy_dashboard import (
-    FLEET_FILES,
-    bridge_hears,
-    dashboard_keys,
-    fleet_names,
-    inbound_regexes,
-    rmw_zenoh_config,
-    ros2dds_config,
+from lunaris.deploy_acl import REPO, ROUTER_FILE, ROUTER_SECRETS, acl, render_router_config, router_config
+from lunaris.deploy_dashboard import FLEET_FILES, fleet_names
+from lunaris.deploy_secrets import (
+    MIN_PASSWORD_LEN,
+    check_secrets,
+    client_config,
+    make_secrets,
+    password_problems,
 )
-from services.bridge.bindings import RoverNames
-from services.bridge.mapping import MappingFile, load_mapping
+from lunaris.deploy_site import IDENTITIES, SERVICES
+from services.bridge.mapping import load_mapping
 from services.bridge.service import DEFAULT_MAPPING
 
-__all__ = ["IDENTITIES", "SERVICES", "acl", "add_arguments", "check_secrets", "main",
-           "make_secrets", "router_config"]
-
-SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
-PEOPLE = {
-    "instructor": "injects and clears faults, commands, inputs, time and sessions; reads all",
-    "console": "the instructor console's own identity: what an instructor may do",
-    "observer": "the crew's view: telemetry only (no fault puts, faults, journal or events)",
-    "debrief": "reads everything an instructor reads, writes nothing (an explicit choice)",
-    "dashboard": "the crew's dashboard: reads only the bridge's topics, writes its inbound ones",
-}
-IDENTITIES = tuple(f"lunaris-{s}" for s in SERVICES) + tuple(PEOPLE)
-DEMO_MARK = "CHANGE-ME"
-MIN_PASSWORD_LEN = 16
-ROUTER_SECRETS = "/etc/zenoh/secrets"  # where the router container finds the secrets
-REPO = Path(__file__).resolve().parent.parent
-ROUTER_FILE = REPO / "deploy" / "zenohd.json5"
-
-_TWIN = ["lunaris/**", "lunaris/**/@adv/**"]
-_READ_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
-_READ_OUT = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
-_WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
-             "lunaris/*/clock/control", "lunaris/*/control/**"]
-# What the crew must discover from effects, not read: the instructor's puts, the journal,
-# the faults in effect, the events that name them, the session's snapshots.
-_CREW_HIDDEN = ["lunaris/*/fault/**", "lunaris/*/event", "lunaris/*/event/@adv/**",
-                "lunaris/*/faults", "lunaris/*/faults/**", "lunaris/*/control/**",
-                "lunaris/*/snapshots", "lunaris/*/snapshots/**"]
-
-
-def _pattern(chunks: tuple[str, ...]) -> str:
-    return "/".join(["lunaris", "*", *("*" if c.startswith("{") else c for c in chunks)])
-
-
-def _published(service: str) -> list[str]:
-    """The keys one service kind publishes: its families, its events, its faults in effect."""
-    own = [_pattern(f.chunks) for f in keys.FAMILIES if f.owner == service and f.direction == "out"]
-    return own + ["lunaris/*/event", f"lunaris/*/faults/active/{service}"]
-
-
-def _answered(service: str) -> list[str]:
-    """The queries one service kind answers."""
-    out = [f"lunaris/*/faults/active/{service}", f"lunaris/*/snapshots/{service}"]
-    if service == "faults":
-        out += ["lunaris/*/faults", "lunaris/*/faults/journal", "lunaris/*/snapshots"]
-    if service == "battery":
-        out += ["lunaris/*/prediction"]
-    return out
-
-
-def _rule(rule_id: str, permission: str, flows: list[str], messages: list[str],
-          key_exprs: list[str]) -> dict[str, Any]:
-    return {"id": rule_id, "permission": permission, "flows": flows, "messages": messages,
-            "key_exprs": key_exprs}
-
-
-def acl(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
-    """The router's ``access_control`` section."""
-    reads, writes = dashboard_keys(mf, fleet)
-    hears = bridge_hears(mf, fleet)
-    inbound = sorted({m.key.replace("{rover}", "*") for m in mf.mappings if m.direction == "in"})
-    inbound = [re.sub(r"\{[a-z_]*\}", "*", k) for k in inbound]
-    ros = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
-    dash_adv = [f"{k}/@adv/**" for k in reads]
-    rules = [
-        _rule("read-twin", "allow", ["ingress"], _READ_IN, _TWIN),
-        _rule("deliver-twin", "allow", ["egress"], _READ_OUT, _TWIN),
-        _rule("crew-hidden-deliver", "deny", ["egress"], ["put", "delete", "reply"], _CREW_HIDDEN),
-        _rule("crew-hidden-ask", "deny", ["ingress"], ["query", "declare_subscriber"], _CREW_HIDDEN),
-        _rule("instructor-write", "allow", ["ingress"], ["put", "delete"], _WRITABLE),
-        _rule("instructor-write-matching", "allow", ["egress"], ["declare_subscriber"], _WRITABLE),
-        _rule("dashboard-read", "allow", ["ingress"], _READ_IN, reads + dash_adv + ros),
-        _rule("dashboard-deliver", "allow", ["egress"], _READ_OUT, reads + dash_adv + ros),
-        _rule("dashboard-write", "allow", ["ingress"], ["put", "liveliness_token"], writes + ros[:1]),
-        # what the bridge hears them on (one key expression for the rovers of a bridge serving
-        # several): the dashboard's publishers must see that subscriber, or they never send
-        _rule("dashboard-write-matching", "allow", ["egress"], ["declare_subscriber"],
-              sorted(set(writes) | set(hears))),
-    ]
-    subjects = [{"id": person, "usernames": [person]} for person in PEOPLE]
-    policies = [
-        {"id": "instructor", "subjects": ["instructor", "console"],
-         "rules": ["read-twin", "deliver-twin", "instructor-write", "instructor-write-matching"]},
-        {"id": "debrief", "subjects": ["debrief"], "rules": ["read-twin", "deliver-twin"]},
-        {"id": "observer", "subjects": ["observer"],
-         "rules": ["read-twin", "deliver-twin", "crew-hidden-deliver", "crew-hidden-ask"]},
-        {"id": "dashboard", "subjects": ["dashboard"],
-         "rules": ["dashboard-read", "dashboard-deliver", "dashboard-write", "dashboard-write-matching"]},
-    ]
-    for service in SERVICES:
-        pub = _published(service)
-        answered = _answered(service)
-        adv = [f"{k}/@adv/**" for k in pub]
-        extra_pub: list[str] = []
-        if service == "bridge":  # the dashboard's topics, and the inputs they carry in
-            extra_pub = reads + dash_adv + ["@ros2_lv/**"] + inbound
-        r = f"svc-{service}"
-        rules += [
-            _rule(f"{r}-publish", "allow", ["ingress"], ["put", "delete"], pub + extra_pub),
-            _rule(f"{r}-matching", "allow", ["egress"], ["declare_subscriber"], pub + extra_pub),
-            # A cache answers a late joiner with the samples themselves: replies on pub too.
-            _rule(f"{r}-answer", "allow", ["ingress"], ["declare_queryable", "reply"],
-                  answered + pub + adv + (reads + dash_adv if service == "bridge" else [])),
-            # The faults service gathers with one query for every owner (a wildcard): each
-            # owner may be asked it, and may reply only on its own key.
-            _rule(f"{r}-asked", "allow", ["egress"], ["query"],
-                  answered + pub + adv + ["lunaris/*/faults/active/*", "lunaris/*/snapshots/*"]
-                  + (reads + dash_adv if service == "bridge" else [])),
-            _rule(f"{r}-announce", "allow", ["ingress"], ["liveliness_token"],
-                  [f"lunaris/*/service/{service}"] + adv
-                  + (dash_adv + ["@ros2_lv/**"] if service == "bridge" else [])),
-        ]
-        if service == "bridge":  # it hears the dashboard's inbound topics and ROS 2 discovery
-            # (a bridge serving several rovers hears a topic of them all on one key expression)
-            rules += [_rule("svc-bridge-hear", "allow", ["ingress"], _READ_IN, hears + ros),
-                      _rule("svc-bridge-heard", "allow", ["egress"], _READ_OUT, writes + ros)]
-        subjects.append({"id": f"lunaris-{service}", "usernames": [f"lunaris-{service}"]})
-        policies.append({
-            "id": f"service-{service}", "subjects": [f"lunaris-{service}"],
-            "rules": ["read-twin", "deliver-twin", f"{r}-publish", f"{r}-matching", f"{r}-answer",
-                      f"{r}-asked", f"{r}-announce"]
-            + (["svc-bridge-hear", "svc-bridge-heard"] if service == "bridge" else []),
-        })
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects,
-            "policies": policies}
-
-
-def router_config(mf: MappingFile, fleet: list[RoverNames]) -> dict[str, Any]:
-    return {
-        "mode": "router",
-        # Inside the container; docker-compose.yml decides which host address publishes it.
-        "listen": {"endpoints": ["tls/0.0.0.0:7447"]},
-        "connect": {"endpoints": []},
-        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-        # What ROS 2 nodes on rmw_zenoh need: rmw_zenoh's own router turns gossip on, so its
-        # peers find each other and connect directly; with gossip off (everywhere here) the
-        # router forwards between peers that are not connected to each other, and it stamps
-        # samples (rmw_zenoh's router and sessions enable timestamping).
-        "routing": {"router": {"peers_failover_brokering": True}},
-        "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
-        "transport": {
-            "auth": {"usrpwd": {"dictionary_file": f"{ROUTER_SECRETS}/credentials.txt"}},
-            "link": {"tls": {"listen_certificate": f"{ROUTER_SECRETS}/tls/router.crt",
-                             "listen_private_key": f"{ROUTER_SECRETS}/tls/router.key"},
-                     # what each Lunaris session queues: a fleet's tick, not dropped
-                     "tx": {"queue": {"size": TX_QUEUE_SIZE}}},
-        },
-        "access_control": acl(mf, fleet),
-    }
-
-
-_HEADER = """\
-// Zenoh router (zenohd, image eclipse/zenoh) of a Lunaris deployment.
-// GENERATED by `lunaris deploy acl` from the code's table of key families and the bridge
-// mapping: edit those, then regenerate; tests/deploy fails when this file is stale.
-//
-// Identities (users of secrets/credentials.txt, made by `lunaris deploy secrets`):
-{identities}//
-// How zenoh 1.x applies these rules (checked with the embedded router in tests/deploy):
-// - "ingress" is a message arriving at the router from a client, "egress" one it sends
-//   to a client; a put from A to B needs ingress "put" for A and egress "put" for B.
-// - Anything no rule allows is denied (default_permission "deny"), and a deny rule wins
-//   over an allow rule: the observer reads the twin except what the crew must not see.
-// - A publisher sends only when it knows of a matching subscriber: a publisher needs
-//   egress "declare_subscriber" on its keys; a queryable needs egress "query".
-// - Wildcards never match a chunk starting with '@': the advanced publishers' caches and
-//   tokens ("<key>/@adv/...") and ROS 2 discovery ("@ros2_lv/...") are listed explicitly.
-"""
-
-
-def _compact(text: str) -> str:
-    """JSON with every list of strings on one line: a rule reads as one block."""
-    return re.sub(r"\[\s*((?:\"[^\"]*\",?\s*)+)\]",
-                  lambda m: "[" + ", ".join(re.findall(r'"[^"]*"', m.group(1))) + "]", text)
-
-
-def render_router_config(mf: MappingFile, fleet: list[RoverNames] | None = None) -> str:
-    fleet = fleet if fleet is not None else fleet_names()
-    what = {i: PEOPLE.get(i, f"the {i.removeprefix('lunaris-')} service: its own keys only")
-            for i in IDENTITIES}
-    lines = "".join(f"//   {i:<18} {w}\n" for i, w in what.items())
-    return _HEADER.format(identities=lines) + _compact(json.dumps(router_config(mf, fleet), indent=2)) + "\n"
-
-
-# -- secrets ---------------------------------------------------------------------------------
-
-
-def _password() -> str:
-    return random_secrets.token_urlsafe(24)
-
-
-def _read_credentials(path: Path) -> dict[str, str]:
-    out = {}
-    for line in path.read_text().splitlines():
-        if line.strip():
-            user, _, password = line.partition(":")
-            out[user] = password
-    return out
-
-
-def client_config(user: str, password: str, ca_pem: bytes | None, connect: str) -> dict[str, Any]:
-    conf: dict[str, Any] = {
-        "mode": "client",
-        "connect": {"endpoints": [connect]},
-        "listen": {"endpoints": []},
-        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
-        "transport": {"auth": {"usrpwd": {"user": user, "password": password}}},
-    }
-    if ca_pem is not None:
-        conf["transport"]["link"] = {"tls": {
-            "root_ca_certificate_base64": base64.b64encode(ca_pem).decode()}}
-    return conf
-
-
-def _openssl(*args: str, cwd: Path) -> None:
-    out = subprocess.run(["openssl", *args], cwd=cwd, capture_output=True, text=True)
-    if out.returncode != 0:
-        raise RuntimeError(f"openssl {args[0]} failed: {out.stderr.strip()}")
-
-
-def make_certificates(folder: Path, hosts: list[str]) -> None:
-    """A certificate authority and the router's certificate for ``hosts`` (names or IPs)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
-    _openssl("req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.crt", "-days", "3650",
-             "-subj", "/CN=Lunaris deployment CA", cwd=folder)
-    _openssl("req", *ec, "-keyout", "router.key", "-out", "router.csr", "-subj",
-             f"/CN={hosts[0]}", cwd=folder)
-    names = ",".join(f"IP:{h}" if re.fullmatch(r"[0-9.]+|[0-9a-fA-F:]+:[0-9a-fA-F:]*", h)
-                     else f"DNS:{h}" for h in hosts)
-    (folder / "router.ext").write_text(
-        f"subjectAltName={names}\nbasicConstraints=CA:FALSE\n"
-        "keyUsage=digitalSignature,keyEncipherment\nextendedKeyUsage=serverAuth\n")
-    _openssl("x509", "-req", "-in", "router.csr", "-CA", "ca.crt", "-CAkey", "ca.key",
-             "-CAcreateserial", "-out", "router.crt", "-days", "825", "-extfile", "router.ext",
-             cwd=folder)
-    for name in ("router.csr", "router.ext", "ca.srl"):
-        (folder / name).unlink(missing_ok=True)
-    for key in ("ca.key", "router.key"):
-        (folder / key).chmod(0o600)
-
-
-def make_secrets(folder: Path, hosts: list[str], connect: str, tls: bool = True,
-                 rotate: list[str] | None = None, fleet: list[RoverNames] | None = None,
-                 mf: MappingFile | None = None) -> list[str]:
-    """Make (or, with ``rotate``, renew some of) the secrets of a deployment; returns what
-    was written."""
-    folder.mkdir(parents=True, exist_ok=True)
-    folder.chmod(0o700)
-    cred_path = folder / "credentials.txt"
-    creds = _read_credentials(cred_path) if cred_path.is_file() else {}
-    unknown = sorted(set(rotate or []) - set(IDENTITIES))
-    if unknown:
-        raise ValueError(f"unknown identity {', '.join(unknown)} (identities: {', '.join(IDENTITIES)})")
-    for user in IDENTITIES:
-        if rotate is None or user in rotate or user not in creds:
-            creds[user] = _password()
-    written = []
-    if tls and (rotate is None or not (folder / "tls" / "ca.crt").is_file()):
-        make_certificates(folder / "tls", hosts)
-        written.append("tls/")
-    ca = (folder / "tls" / "ca.crt").read_bytes() if tls else None
-    cred_path.write_text("".join(f"{u}:{p}\n" for u, p in creds.items()))
-    cred_path.chmod(0o600)
-    written.append("credentials.txt")
-    for user in IDENTITIES:
-        if rotate is not None and user not in rotate:
-            continue
-        path = folder / f"client-{user}.json5"
-        path.write_text(json.dumps(client_config(user, creds[user], ca, connect), indent=2) + "\n")
-        path.chmod(0o600)
-        written.append(path.name)
-    accounts = folder / "console-accounts.json"
-    if not accounts.exists():  # people, not machines: made empty once, never overwritten
-        accounts.write_text('{"users": {}}\n')
-        accounts.chmod(0o600)
-        written.append(accounts.name)
-    if rotate is None or "dashboard" in rotate:
-        fleet = fleet if fleet is not None else fleet_names()
-        mf = mf if mf is not None else load_mapping(DEFAULT_MAPPING)
-        base = mf.bridge.outputs.ros2.domain_id or 0
-        files = {f"zenoh-bridge-ros2dds-{r.id}.json5": ros2dds_config(
-            creds["dashboard"], ca, r.id, mf.bridge.rover_domains.get(r.id, base + place),
-            inbound_regexes(mf)) for place, r in enumerate(fleet)}
-        files["rmw-zenoh-dashboard.json5"] = rmw_zenoh_config(creds["dashboard"], ca, connect)
-        for name, conf in files.items():
-            path = folder / name
-            path.write_text(json.dumps(conf, indent=2) + "\n")
-            path.chmod(0o600)
-            written.append(path.name)
-    return written
-
-
-def check_secrets(folder: Path, tls: bool = True) -> list[str]:
-    """Every reason the secrets in ``folder`` cannot be trusted (empty: they can)."""
-    problems = []
-    cred_path = folder / "credentials.txt"
-    if not cred_path.is_file():
-        return [f"{cred_path}: missing (make the secrets with `lunaris deploy secrets {folder}`)"]
-    creds = _read_credentials(cred_path)
-    for user in IDENTITIES:
-        password = creds.get(user)
-        if password is None:
-            problems.append(f"credentials.txt: no password for {user}")
-        elif DEMO_MARK in password or password.startswith("demo"):
-            problems.append(f"credentials.txt: {user} still has a shipped demo password")
-        elif len(password) < MIN_PASSWORD_LEN:
-            problems.append(f"credentials.txt: the password of {user} is shorter than "
-                            f"{MIN_PASSWORD_LEN} characters")
-    for user in IDENTITIES:
-        path = folder / f"client-{user}.json5"
-        if not path.is_file():
-            problems.append(f"{path.name}: missing")
-            continue
-        auth = json.loads(path.read_text()).get("transport", {}).get("auth", {}).get("usrpwd", {})
-        if auth.get("user") != user or auth.get("password") != creds.get(user):
-            problems.append(f"{path.name}: its password is not the router's for {user}")
-    if tls:
-        for name in ("ca.crt", "router.crt", "router.key"):
-            if not (folder / "tls" / name).is_file():
-                problems.append(f"tls/{name}: missing")
-    return problems
-
-
-# -- the command -----------------------------------------------------------------------------
+__all__ = ["IDENTITIES", "MIN_PASSWORD_LEN", "SERVICES", "acl", "add_arguments", "check_secrets",
+           "client_config", "main", "make_secrets", "password_problems", "render_router_config",
+           "router_config"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", required=True, metavar="ACTION")
+    site_help = ("a site of several machines (deploy/site.yaml): its routers, their links and what "
+                 "runs where")
     a = sub.add_parser("acl", help="write the router configuration with its access control")
     a.add_argument("--bridge-config", metavar="FILE", help="bridge mapping (default: the shipped one)")
     a.add_argument("--rover", action="append", metavar="FILE",
                    help=f"the deployment's rovers, in order (default {' '.join(FLEET_FILES)})")
-    a.add_argument("--output", metavar="FILE", default=str(ROUTER_FILE))
-    a.add_argument("--check", action="store_true", help="exit 1 if the file is not up to date")
+    a.add_argument("--output", metavar="PATH",
+                   help=f"the file to write (default {ROUTER_FILE.relative_to(REPO)}); with --site "
+                        "the site's secrets folder, where each router's configuration goes "
+                        "(default deploy/secrets)")
+    a.add_argument("--secrets-dir", metavar="DIR",
+                   help="where the router finds its secrets when it runs (default: the "
+                        f"container's {ROUTER_SECRETS}): a folder of its machine, to run it "
+                        "outside Docker (with --site: the site's secrets folder)")
+    a.add_argument("--site", metavar="FILE", help=site_help)
+    a.add_argument("--check", action="store_true", help="exit 1 if a configuration is not up to date")
     s = sub.add_parser("secrets", help="make passwords, client configurations and certificates")
     s.add_argument("dir", metavar="DIR", help="where to write them (deploy/secrets)")
     s.add_argument("--host", action="append", metavar="NAME",
@@ -388,18 +61,43 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--connect", default="tls/router:7447", metavar="ENDPOINT",
                    help="the endpoint the clients connect to (default tls/router:7447)")
     s.add_argument("--no-tls", action="store_true", help="plain TCP: no certificates")
-    s.add_argument("--rotate", action="append", metavar="USER",
-                   help="give only this identity a new password (repeat)")
+    s.add_argument("--rotate", action="append", metavar="ID",
+                   help="give only this identity a new password (repeat); a router's identity "
+                        "(router-NAME, with --site) gets a new key and certificate too")
+    s.add_argument("--rover", action="append", metavar="FILE",
+                   help="the deployment's rovers, in order: one zenoh-bridge-ros2dds file each "
+                        f"(default {' '.join(FLEET_FILES)})")
+    s.add_argument("--bridge-config", metavar="FILE", help="bridge mapping (default: the shipped one)")
+    s.add_argument("--site", metavar="FILE", help=site_help + "; makes what is missing, keeps the rest")
+    s.add_argument("--secrets-dir", metavar="DIR",
+                   help="with --site: where the routers find their folders when they run outside "
+                        f"Docker (DIR/<router>; default: the container's {ROUTER_SECRETS})")
     c = sub.add_parser("check", help="refuse secrets that cannot be trusted (exit 1)")
     c.add_argument("dir", metavar="DIR")
     c.add_argument("--no-tls", action="store_true")
+    c.add_argument("--site", metavar="FILE", help=site_help)
+    c.add_argument("--router", metavar="NAME",
+                   help="with --site: DIR is this router's folder alone (what its machine holds)")
+
+
+_SITE_ONLY = ("host", "connect", "no_tls", "rover", "bridge_config")
+
+
+def _site_conflicts(args: argparse.Namespace) -> list[str]:
+    """Options a site file decides (its hosts, endpoints, rovers, mapping)."""
+    defaults = {"connect": "tls/router:7447"}
+    return [f"--{o.replace('_', '-')}" for o in _SITE_ONLY
+            if getattr(args, o, None) not in (None, False, defaults.get(o))]
 
 
 def main(args: argparse.Namespace) -> int:
+    if getattr(args, "site", None) is not None:
+        return _main_site(args)
     if args.action == "acl":
         mf = load_mapping(args.bridge_config or DEFAULT_MAPPING)
-        text = render_router_config(mf, fleet_names(args.rover or FLEET_FILES))
-        out = Path(args.output)
+        secrets_dir = ROUTER_SECRETS if args.secrets_dir is None else str(Path(args.secrets_dir).resolve())
+        text = render_router_config(mf, fleet_names(args.rover or FLEET_FILES), secrets_dir)
+        out = Path(args.output or ROUTER_FILE)
         if args.check:
             if not out.is_file() or out.read_text() != text:
                 print(f"{out} is stale: run lunaris deploy acl", file=sys.stderr)
@@ -409,9 +107,15 @@ def main(args: argparse.Namespace) -> int:
         print(f"wrote {out}")
         return 0
     if args.action == "secrets":
+        if args.secrets_dir is not None:
+            print("lunaris deploy secrets: --secrets-dir goes with --site (one router: "
+                  "lunaris deploy acl --secrets-dir)", file=sys.stderr)
+            return 2
         hosts = args.host or ["router", "localhost", "127.0.0.1"]
         try:
-            written = make_secrets(Path(args.dir), hosts, args.connect, not args.no_tls, args.rotate)
+            written = make_secrets(Path(args.dir), hosts, args.connect, not args.no_tls, args.rotate,
+                                   fleet_names(args.rover or FLEET_FILES),
+                                   load_mapping(args.bridge_config or DEFAULT_MAPPING))
         except (ValueError, RuntimeError, OSError) as exc:
             print(f"lunaris deploy secrets: {exc}", file=sys.stderr)
             return 2
@@ -419,12 +123,62 @@ def main(args: argparse.Namespace) -> int:
         if args.rotate:
             print("restart the router and the containers of the rotated identities")
         return 0
-    problems = check_secrets(Path(args.dir), not args.no_tls)
+    if args.router is not None:
+        print("lunaris deploy check: --router goes with --site", file=sys.stderr)
+        return 2
+    return _report(check_secrets(Path(args.dir), not args.no_tls), args.dir)
+
+
+def _report(problems: list[str], where: str) -> int:
     for problem in problems:
         print(f"lunaris deploy check: {problem}", file=sys.stderr)
     if problems:
         print("lunaris deploy check: REFUSED: the deployment does not start with these secrets",
               file=sys.stderr)
         return 1
-    print(f"lunaris deploy check: the secrets in {args.dir} are fit to use")
+    print(f"lunaris deploy check: the secrets in {where} are fit to use")
     return 0
+
+
+def _main_site(args: argparse.Namespace) -> int:
+    from lunaris.deploy_routers import (
+        check_router_folder,
+        check_site_secrets,
+        make_site_secrets,
+        write_router_configs,
+    )
+    from lunaris.deploy_site import load_site
+
+    command = f"lunaris deploy {args.action}"
+    conflicts = _site_conflicts(args)
+    if conflicts:
+        print(f"{command}: {', '.join(conflicts)}: the site file decides (--site)", file=sys.stderr)
+        return 2
+    try:
+        site = load_site(args.site)
+        if args.action == "check":
+            if args.router is not None:
+                if args.router not in {r.name for r in site.routers}:
+                    raise ValueError(f"{args.site} has no router {args.router!r}")
+                return _report(check_router_folder(Path(args.dir), site, args.router), args.dir)
+            return _report(check_site_secrets(Path(args.dir), site), args.dir)
+        if args.action == "secrets":
+            written = make_site_secrets(Path(args.dir), site, args.rotate, args.secrets_dir)
+            print(f"wrote {', '.join(written)} in {args.dir} (keep it private; copy each "
+                  "router's folder to its machine only)")
+            if args.rotate:
+                print("copy the rotated folders to their machines, restart their routers and the "
+                      "containers of the rotated identities")
+            return 0
+        folder = Path(args.output or REPO / "deploy" / "secrets")
+        stale = write_router_configs(folder, site, args.secrets_dir, check=args.check)
+        if args.check:
+            for name in stale:
+                print(f"{folder / name} is stale: run lunaris deploy acl --site {args.site}",
+                      file=sys.stderr)
+            return 1 if stale else 0
+        print(f"wrote {', '.join(stale)} in {folder}")
+        return 0
+    except (ValueError, RuntimeError, OSError) as exc:
+        print(f"{command}: {exc}", file=sys.stderr)
+        return 2

@@ -16,7 +16,8 @@ from common.config import load_rover
 from services.bridge.bindings import Binding, RoverNames, open_keyexpr, rover_names, zenoh_key
 from services.bridge.mapping import MappingFile, ros_name
 
-__all__ = ["FLEET_FILES", "bridge_hears", "dashboard_keys", "fleet_names", "inbound_regexes",
+__all__ = ["FLEET_FILES", "bridge_hears", "dashboard_files", "dashboard_keys", "fleet_names",
+           "inbound_regexes",
            "ros2dds_config", "rmw_zenoh_config"]
 
 REPO = Path(__file__).resolve().parent.parent
@@ -80,17 +81,22 @@ def bridge_hears(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
 
 
 def ros2dds_config(password: str, ca_pem: bytes | None, rover: str, domain: int,
-                   inbound: list[str]) -> dict[str, Any]:
+                   inbound: list[str], namespace: str | None,
+                   connect: str = "tls/127.0.0.1:7447") -> dict[str, Any]:
     """zenoh-bridge-ros2dds for the dashboard of one rover on DDS (the compose profile
     ``ros2dds``, one container per rover): the ``dashboard`` identity, host networking, so it
-    reaches the router on the host's port. Its namespace is the rover's (``/mapp_1``): the
-    bridge's ``mapp_1/battery_state`` is ``/battery_state`` in the rover's DDS domain, the
-    dashboard's plain name. Zenoh -> DDS: every topic of the rover; DDS -> Zenoh: only the
-    inbound topics (the router's access control enforces the same limit)."""
-    conf = _client("dashboard", password, ca_pem, "tls/127.0.0.1:7447")
-    conf["plugins"] = {"ros2dds": {
-        "id": f"lunaris-{ros_name(rover)}", "namespace": f"/{ros_name(rover)}", "domain": domain,
-        "allow": {"publishers": inbound, "subscribers": [".*"]}}}
+    reaches the router on the host's port (``connect``). In a fleet its namespace is the rover's
+    (``/mapp_1``, the mapping's ``fleet_namespace``): the bridge's ``mapp_1/battery_state``
+    is ``/battery_state`` in the rover's DDS domain, the dashboard's plain name; a fleet of
+    one rover has no namespace (the bridge's keys are the plain names). Zenoh -> DDS: every
+    topic of the rover; DDS -> Zenoh: only the inbound topics (the router's access control
+    enforces the same limit)."""
+    conf = _client("dashboard", password, ca_pem, connect)
+    plugin: dict[str, Any] = {"id": f"lunaris-{ros_name(rover)}", "domain": domain,
+                              "allow": {"publishers": inbound, "subscribers": [".*"]}}
+    if namespace is not None:
+        plugin["namespace"] = namespace
+    conf["plugins"] = {"ros2dds": plugin}
     return conf
 
 
@@ -102,6 +108,23 @@ def rmw_zenoh_config(password: str, ca_pem: bytes | None, connect: str) -> dict[
     return conf
 
 
+def dashboard_files(password: str, ca_pem: bytes | None, mf: MappingFile,
+                    fleet: list[RoverNames], connect: str,
+                    local: str = "tls/127.0.0.1:7447") -> dict[str, dict[str, Any]]:
+    """The dashboards' configurations, by file name: a ``zenoh-bridge-ros2dds`` per rover of
+    the fleet (reaching the router at ``local``, its host's port) and the rmw_zenoh session
+    (at ``connect``)."""
+    base = mf.bridge.outputs.ros2.domain_id or 0
+    several = len(fleet) > 1
+    files = {f"zenoh-bridge-ros2dds-{r.id}.json5": ros2dds_config(
+        password, ca_pem, r.id, mf.bridge.rover_domains.get(r.id, base + place),
+        inbound_regexes(mf),
+        mf.bridge.fleet_namespace.replace("{rover}", ros_name(r.id)) if several else None, local)
+        for place, r in enumerate(fleet)}
+    files["rmw-zenoh-dashboard.json5"] = rmw_zenoh_config(password, ca_pem, connect)
+    return files
+
+
 def inbound_regexes(mf: MappingFile) -> list[str]:
     return sorted({re.sub(r"\{[a-z_]*\}", "[^/]*", m.topic) for m in mf.mappings
                    if m.direction == "in"})
@@ -110,6 +133,6 @@ def inbound_regexes(mf: MappingFile) -> list[str]:
 
 
 def _client(user: str, password: str, ca_pem: bytes | None, connect: str) -> dict[str, Any]:
-    from lunaris.deploy import client_config  # one definition of a client's configuration
+    from lunaris.deploy_secrets import client_config  # one definition of a client's configuration
 
     return client_config(user, password, ca_pem, connect)

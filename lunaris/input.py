@@ -13,7 +13,7 @@
 
 A VALUE may also be the JSON object the key takes. The value is checked with the twin's own
 Struct before it is sent, then the twin's answer is printed: the ``input`` event, or the
-rejection. Exit status as ``lunaris fault``: 0 accepted, 1 rejected, 2 no answer.
+rejection. Exit status as ``lunaris fault``: 0 accepted, 1 rejected, 2 not applied.
 """
 
 from __future__ import annotations
@@ -23,12 +23,10 @@ import json
 
 import msgspec
 
-from common import keys
-from common.messages import BadInput
 from common.traverse import TraverseError, load_traverse
-from common.writes import check_write
-from lunaris.confirm import add_common_arguments, confirm, tool_main
-from lunaris.tooling import ToolError
+from common.writes import Write
+from lunaris.client import ToolError
+from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
 __all__ = ["add_arguments", "main", "payload"]
 
@@ -67,23 +65,16 @@ def _number(text: str) -> float:
         raise ToolError(f"{text!r} is not a number", 1) from None
 
 
-def payload(key: str, values: list[str], delete: bool = False) -> tuple[bytes | None, str]:
-    """The checked payload (None: a delete) of ``input/<key>`` and the event that accepts it."""
-    parts = ["input", *key.strip("/").removeprefix("input/").split("/")]
+def payload(rover: str, key: str, values: list[str], delete: bool = False) -> Write:
+    """The checked write of ``input/<key>`` (a delete with ``delete``)."""
     if delete and values:
         raise ToolError("--delete takes no VALUE", 1)
     if not delete and not values:
         raise ToolError(f"give a VALUE for {key}, or --delete", 1)
-    try:
-        checked = check_write(parts, None if delete else _raw(key, values))
-    except BadInput as exc:
-        raise ToolError(str(exc), 1) from None
-    return checked.payload, checked.accepted
+    tail = "input/" + key.strip("/").removeprefix("input/")
+    return plan(rover, tail, None if delete else _raw(key, values))
 
 
 def main(args: argparse.Namespace) -> int:
-    def run(a: argparse.Namespace) -> int:
-        body, accepted = payload(a.key, a.value, a.delete)
-        key = keys.under(a.rover, "input/" + a.key.strip("/").removeprefix("input/"))
-        return confirm(a, a.rover, key, body, accepted)
-    return tool_main("input", run, args)
+    return tool_main("input", lambda a: confirm(a, "input", payload(a.rover, a.key, a.value, a.delete)),
+                     args)

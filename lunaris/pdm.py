@@ -6,8 +6,8 @@ current, power and current limit. The values are the twin's, converted by the sa
 the bridge publishes (the mappings of ``group: pdm`` in ``config/bridge/default.yaml`` or
 ``--mapping``): the same scale, the same rounding, the same names.
 
-The subscriptions are advanced subscribers with history, so the values appear at once when
-the tool joins a running session. ``--once`` prints one table when the values have arrived;
+The values are the client's mirror of the rover (:class:`lunaris.client.Mirror`): they appear
+at once when the tool joins a running session. ``--once`` prints one table when the values have arrived;
 otherwise the table is reprinted every ``--interval`` seconds until Ctrl-C.
 """
 
@@ -15,19 +15,16 @@ from __future__ import annotations
 
 import argparse
 import sys
-import threading
 import time
 from typing import Any
 
 import msgspec
 import zenoh
-import zenoh.ext as zext
 
 from common import keys
 from common.config import ConfigError
 from common.connection import add_connection_args
-from common.messages import Clock, decode
-from lunaris.tooling import ToolError, live_rovers, open_session
+from lunaris.client import START_HINT, Change, Mirror, ToolError, close_session, live_rovers, open_session
 from services.bridge.bindings import Binding, RoverNames, expand
 from services.bridge.convert import out_value
 from services.bridge.mapping import PLACEHOLDERS, MappingFile, load_mapping
@@ -57,45 +54,44 @@ def pdm_mappings(mf: MappingFile) -> MappingFile:
 
 
 class PdmView:
-    """The latest twin payloads of one rover and the component names seen so far."""
+    """One rover's PDM values as the mapping shows them, read off the client's mirror."""
 
     def __init__(self, mf: MappingFile, rover: str):
         self.mf, self.rover = mf, rover
-        self.latest: dict[str, msgspec.Struct] = {}
-        self.names: dict[str, list[str]] = {p: [] for p in PLACEHOLDERS}
-        self.t_s: float | None = None
         self.changed_at = time.monotonic()
-        self._lock = threading.Lock()
         self._families: list[keys.Family] = []
         for m in mf.mappings:
             found = keys.family_of_template(m.key)
             if found is not None and found[0] not in self._families:
                 self._families.append(found[0])
+        self.mirror = Mirror(rover, families=[f.name for f in self._families], events=False)
+        self._seen: set[str] = set()
+        self.mirror.listen(self._on_change)
 
-    def patterns(self) -> list[str]:
-        return sorted({fam.pattern(self.rover) for fam in self._families} | {keys.clock(self.rover)})
+    def _on_change(self, change: Change) -> None:
+        if change.kind == "value" and change.key not in self._seen:
+            self._seen.add(change.key)
+            self.changed_at = time.monotonic()  # a key not seen before: the table grows
 
-    def on_sample(self, s: zenoh.Sample) -> None:
-        key = str(s.key_expr)
-        rover, parts = keys.split(key)
-        payload = s.payload.to_bytes()
-        if parts == ["clock"]:
-            self.t_s = decode(payload, Clock).t_s
-            return
-        fam = next((f for f in self._families if f.matches(parts)), None)
-        if fam is None:
-            return
-        with self._lock:
-            if key not in self.latest:
-                self.changed_at = time.monotonic()
-            self.latest[key] = decode(payload, fam.payload)
-            if fam.placeholder is not None:
+    @property
+    def t_s(self) -> float | None:
+        clock = self.mirror.value(keys.clock(self.rover))
+        return None if clock is None else clock.t_s
+
+    def names(self) -> dict[str, list[str]]:
+        """The component names seen so far, per placeholder, in the order they came."""
+        out: dict[str, list[str]] = {p: [] for p in PLACEHOLDERS}
+        for key in self.mirror.latest(self.rover):
+            _, parts = keys.split(key)
+            fam = next((f for f in self._families if f.matches(parts)), None)
+            if fam is not None and fam.placeholder is not None:
                 name = parts[fam.chunks.index(f"{{{fam.placeholder}}}")]
-                if name not in self.names[fam.placeholder]:
-                    self.names[fam.placeholder].append(name)
+                if name not in out[fam.placeholder]:
+                    out[fam.placeholder].append(name)
+        return out
 
     def bindings(self) -> list[Binding]:
-        n = self.names
+        n = self.names()
         names = RoverNames(self.rover, load=tuple(n["load"]), rail=tuple(n["rail"]),
                            radio=tuple(n["radio"]), panel=tuple(n["panel"]))
         try:
@@ -107,23 +103,21 @@ class PdmView:
         """(label, value or None, unit) for every value of the distribution: the values of
         the rover first, then each component's values together (a rail's voltage, current,
         power and current limit), in the mapping's order."""
-        with self._lock:
-            groups: dict[str | None, list[Binding]] = {None: []}
-            for b in self.bindings():
-                groups.setdefault(b.item, []).append(b)
-            out = []
-            for b in (b for group in groups.values() for b in group):
-                payload = self.latest.get(b.key)
-                value = out_value(b.mapping, payload) if payload is not None else None
-                out.append((b.label, value, b.mapping.unit or ""))
-            return out
+        groups: dict[str | None, list[Binding]] = {None: []}
+        for b in self.bindings():
+            groups.setdefault(b.item, []).append(b)
+        out = []
+        for b in (b for group in groups.values() for b in group):
+            payload = self.mirror.value(b.key)
+            value = out_value(b.mapping, payload) if payload is not None else None
+            out.append((b.label, value, b.mapping.unit or ""))
+        return out
 
     def complete(self) -> bool:
         """Every value that needs no component name has arrived, and some rail has."""
-        with self._lock:
-            bindings = self.bindings()
-            return bool(bindings) and all(b.key in self.latest for b in bindings) and (
-                bool(self.names["rail"]) or not any("{rail}" in m.key for m in self.mf.mappings))
+        bindings = self.bindings()
+        return bool(bindings) and all(self.mirror.get(b.key) is not None for b in bindings) and (
+            bool(self.names()["rail"]) or not any("{rail}" in m.key for m in self.mf.mappings))
 
 
 def _expand_one(mf: MappingFile, m: Any, names: RoverNames) -> list[Binding]:
@@ -158,17 +152,14 @@ def main(args: argparse.Namespace) -> int:
     except ToolError as exc:
         print(f"lunaris pdm: {exc}", file=sys.stderr)
         return exc.code
-    keep: list[Any] = []
+    view: PdmView | None = None
     try:
         rover = args.rover or _first_rover(session, args.timeout)
         if rover is None:
-            print("lunaris pdm: no live rover (is the twin running?)", file=sys.stderr)
+            print(f"lunaris pdm: no live rover (is the twin running? {START_HINT})", file=sys.stderr)
             return 1
         view = PdmView(mf, rover)
-        history = zext.HistoryConfig(detect_late_publishers=True)
-        for pattern in view.patterns():
-            keep.append(zext.declare_advanced_subscriber(session, pattern, view.on_sample,
-                                                         history=history))
+        view.mirror.start(session)
         if args.once:
             deadline = time.monotonic() + args.timeout
             while time.monotonic() < deadline and not (
@@ -182,8 +173,9 @@ def main(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     finally:
-        keep.clear()
-        session.close()
+        if view is not None:
+            view.mirror.close()
+        close_session(session)
 
 
 def _first_rover(session: zenoh.Session, timeout_s: float) -> str | None:

@@ -26,7 +26,7 @@ import msgspec
 from common import keys
 from common.connection import add_connection_args
 from common.messages import BadInput, Percentiles, Prediction, PredictionRequest, decode, encode
-from lunaris.tooling import ToolError, open_session, require_rover
+from lunaris.client import ToolError, open_session, require_rover
 
 __all__ = ["add_arguments", "format_prediction", "main"]
 

@@ -2,7 +2,7 @@
 
 Puts ``lunaris/<rover>/cmd/rail/<rail>`` and prints the twin's answer: the ``command`` event
 with the rail's new state, or the rejection (an unknown rail, the solar rail ...). Exit
-status as ``lunaris fault``: 0 accepted, 1 rejected, 2 no answer.
+status as ``lunaris fault``: 0 accepted, 1 rejected, 2 not applied.
 """
 
 from __future__ import annotations
@@ -11,9 +11,8 @@ import argparse
 
 import msgspec
 
-from common import keys
 from common.messages import RailCommand
-from lunaris.confirm import add_common_arguments, confirm, tool_main
+from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
 __all__ = ["COMMANDS", "add_arguments", "main"]
 
@@ -29,5 +28,5 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     body = msgspec.json.encode(COMMANDS[args.action])
-    return tool_main("rail", lambda a: confirm(a, a.rover, keys.cmd_rail(a.rover, a.rail), body,
-                                               "command"), args)
+    return tool_main("rail", lambda a: confirm(a, "rail", plan(a.rover, f"cmd/rail/{a.rail}", body)),
+                     args)

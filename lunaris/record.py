@@ -42,7 +42,7 @@ from mcap.writer import Writer
 
 from common import keys
 from common.connection import add_connection_args
-from lunaris.tooling import ToolError, describe_endpoint, open_session
+from lunaris.client import ToolError, describe_endpoint, open_session
 
 __all__ = ["KeyWrite", "Recorder", "add_arguments", "main", "schema_for"]
 

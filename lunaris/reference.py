@@ -26,7 +26,7 @@ from common import keys
 from common.conditions import SOURCES
 from common.config import Rover
 from common.datafile import struct_fields
-from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, NoParams
+from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RETIRED_CODES, NoParams
 from common.messages import Prediction, PredictionRequest
 from common.scenario import Scenario
 from common.traverse import TraverseFile
@@ -220,7 +220,7 @@ def faults_page() -> str:
     for component, kinds in CATALOGUE.items():
         comp = f"{component}/<name>" if component in NAMED_COMPONENTS else component
         for kind, spec in kinds.items():
-            if spec.params is NoParams:
+            if issubclass(spec.params, NoParams):
                 params = "none (empty payload or `{}`)"
             else:
                 params = ", ".join(
@@ -238,15 +238,25 @@ def faults_page() -> str:
             "is answered by an event: `fault_injected`, `fault_cleared`, or `rejected` with the "
             "reason.\n\n"
             + _table(("component", "kind", "parameters", "effect"), rows)
+            + "\nAn injected fault is in effect, and listed by `faults/active/<service>` and "
+            "`get faults`, from its injection to its clearing, whatever its parameters (heating "
+            "0 W, dust 0 and resistance x1 included). It is the instructor's: no telemetry "
+            "payload names it. The crew sees what it does (less power from a panel, a rising "
+            "temperature, a rail that trips, a lost link) and the twin's own alarms below.\n"
             + "\n## Derived faults\n\nRaised and resolved by the models themselves, each as an "
             "event (`fault_raised`, `fault_resolved`) on a key such as "
-            "`lunaris/<rover>/battery/over_temperature` or `lunaris/<rover>/rail/12V/tripped`:\n\n"
+            "`lunaris/<rover>/battery/over_temperature` or `lunaris/<rover>/rail/12V/tripped`. "
+            "They are the alarms the telemetry carries (`battery/state.faults` and `fault_code`, "
+            "`load/<load>/power.faults`, `radio/<radio>/link.faults`; panels have none):\n\n"
             + _table(("component", "fault", "meaning"), [
                 (f"`{component}`", f"`{name}`", meaning)
                 for component, faults in DERIVED.items() for name, meaning in faults.items()])
             + "\n## `fault_code`\n\nThe battery's `fault_code` (in `battery/state`, for the "
-            "dashboard) is the first of its active faults in this table, `0` when nominal:\n\n"
-            + _table(("code", "fault", "meaning"), [("0", "-", "nominal"), *codes]))
+            "dashboard) is the first of the pack's active alarms in this table, `0` when "
+            "nominal:\n\n"
+            + _table(("code", "fault", "meaning"), [("0", "-", "nominal"), *codes])
+            + "\nRetired codes, never sent again and never to be given another meaning:\n\n"
+            + _table(("code", "meaning"), [(str(code), meaning) for code, meaning in RETIRED_CODES]))
 
 
 def mapping_page() -> str:

@@ -30,6 +30,7 @@ from pathlib import Path
 import msgspec
 
 from common import keys
+from lunaris.client.events import EventWindow, event_identity
 
 __all__ = ["Session", "add_arguments", "draw", "load_session", "main"]
 
@@ -106,7 +107,7 @@ def load_session(path: Path) -> dict[str, Session]:
     from mcap.reader import make_reader
 
     sessions: dict[str, Session] = {}
-    seen_events: set[tuple] = set()
+    seen_events = EventWindow()
     with open(path, "rb") as f:
         try:
             messages = list(make_reader(f).iter_messages(log_time_order=True))
@@ -118,21 +119,22 @@ def load_session(path: Path) -> dict[str, Session]:
         except ValueError:
             continue
         fam = keys.telemetry_family(parts)
-        family = fam.name if fam is not None else None
+        family = "event" if parts[:1] == ["event"] and len(parts) <= 2 else (
+            fam.name if fam is not None else None)  # events: the journal's key and each service's
         if family is None:
             continue
         try:
             v = msgspec.json.decode(message.data)
         except msgspec.DecodeError:
             continue
+        if not isinstance(v, dict):
+            continue
         s = sessions.setdefault(rover, Session(rover))
         t_sim = float(v.get("t_s", 0.0))
         if family == "clock":
             s.on_clock(t_sim, int(v.get("epoch", 0)))
         if family == "event":
-            ident = (rover, t_sim, v.get("kind"), v.get("key"), v.get("message"))
-            if ident not in seen_events:  # a cache replayed after a reconnection
-                seen_events.add(ident)
+            if seen_events.first(event_identity(rover, v)):  # once: journal's key, service's, replays
                 at = s.at(t_sim) if s.offset_s is not None else None
                 # replayed from the caches: older than the recording's first tick
                 v["at_s"] = at if at is not None and at >= -1e-9 and s.epoch is not None else None
@@ -168,8 +170,8 @@ def load_session(path: Path) -> dict[str, Session]:
 
 def add_thresholds(s: Session, rover_file: str | None) -> str:
     """The rover file's alarm thresholds on the plots; a note of where they came from."""
+    from lunaris.client import ToolError
     from lunaris.scenario import find_rover
-    from lunaris.tooling import ToolError
 
     try:
         rover, note = find_rover(s.rover, rover_file)

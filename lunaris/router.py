@@ -1,4 +1,8 @@
-"""``lunaris router``: a standalone embedded Zenoh router (a Python session in router mode)."""
+"""``lunaris router``: a standalone embedded Zenoh router (a Python session in router mode).
+
+It logs as ``zenohd`` does: ``RUST_LOG`` chooses what (default: errors only), e.g.
+``RUST_LOG=info,zenoh::net::routing::interceptor::access_control=trace`` shows every
+decision of the access control."""
 
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ def open_router(listen: list[str] | None, connect: list[str] | None = None,
 
 
 def main(args: argparse.Namespace) -> int:
+    zenoh.init_log_from_env_or("error")
     listen = args.listen or ([] if args.config else [DEFAULT_ENDPOINT])
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

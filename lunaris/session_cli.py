@@ -5,7 +5,7 @@ conditions, the injected faults are cleared and the clock is at 0. ``snapshot sa
 saves every service's state under NAME (kept under the services' ``--state-dir``, so it
 survives a restart), ``snapshot restore NAME`` puts it back, ``snapshot list`` lists them.
 Each write is confirmed by the ``session`` event of the faults service, or its rejection;
-exit status as ``lunaris fault``: 0 accepted, 1 rejected, 2 no answer.
+exit status as ``lunaris fault``: 0 accepted, 1 rejected, 2 not applied.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import time
 
 from common import keys
 from common.session import SNAPSHOT_NAME
-from lunaris.confirm import add_common_arguments, confirm, tool_main
-from lunaris.tooling import ToolError, open_session
+from lunaris.client import ToolError, close_session, open_session
+from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
 __all__ = ["add_reset_arguments", "add_snapshot_arguments", "main_reset", "main_snapshot"]
 
@@ -36,8 +36,7 @@ def add_snapshot_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main_reset(args: argparse.Namespace) -> int:
-    return tool_main("reset", lambda a: confirm(a, a.rover, keys.control_reset(a.rover), b"",
-                                                "session"), args)
+    return tool_main("reset", lambda a: confirm(a, "reset", plan(a.rover, "control/reset", b"")), args)
 
 
 def main_snapshot(args: argparse.Namespace) -> int:
@@ -49,8 +48,8 @@ def main_snapshot(args: argparse.Namespace) -> int:
         if not SNAPSHOT_NAME.match(a.name):
             raise ToolError(f"bad snapshot name {a.name!r}: letters, digits, '_', '-' and '.', "
                             "at most 64", 1)
-        key = (keys.control_snapshot if a.action == "save" else keys.control_restore)(a.rover, a.name)
-        return confirm(a, a.rover, key, b"", "session")
+        verb = "snapshot" if a.action == "save" else "restore"
+        return confirm(a, "snapshot", plan(a.rover, f"control/{verb}/{a.name}", b""))
     return tool_main("snapshot", run, args)
 
 
@@ -60,7 +59,7 @@ def _list(args: argparse.Namespace) -> int:
         replies = [r.ok for r in session.get(keys.snapshots(args.rover), timeout=args.timeout)
                    if r.ok is not None]
     finally:
-        session.close()
+        close_session(session)
     if not replies:
         print(f"no answer from the faults service of {args.rover!r} within {args.timeout:g} s "
               "(unknown rover, or the faults service is not running)", file=sys.stderr)

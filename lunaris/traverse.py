@@ -6,22 +6,20 @@ or deletes it (``--stop``: the rover stops where it is), then prints the twin's 
 length and duration, or rejects it with the reason (a speed above the rover's maximum, a
 leg too steep, a rover without a drive ...).
 
-Exit status: 0 accepted; 1 rejected (or a file with problems); 2 no answer.
+Exit status: 0 accepted; 1 rejected (or a file with problems); 2 not applied.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 
 import msgspec
 
-from common import keys
 from common.connection import add_connection_args
 from common.messages import DriveTraverse, TraverseWaypoint
 from common.traverse import TraverseError, load_traverse
-from lunaris.fault import format_event, send_fault
-from lunaris.tooling import ToolError, open_session, require_rover
+from lunaris.client import ANSWER_S, ToolError
+from lunaris.confirm import confirm, plan, tool_main
 
 __all__ = ["add_arguments", "main"]
 
@@ -37,10 +35,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --to: the speed (default the rover's max_speed_m_per_s)")
     p.add_argument("--return", dest="back", action="store_true",
                    help="then drive back to where the traverse began")
-    p.add_argument("--timeout", type=float, default=3.0, metavar="S",
-                   help="how long to wait for the twin's answer (default 3 s)")
+    p.add_argument("--timeout", type=float, default=ANSWER_S, metavar="S",
+                   help=f"how long to wait for the twin's answer (default {ANSWER_S:g} s)")
     p.add_argument("--wait", type=float, default=10.0, metavar="S",
-                   help="how long to wait for the router (default 10 s)")
+                   help="how long to wait for a router that does not answer (default 10 s)")
+    p.add_argument("--json", action="store_true", help="print the answer as JSON")
     add_connection_args(p)
 
 
@@ -62,22 +61,5 @@ def _payload(args: argparse.Namespace) -> bytes | None:
 
 
 def main(args: argparse.Namespace) -> int:
-    key = keys.input_drive_traverse(args.rover)
-    try:
-        payload = _payload(args)
-        session = open_session(args, wait_s=args.wait, on_waiting=lambda: print(
-            "waiting for the Zenoh router ...", file=sys.stderr, flush=True))
-        try:
-            require_rover(session, args.rover)
-            ev = send_fault(session, args.rover, key, payload, args.timeout, accepted="input")
-        finally:
-            session.close()
-    except ToolError as exc:
-        print(f"lunaris traverse: {exc}", file=sys.stderr)
-        return exc.code
-    if ev is None:
-        print(f"no answer within {args.timeout:g} s on {key}: is the drive service of "
-              f"{args.rover} running?", file=sys.stderr)
-        return 2
-    print(format_event(ev))
-    return 1 if ev.kind == "rejected" else 0
+    return tool_main("traverse", lambda a: confirm(a, "traverse", plan(a.rover, "input/drive/traverse",
+                                                                         _payload(a))), args)

@@ -6,10 +6,12 @@ radios, the PDM table (every rail with its loads), the active faults and the
 latest events; alarms are coloured by severity. Without it, one line per rover,
 the fleet's active faults and events.
 
-The session's subscriptions are advanced subscribers with history, so values
-appear at once when the tool joins a running session. The view says when the
-router goes away ("DISCONNECTED ... retrying"): Zenoh keeps trying to reconnect,
-and when it does the subscriptions are restored and the view says so.
+What it shows is the client's mirror of the twin (:class:`lunaris.client.Mirror`): values
+appear at once when the tool joins a running session (the publishers' caches), events are
+taken once. The view says when the router goes away ("DISCONNECTED ... retrying"): Zenoh
+keeps trying to reconnect, and when it does the subscriptions are restored and the view says
+so; and when a rover is cut off behind it ("LINK LOST": no clock tick for 2 s, or its clock's
+token gone), which it shows within a refresh, and clears with the rover's next tick.
 
 On a terminal the view is a full-screen ``rich`` display refreshed a few times a
 second (Ctrl-C quits); narrower than 110 columns it draws a compact layout that fits an
@@ -25,26 +27,21 @@ import signal
 import sys
 import threading
 import time
-from collections import deque
 from typing import Any
 
 import msgspec
 import zenoh
-import zenoh.ext as zext
 from rich.console import Console, RenderableType
 from rich.live import Live
 
 from common import keys
 from common.connection import add_connection_args
-from common.messages import (
-    ActiveFaults,
-    Event,
-    decode,
-)
-from lunaris.tooling import ToolError, close_session, describe_endpoint, ignored, open_session
-from lunaris.watch_view import Connection, Snapshot, render
+from common.messages import ActiveFaults
+from lunaris.client import Mirror, ToolError, close_session, describe_endpoint, open_session
+from lunaris.watch_compact import fleet_compact, render_compact
+from lunaris.watch_view import Connection, Snapshot, render_fleet, render_rover
 
-__all__ = ["Connection", "Snapshot", "Store", "add_arguments", "main", "render"]
+__all__ = ["Connection", "Snapshot", "add_arguments", "main", "render", "snapshot_of"]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,93 +59,54 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_connection_args(p)
 
 
-# -- what the view knows, kept up to date by Zenoh callbacks --------------------------------
+def snapshot_of(mirror: Mirror) -> Snapshot:
+    """What one frame is drawn from: the mirror's latest values, events (in sim time order:
+    services interleave), faults in effect, live services and links."""
+    latest: dict[str, tuple[bytes, float]] = {}
+    faults: dict[str, list[dict[str, Any]]] = {}
+    for key, v in mirror.latest().items():
+        rover, parts = keys.split(key)
+        if parts[:2] == ["faults", "active"] and isinstance(v.value, ActiveFaults):
+            faults.setdefault(rover, []).extend(msgspec.structs.asdict(f) for f in v.value.faults)
+        else:
+            latest[key] = (v.raw, v.at)
+    for listed in faults.values():
+        listed.sort(key=lambda f: (f["since_t_s"], f["key"]))
+    events = sorted(((rover, ev) for rover, ev, _ in mirror.events()), key=lambda re: re[1].t_s)
+    return Snapshot(latest, events, faults, mirror.all_services(), links=mirror.links())
 
 
-class Store:
-    """Thread-safe: Zenoh calls back on its own threads, the view reads snapshots."""
+COMPACT_BELOW = 110  # columns: narrower than this, the compact layout (an 80x24 terminal)
 
-    def __init__(self, max_events: int = 500):
-        self._lock = threading.Lock()
-        self._latest: dict[str, tuple[bytes, float]] = {}
-        self._events: deque[tuple[str, Event]] = deque(maxlen=max_events)
-        self._seen: set[tuple] = set()
-        self._faults: dict[str, dict[str, list[dict]]] = {}  # rover -> service -> faults
-        self._services: dict[str, set[str]] = {}
-        self.last_sample = 0.0
 
-    def on_sample(self, s: zenoh.Sample) -> None:
-        key = str(s.key_expr)
-        try:
-            rover, parts = keys.split(key)
-        except ValueError:
-            return
-        fam = keys.telemetry_family(parts)
-        family = fam.name if fam is not None else None
-        if family is None or s.kind != zenoh.SampleKind.PUT:
-            return
-        payload, now = s.payload.to_bytes(), time.monotonic()
-        if family == "event":
-            try:
-                ev = decode(payload, Event)
-            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-                ignored(key, f"not an event ({exc})")
-                return
-            ident = (rover, ev.t_s, ev.source, ev.kind, ev.key, ev.message)
-            with self._lock:
-                self.last_sample = now
-                if ident in self._seen:  # a cache replayed after a reconnection
-                    return
-                self._seen.add(ident)
-                self._events.append((rover, ev))
-            return
-        if family == "faults/active/*":
-            try:
-                active = decode(payload, ActiveFaults)
-            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-                ignored(key, f"not a list of faults ({exc})")
-                return
-            with self._lock:
-                self._faults.setdefault(rover, {})[active.service] = [
-                    msgspec.structs.asdict(f) for f in active.faults]
-            return
-        with self._lock:
-            self._latest[key] = (payload, now)
-            self.last_sample = now
+def render(snap: Snapshot, conn: Connection, rover: str | None, n_events: int,
+           width: int = 200, height: int = 60) -> RenderableType:
+    """The frame; below ``COMPACT_BELOW`` columns a compact one that fits an 80x24 terminal."""
+    from rich.console import Group
 
-    def on_token(self, s: zenoh.Sample) -> None:
-        try:
-            rover, parts = keys.split(str(s.key_expr))
-        except ValueError:
-            return
-        with self._lock:
-            live = self._services.setdefault(rover, set())
-            (live.add if s.kind == zenoh.SampleKind.PUT else live.discard)(parts[-1])
+    from lunaris.watch_view import banner
 
-    def snapshot(self) -> Snapshot:
-        with self._lock:
-            events = sorted(self._events, key=lambda re: re[1].t_s)  # services interleave
-            faults = {r: sorted((f for fs in by_service.values() for f in fs),
-                                key=lambda f: (f["since_t_s"], f["key"]))
-                      for r, by_service in self._faults.items()}
-            return Snapshot(dict(self._latest), events, faults,
-                            {r: set(s) for r, s in self._services.items()})
+    compact = width < COMPACT_BELOW
+    if rover:
+        body = render_compact(snap, rover, height) if compact else render_rover(snap, rover, n_events)
+    else:
+        body = fleet_compact(snap, n_events) if compact else render_fleet(snap, n_events)
+    return Group(banner(conn, snap.now), body)
 
 
 # -- the session ------------------------------------------------------------------------------
 
 
 class _Watcher:
-    """Opens the session in the background and keeps the store and the connection state."""
+    """Opens the session in the background and keeps the mirror and the connection state."""
 
-    def __init__(self, args: argparse.Namespace, store: Store):
+    def __init__(self, args: argparse.Namespace):
         self.args = args
-        self.store = store
+        self.mirror = Mirror(args.rover or "*")
         self.conn = Connection(describe_endpoint(args))
         self.session: zenoh.Session | None = None
         self.error: str | None = None
         self.stop = threading.Event()
-        self._keep: list[Any] = []
         self._opener = threading.Thread(target=self._open, name="watch-open", daemon=True)
 
     def start(self) -> None:
@@ -161,14 +119,8 @@ class _Watcher:
             self.error = str(exc)
             return
         self.session = session  # from here, close() closes it, declared or not
-        rover = self.args.rover or "*"
-        history = zext.HistoryConfig(detect_late_publishers=True)
         try:
-            for family in keys.families("out"):
-                self._keep.append(zext.declare_advanced_subscriber(
-                    session, family.pattern(rover), self.store.on_sample, history=history))
-            self._keep.append(session.liveliness().declare_subscriber(
-                keys.service(rover, "*"), self.store.on_token, history=True))
+            self.mirror.start(session)
         except zenoh.ZError:
             if not self.stop.is_set():  # else: closed while declaring, on the way out
                 raise
@@ -179,25 +131,20 @@ class _Watcher:
         return self._opener.is_alive()
 
     def refresh_connection(self) -> None:
-        session = self.session
-        if session is None:
+        if self.session is None:
             return
-        try:
-            connected = bool(session.info.routers_zid())
-        except zenoh.ZError:
-            connected = False
-        self.conn.update(connected)
+        self.conn.update(self.mirror.refresh_connection())
+        self.mirror.sweep()
 
     def close(self) -> None:
         self.stop.set()
-        self._keep.clear()
+        self.mirror.close()
         if self.session is not None:
             close_session(self.session)
 
 
 def main(args: argparse.Namespace) -> int:
-    store = Store()
-    watcher = _Watcher(args, store)
+    watcher = _Watcher(args)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     # Ctrl-C quits even when started with SIGINT ignored (from a script's background job,
@@ -205,18 +152,18 @@ def main(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     watcher.start()
     tty = sys.stdout.isatty() and not args.once
-    console = Console(width=args.width or _piped_width()) if args.width or not sys.stdout.isatty() \
-        else Console()
+    console = _Console(width=args.width or _piped_width()) if args.width or not sys.stdout.isatty() \
+        else _Console()
 
     def frame() -> RenderableType:
         watcher.refresh_connection()
-        return render(store.snapshot(), watcher.conn, args.rover, args.events,
+        return render(snapshot_of(watcher.mirror), watcher.conn, args.rover, args.events,
                       width=console.size.width, height=console.size.height)
 
     code = 0
     try:
         if args.once:
-            code = _once(args, watcher, store, console, frame)
+            code = _once(args, watcher, console, frame)
         elif tty:
             with Live(frame(), console=console, screen=True, auto_refresh=False,
                       redirect_stderr=False) as live:
@@ -233,6 +180,8 @@ def main(args: argparse.Namespace) -> int:
                     break
     except KeyboardInterrupt:
         pass
+    except BrokenPipeError:  # the reader has gone (| head): close as on Ctrl-C, quietly
+        _quiet_stdout()
     if watcher.error:
         print(f"lunaris watch: {watcher.error}", file=sys.stderr, flush=True)
         code = 2
@@ -270,13 +219,30 @@ def _piped_width() -> int:
     return PIPED_WIDTH
 
 
-def _once(args: argparse.Namespace, watcher: _Watcher, store: Store, console: Console, frame) -> int:
+class _Console(Console):
+    def on_broken_pipe(self) -> None:
+        """rich exits the process (SystemExit) when its reader goes; the session must be
+        closed first, or zenoh's threads abort the interpreter's exit: say it as an error."""
+        self.quiet = True
+        raise BrokenPipeError
+
+
+def _quiet_stdout() -> None:
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    finally:
+        os.close(devnull)
+
+
+def _once(args: argparse.Namespace, watcher: _Watcher, console: Console, frame) -> int:
     deadline = time.monotonic() + args.timeout
     want = keys.battery_state(args.rover) if args.rover else None
 
     def ready() -> bool:
-        snap = store.snapshot()
-        return (want in snap.latest) if want else bool(snap.latest)
+        return (watcher.mirror.get(want) is not None) if want else bool(watcher.mirror.latest())
 
     while not ready() and time.monotonic() < deadline and not watcher.error:
         time.sleep(0.05)

@@ -13,7 +13,15 @@ from rich.text import Text
 
 from common import keys
 from common.messages import BatteryState, Clock, DriveState, PowerSummary, RadioLink, RailState, SolarPower
-from lunaris.watch_view import DRIVE_STYLE, RAIL_STYLE, Snapshot, _duration, _rover_header, _sev, _worst
+from lunaris.watch_view import (
+    DRIVE_STYLE,
+    RAIL_STYLE,
+    Snapshot,
+    duration,
+    rover_header,
+    severity_style,
+    worst,
+)
 
 __all__ = ["fleet_compact", "render_compact"]
 
@@ -21,7 +29,7 @@ __all__ = ["fleet_compact", "render_compact"]
 def render_compact(snap: Snapshot, rover: str, height: int) -> RenderableType:
     """One rover on a small terminal (80x24): a line each for the battery, the power, the
     radios and the drive; the rails (not their loads); the faults; as many events as fit."""
-    lines: list[RenderableType] = [_rover_header(snap, rover)]
+    lines: list[RenderableType] = [rover_header(snap, rover)]
     got = snap.value(keys.battery_state(rover), BatteryState)
     if got is not None:
         b = got[0]
@@ -29,7 +37,7 @@ def render_compact(snap: Snapshot, rover: str, height: int) -> RenderableType:
         soc_style = "bold red" if b.soc < 0.1 else "yellow" if b.soc < 0.2 else "green"
         line.append(f"{b.soc * 100:6.2f} %", style=soc_style)
         line.append(f"  {b.voltage_v:.2f} V  {b.current_a:.2f} A  {b.temperature_c:.1f} C  empty in "
-                    f"{_duration(b.time_to_empty_s) if b.time_to_empty_s is not None else '-'}  ")
+                    f"{duration(b.time_to_empty_s) if b.time_to_empty_s is not None else '-'}  ")
         line.append("ok" if b.operational else "NOT OPERATIONAL",
                     style="green" if b.operational else "bold red")
         if b.faults:
@@ -68,7 +76,7 @@ def render_compact(snap: Snapshot, rover: str, height: int) -> RenderableType:
         text.append("none", style="green")
     for f in faults[:4]:
         name = f["key"].removeprefix(prefix).removeprefix("fault/")
-        text.append(name + "  ", style=_sev(f.get("severity", "")))
+        text.append(name + "  ", style=severity_style(f.get("severity", "")))
     if len(faults) > 4:
         text.append(f"+{len(faults) - 4} more")
     lines.append(text)
@@ -76,7 +84,7 @@ def render_compact(snap: Snapshot, rover: str, height: int) -> RenderableType:
     events = [e for r, e in snap.events if r == rover][-max(1, height - used - 1):]
     for ev in events:
         line = Text(f"{ev.t_s:7.1f} s ", style="dim")
-        line.append(f"{ev.kind} ", style=_sev(ev.severity))
+        line.append(f"{ev.kind} ", style=severity_style(ev.severity))
         line.append(ev.message)
         line.truncate(200)
         lines.append(line)
@@ -93,12 +101,16 @@ def fleet_compact(snap: Snapshot, n_events: int) -> RenderableType:
         b = snap.value(keys.battery_state(rover), BatteryState)
         rails = snap.named(rover, "rail", "state", RailState)
         faults = snap.faults.get(rover, [])
-        worst = _worst(faults)
+        worst_severity = worst(faults)
         on = sum(1 for r in rails.values() if r.state == "on")
-        t.add_row(Text(rover, style="bold"), f"{c[0].t_s:.0f}" if c else "-",
+        link = snap.links.get(rover)
+        lost = link is not None and link.state == "lost"
+        label = Text(rover + (" LOST" if lost else ""), style="bold white on red" if lost else "bold")
+        fault_style = severity_style(worst_severity) if worst_severity else "green"
+        t.add_row(label, f"{c[0].t_s:.0f}" if c else "-",
                   f"{b[0].soc * 100:.1f} %" if b else "-", f"{b[0].voltage_v:.1f}" if b else "-",
                   f"{b[0].current_a:.1f}" if b else "-", f"{b[0].temperature_c:.0f}" if b else "-",
-                  f"{on}/{len(rails)}", Text(str(len(faults)), style=_sev(worst) if worst else "green"))
+                  f"{on}/{len(rails)}", Text(str(len(faults)), style=fault_style))
     events = [Text(f"{r} {e.t_s:.1f} s {e.kind}: {e.message}", overflow="ellipsis", no_wrap=True)
               for r, e in snap.events[-min(n_events, 6):]]
     return Group(t, *events)

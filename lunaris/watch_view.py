@@ -34,8 +34,10 @@ from common.messages import (
     UmbilicalState,
     decode,
 )
+from lunaris.client import Link
 
-__all__ = ["Connection", "Snapshot", "render"]
+__all__ = ["DRIVE_STYLE", "RAIL_STYLE", "Connection", "Snapshot", "banner", "duration", "render_fleet",
+           "render_rover", "rover_header", "severity_style", "worst"]
 
 SEVERITY_STYLE = {"info": "cyan", "warning": "yellow", "critical": "bold red"}
 SEVERITY_RANK = {"info": 0, "warning": 1, "critical": 2}
@@ -53,10 +55,11 @@ class Snapshot:
     events: list[tuple[str, Event]]  # (rover, event), oldest first
     faults: dict[str, list[dict]]  # rover -> the faults in effect (the owners' records)
     services: dict[str, set[str]]  # rover -> live services
-    now: float = field(default_factory=time.monotonic)
+    now: float = field(default_factory=time.time)  # the clock of the times in ``latest``
+    links: dict[str, Link] = field(default_factory=dict)  # rover -> its link (lunaris.client)
 
     def rovers(self) -> list[str]:
-        found = set(self.services) | set(self.faults)
+        found = set(self.services) | set(self.faults) | set(self.links)
         for key in self.latest:
             rover, _ = keys.split(key)
             found.add(rover)
@@ -90,11 +93,11 @@ class Connection:
 
     endpoint: str
     state: str = "connecting"  # connecting | connected | disconnected
-    since: float = field(default_factory=time.monotonic)  # of the current state
+    since: float = field(default_factory=time.time)  # of the current state
     reconnected_after_s: float | None = None  # the last outage, shown for a while
 
     def update(self, connected: bool, now: float | None = None) -> None:
-        now = time.monotonic() if now is None else now
+        now = time.time() if now is None else now
         new = "connected" if connected else ("disconnected" if self.state != "connecting" else "connecting")
         if new == self.state:
             return
@@ -106,16 +109,16 @@ class Connection:
 # -- drawing ----------------------------------------------------------------------------------
 
 
-def _sev(severity: str) -> str:
+def severity_style(severity: str) -> str:
     return SEVERITY_STYLE.get(severity, "")
 
 
-def _worst(faults: list[dict], contains: str = "") -> str | None:
+def worst(faults: list[dict], contains: str = "") -> str | None:
     sevs = [f.get("severity", "warning") for f in faults if contains in f.get("key", "")]
     return max(sevs, key=lambda s: SEVERITY_RANK.get(s, 1)) if sevs else None
 
 
-def _duration(s: float | None) -> str:
+def duration(s: float | None) -> str:
     if s is None:
         return "-"
     if s >= 3600:
@@ -129,17 +132,17 @@ def _clock_text(t_s: float) -> str:
     return f"{int(t_s // 3600):02d}:{int(t_s % 3600 // 60):02d}:{t_s % 60:04.1f}"
 
 
-def _banner(conn: Connection, now: float) -> Text:
+def banner(conn: Connection, now: float) -> Text:
     text = Text()
     if conn.state == "connecting":
         text.append(f" CONNECTING to {conn.endpoint} ... ", style="bold black on yellow")
     elif conn.state == "disconnected":
-        text.append(f" DISCONNECTED from the router at {conn.endpoint} for {_duration(now - conn.since)}"
+        text.append(f" DISCONNECTED from the router at {conn.endpoint} for {duration(now - conn.since)}"
                     " - retrying; values below are the last received ", style="bold white on red")
     else:
         text.append(f" connected to {conn.endpoint} ", style="bold black on green")
         if conn.reconnected_after_s is not None and now - conn.since < 15.0:
-            text.append(f"  reconnected after an outage of {_duration(conn.reconnected_after_s)}",
+            text.append(f"  reconnected after an outage of {duration(conn.reconnected_after_s)}",
                         style="bold green")
     return text
 
@@ -155,29 +158,31 @@ def _kv(rows: Sequence[tuple[str, Text | str]]) -> Table:
 
 def _battery_panel(snap: Snapshot, rover: str, faults: list[dict]) -> Panel:
     got = snap.value(keys.battery_state(rover), BatteryState)
-    worst = _worst(faults, "/battery/")
+    battery_worst = worst(faults, "/battery/")
     if got is None:
         return Panel("waiting for battery/state ...", title="battery", border_style="dim", expand=False)
     b, age = got
     soc_style = "bold red" if b.soc < 0.1 else "yellow" if b.soc < 0.2 else "green"
     temp_faults = [f for f in b.faults if "temperature" in f or "cutoff" in f or f == "heating"]
-    temp_style = _sev(_worst([f for f in faults if any(n in f["key"] for n in temp_faults)]) or "")
+    temp_style = severity_style(worst([f for f in faults if any(n in f["key"] for n in temp_faults)]) or "")
     status = Text("operational", style="green") if b.operational else Text("NOT OPERATIONAL",
                                                                              style="bold red")
     if b.faults:
-        status.append(f"  {', '.join(b.faults)} (code {b.fault_code})", style=_sev(worst or "warning"))
+        status.append(f"  {', '.join(b.faults)} (code {b.fault_code})",
+                      style=severity_style(battery_worst or "warning"))
     rows: list[tuple[str, Text | str]] = [
         ("energy", f"{b.energy_j / 1e3:8.1f} kJ of {b.capacity_j / 1e3:.1f} kJ"),
         ("state of charge", Text(f"{b.soc * 100:8.2f} %", style=soc_style)),
         ("voltage", f"{b.voltage_v:8.2f} V   (open circuit {b.ocv_v:.2f} V)"),
         ("current", f"{b.current_a:8.2f} A   ({b.power_w:.1f} W)"),
         ("temperature", Text(f"{b.temperature_c:8.1f} C", style=temp_style)),
-        ("time to empty", "- (not draining)" if b.time_to_empty_s is None else _duration(b.time_to_empty_s)),
+        ("time to empty", "- (not draining)" if b.time_to_empty_s is None else duration(b.time_to_empty_s)),
         ("status", status),
     ]
     if age > STALE_S:
-        rows.append(("", Text(f"no update for {_duration(age)}", style="yellow")))
-    return Panel(_kv(rows), title="battery", border_style=_sev(worst) if worst else "blue",
+        rows.append(("", Text(f"no update for {duration(age)}", style="yellow")))
+    return Panel(_kv(rows), title="battery",
+                 border_style=severity_style(battery_worst) if battery_worst else "blue",
                  expand=False)
 
 
@@ -242,7 +247,7 @@ def _drive_panel(snap: Snapshot, rover: str) -> Panel | None:
         ("odometer", f"{d.odometer_m:8,.1f} m   drive energy {d.energy_j / 3600:,.2f} Wh"),
     ]
     if age > STALE_S:
-        rows.append(("", Text(f"no update for {_duration(age)}", style="yellow")))
+        rows.append(("", Text(f"no update for {duration(age)}", style="yellow")))
     return Panel(_kv(rows), title="drive", border_style="red" if d.status == "unpowered" else "blue",
                  expand=False)
 
@@ -288,7 +293,7 @@ def _faults_table(faults_by_rover: dict[str, list[dict]], fleet: bool) -> Table:
         prefix = keys.rover_prefix(rover) + "/"
         for f in faults:
             count += 1
-            style = _sev(f.get("severity", "warning"))
+            style = severity_style(f.get("severity", "warning"))
             name = f["key"].removeprefix(prefix).removeprefix("fault/")
             params = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
                               for k, v in (f.get("params") or {}).items())
@@ -311,14 +316,14 @@ def _events_table(events: list[tuple[str, Event]], n: int, fleet: bool) -> Table
     t.add_column("kind", no_wrap=True)
     t.add_column("message", overflow="ellipsis", no_wrap=True, ratio=1)
     for rover, ev in events[-n:] if n > 0 else []:
-        style = _sev(ev.severity)
+        style = severity_style(ev.severity)
         row: list[RenderableType] = [f"{ev.t_s:.1f} s", Text(ev.severity, style=style), ev.source,
                                      Text(ev.kind, style=style), ev.message]
         t.add_row(*([rover] if fleet else []), *row)
     return t
 
 
-def _rover_header(snap: Snapshot, rover: str) -> Text:
+def rover_header(snap: Snapshot, rover: str) -> Text:
     text = Text(f"LUNARIS  {rover}", style="bold")
     got = snap.value(keys.clock(rover), Clock)
     if got is not None:
@@ -327,12 +332,16 @@ def _rover_header(snap: Snapshot, rover: str) -> Text:
         if c.paused:
             text.append("  PAUSED", style="bold yellow")
         if age > STALE_S:
-            text.append(f"  no clock for {_duration(age)}", style="bold yellow")
+            text.append(f"  no clock for {duration(age)}", style="bold yellow")
     else:
         text.append("   waiting for the clock ...", style="yellow")
     services = snap.services.get(rover, set())
     text.append(f"   services {len(services)}: {', '.join(sorted(services)) or 'none'}",
                 style="" if services else "yellow")
+    link = snap.links.get(rover)
+    if link is not None and link.state == "lost":
+        text.append(f"\n LINK LOST to {rover}: {link.reason}; values below are the last received ",
+                    style="bold white on red")
     return text
 
 
@@ -345,13 +354,10 @@ def render_rover(snap: Snapshot, rover: str, n_events: int) -> RenderableType:
     middle = Columns([_pdm_table(snap, rover), _faults_table({rover: faults}, fleet=False)],
                      padding=(0, 3))
     events = [(r, e) for r, e in snap.events if r == rover]
-    return Group(_rover_header(snap, rover), top, middle, _events_table(events, n_events, fleet=False))
+    return Group(rover_header(snap, rover), top, middle, _events_table(events, n_events, fleet=False))
 
 
-def render_fleet(snap: Snapshot, n_events: int, compact: bool = False) -> RenderableType:
-    if compact:
-        from lunaris.watch_compact import fleet_compact
-        return fleet_compact(snap, n_events)
+def render_fleet(snap: Snapshot, n_events: int) -> RenderableType:
     t = Table(title=f"fleet: {len(snap.rovers())} rover(s)", box=box.SIMPLE_HEAD, title_justify="left",
               title_style="bold")
     for name in ("rover", "sim t", "x", "SoC", "V", "A", "C", "to empty", "loads W", "gen W",
@@ -365,15 +371,18 @@ def render_fleet(snap: Snapshot, n_events: int, compact: bool = False) -> Render
         rails = snap.named(rover, "rail", "state", RailState)
         radios = snap.named(rover, "radio", "link", RadioLink)
         faults = snap.faults.get(rover, [])
-        worst = _worst(faults)
+        worst_severity = worst(faults)
         bad_rails = sum(1 for r in rails.values() if r.state in ("tripped", "failed"))
-        row: list[Text | str] = [Text(rover, style="bold")]
+        link = snap.links.get(rover)
+        lost = link is not None and link.state == "lost"
+        row: list[Text | str] = [Text(rover + (" LINK LOST" if lost else ""),
+                                      style="bold white on red" if lost else "bold")]
         row += [f"{c[0].t_s:.1f}", f"{c[0].time_scale:g}"] if c else ["-", "-"]
         if b:
             bs = b[0]
             soc_style = "bold red" if bs.soc < 0.1 else "yellow" if bs.soc < 0.2 else ""
             row += [Text(f"{bs.soc * 100:.1f} %", style=soc_style), f"{bs.voltage_v:.2f}",
-                    f"{bs.current_a:.2f}", f"{bs.temperature_c:.1f}", _duration(bs.time_to_empty_s)]
+                    f"{bs.current_a:.2f}", f"{bs.temperature_c:.1f}", duration(bs.time_to_empty_s)]
         else:
             row += ["-"] * 5
         row += [f"{p[0].load_power_w:.1f}", f"{p[0].generation_w:.1f}"] if p else ["-", "-"]
@@ -385,25 +394,10 @@ def render_fleet(snap: Snapshot, n_events: int, compact: bool = False) -> Render
         row.append(Text(f"{d[0].status.replace('_', ' ')} {d[0].speed_m_per_s:.2f} m/s "
                         f"{d[0].odometer_m:,.0f} m", style=DRIVE_STYLE.get(d[0].status, ""))
                    if d else "-")
-        row.append(Text(str(len(faults)), style=_sev(worst) if worst else "green"))
+        fault_style = severity_style(worst_severity) if worst_severity else "green"
+        row.append(Text(str(len(faults)), style=fault_style))
         row.append(str(len(snap.services.get(rover, ()))))
         t.add_row(*row)
     if not snap.rovers():
         t.add_row("waiting for rovers ...", *[""] * 14)
     return Group(t, _faults_table(snap.faults, fleet=True), _events_table(snap.events, n_events, fleet=True))
-
-
-COMPACT_BELOW = 110  # columns: narrower than this, the compact layout (an 80x24 terminal)
-
-
-def render(snap: Snapshot, conn: Connection, rover: str | None, n_events: int,
-           width: int = 200, height: int = 60) -> RenderableType:
-    """The frame; below ``COMPACT_BELOW`` columns a compact one that fits an 80x24 terminal."""
-    from lunaris.watch_compact import render_compact
-
-    compact = width < COMPACT_BELOW
-    if rover:
-        body = render_compact(snap, rover, height) if compact else render_rover(snap, rover, n_events)
-    else:
-        body = render_fleet(snap, n_events, compact)
-    return Group(_banner(conn, snap.now), body)

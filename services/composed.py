@@ -4,20 +4,24 @@ Each tick runs what the services do over Zenoh, in the same order: the battery
 integrates the tick at the demand it was holding (zero-order hold), the loads
 draw new samples, the drive (of a rover that has one) moves over the tick and
 sets its load's power, solar and the PDM resolve rails (trips, shedding,
-protection) and the new net demand goes to the battery. Faults are applied
-with the same model attributes the services set. No I/O, no clock, no Zenoh.
+protection) and the new net demand goes to the battery. Faults are given to the
+models as the services give them, typed (:data:`common.faults.Fault`), with
+:meth:`ComposedTwin.set_faults`: the faults in effect on one component at a time. The
+umbilical's cable follows the drive as the solar service makes it. No I/O, no clock, no Zenoh.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import NamedTuple
 
 import numpy as np
 
 from common.config import Rover
+from common.faults import CATALOGUE, FaultParams
 from common.messages import RailStateName
 from services.battery.model import BatteryModel, BatteryReading
-from services.drive.model import DriveModel, motors_powered
+from services.drive.model import DriveModel
 from services.loads.model import LoadsModel, sample_power
 from services.power.model import PowerModel, Summary
 from services.solar.model import SolarModel
@@ -81,15 +85,39 @@ class ComposedTwin:
         self._rail_w = sums.tolist()
         self._row = 0
 
+    def set_faults(self, component: str, name: str | None, faults: Iterable[FaultParams]) -> None:
+        """Give the model of one component every injected fault in effect on it, as the
+        fault book gives them to the services: ``set_faults("load", "nav_camera",
+        [Short(0.05)])``; ``[]`` clears them. ``component`` as in a fault key (SPEC §6)."""
+        if component not in CATALOGUE:
+            raise ValueError(f"no fault component {component!r} (known: {', '.join(CATALOGUE)})")
+        faults = list(faults)
+        if component == "battery":
+            self.battery.set_faults(faults)
+        elif component == "umbilical":
+            self.solar.set_umbilical_faults(faults)
+        elif name is None:
+            raise ValueError(f"a {component} fault names its {component}")
+        elif component == "load":
+            self.loads.set_faults(name, faults)
+        elif component == "rail":
+            self.power.set_faults(name, faults)
+        elif component == "solar":
+            self.solar.set_panel_faults(name, faults)
+        else:
+            raise ValueError(f"the composed twin has no {component} (it has no radio)")
+        self.summary = self._resolve()
+
     def _update_solar(self) -> None:
         sol, seen = self.solar, self._solar_seen
-        if seen is not None and (sol.sun_angle_deg == seen[0] and sol.dust == seen[1]
-                                 and sol.disconnected == seen[2] and sol.umbilical_connected == seen[3]):
+        if seen is not None and (sol.sun_angle_deg == seen[0] and sol.fault_dust == seen[1]
+                                 and sol.dark == seen[2] and sol.umbilical_connected == seen[3]
+                                 and sol.input_dust == seen[4] and sol.panel_angle_deg == seen[5]):
             return
-        self._solar_seen = (sol.sun_angle_deg, dict(sol.dust), set(sol.disconnected),
-                            sol.umbilical_connected)
+        self._solar_seen = (sol.sun_angle_deg, dict(sol.fault_dust), set(sol.dark),
+                            sol.umbilical_connected, dict(sol.input_dust), dict(sol.panel_angle_deg))
         power = self.power
-        for name, p_w, _, _ in sol.panels():
+        for name, p_w, _ in sol.panels():
             power.panel_power_w[name] = p_w
         power.umbilical_w = sol.umbilical_power_w
 
@@ -100,8 +128,7 @@ class ComposedTwin:
         b = self.battery
         point = b.operating_point()
         power.set_battery(b.soc, b.operational, point.voltage_v)
-        faults = loads.faults
-        if self._fast and self.fast and (not faults or not any(faults.values())):
+        if self._fast and self.fast and not loads.held_w:
             rail_w = self._rail_w[self._row - 1]
             if self.drive is not None:
                 rail_w = list(rail_w)
@@ -147,13 +174,16 @@ class ComposedTwin:
         self.summary = self._resolve()
 
     def _step_drive(self, drive: DriveModel) -> None:
-        """As the drive and loads services do: the drive moves over the tick if its load
-        supplies it, and sets its load's power for the next tick."""
+        """As the drive, loads and solar services do: the drive moves over the tick if its
+        load supplies it, and sets its load's power for the next tick; a rover that drives
+        past its umbilical's cable pulls it out."""
         loads, name = self.loads, self._drive_load
-        drive.set_powered(motors_powered(loads.rail_on.get(self._drive_rail, False),
-                                         loads.faults.get(name, ())))
+        # loads.supplied(name), without the call: this runs every tick
+        drive.set_powered(loads.rail_on.get(self._drive_rail, False) and name not in loads.unsupplied)
         drive.step(self.dt_s)
         loads.driven_w[name] = drive.power_w
+        if self.solar.umbilical_plugged:
+            self.solar.move_rover(drive.x_m, drive.y_m, drive.z_m)
 
     def reading(self) -> BatteryReading:
         return self.battery.reading()

@@ -22,8 +22,8 @@ import sys
 from pathlib import Path
 
 from common.connection import add_connection_args
+from lunaris.client import ToolError, close_session, describe_endpoint, open_session
 from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
-from lunaris.tooling import ToolError, describe_endpoint, open_session
 
 __all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http"]
 
@@ -46,6 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tls-key", metavar="FILE", help="... and this private key (PEM)")
     p.add_argument("--wait", type=float, default=None, metavar="S",
                    help="how long to wait for the Zenoh router (default: for ever)")
+    p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                   help="another name this computer is reached by (a request's Host header must "
+                        "be one of the console's names: its address, localhost, and these)")
     add_connection_args(p)
     sub = p.add_subparsers(dest="action", metavar="ACTION")
     users = sub.add_parser("users", help="add, remove and list the console's users")
@@ -104,7 +107,7 @@ def _users(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
-    from lunaris.console.server import make_app
+    from lunaris.console.server import Protocol, host_names, make_app
 
     host, port = parse_http(args.http)
     accounts = Accounts(args.accounts) if args.accounts else None
@@ -120,7 +123,8 @@ def _serve(args: argparse.Namespace) -> int:
     if args.config:
         connection += ["--config", args.config]
     app = make_app(session, accounts, tls=bool(args.tls_cert), scenarios_dir=Path(args.scenarios),
-                   recordings_dir=Path(args.recordings), connection=connection)
+                   recordings_dir=Path(args.recordings), connection=connection,
+                   hosts=host_names(host, args.allow_host))
     scheme = "https" if args.tls_cert else "http"
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     print(f"Lunaris console: {scheme}://{shown}:{port}/  (twin at {describe_endpoint(args)})", flush=True)
@@ -138,10 +142,10 @@ def _serve(args: argparse.Namespace) -> int:
                   "--tls-key, or put the console behind an HTTPS proxy", flush=True)
     config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False,
                             timeout_graceful_shutdown=1, ssl_certfile=args.tls_cert,
-                            ssl_keyfile=args.tls_key, lifespan="on")
+                            ssl_keyfile=args.tls_key, lifespan="on", http=Protocol)
     try:
         uvicorn.Server(config).run()
     finally:
-        session.close()
+        close_session(session)
     print("Lunaris console: stopped", flush=True)
     return 0

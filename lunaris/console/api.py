@@ -3,65 +3,68 @@
 - ``GET /api/live``: server-sent events, a snapshot then batches (:mod:`lunaris.console.live`).
 - ``PUT`` / ``DELETE /api/rovers/<rover>/keys/<key>``: a write on ``lunaris/<rover>/<key>``
   (``fault/...``, ``cmd/rail/<rail>``, ``clock/control``, ``input/...``, ``control/...``),
-  the body being the payload the key takes. The write is checked with the twin's own
-  Structs first (:func:`common.writes.check_write`: 422 and the reason, nothing sent), then
-  sent, and the answer is the twin's: 200 with the accepting event, 409 with the rejection's
-  reason, 504 when nothing answered. An observer gets 403 and nothing is sent.
+  the body being the payload the key takes. The write is planned and checked with the twin's
+  own Structs first (:func:`common.writes.plan_write`: 422 and the reason in words, nothing
+  sent; a wildcard key, a huge number or a lone surrogate included), then sent by the client's
+  writer (:class:`lunaris.client.Writer`), and the answer is the twin's: 200 with the accepting
+  event, 409 with the rejection's reason, 503 "not applied: ..." when the service that owns the
+  key is known to be out of reach (its liveliness gone, the rover's link lost), 504 "no answer
+  within 3 s: not applied ..." when nothing answered. An observer gets 403 and nothing is sent.
+  Every answer is ``{"verdict", "message", "event"}``; a bad request is always a 4xx in words.
 - ``GET /api/rovers/<rover>/snapshots``, ``/faults``, ``/journal``, ``/prediction``: the
-  twin's queries; ``GET /api/catalogue``: the fault catalogue the forms are built from;
-  ``GET /api/me``: who is signed in and what they may do.
+  twin's queries (``faults`` with an owner that did not answer: 502, the faults listed and
+  ``missing``, the owners' absence in words);
+  ``GET /api/catalogue``: the fault catalogue the forms are built from; ``GET /api/me``: who
+  is signed in and what they may do.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import math
 import re
 from typing import Any
 
 import msgspec.inspect as mi
 import zenoh
-from starlette.requests import Request
+from starlette.requests import ClientDisconnect, Request
 from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
 from common import keys
-from common.connection import write
 from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, NoParams
 from common.messages import MAX_INPUT_BYTES, BadInput
-from common.writes import check_write
+from common.writes import plan_write
+from lunaris.client import Accepted, NotApplied, Rejected, describe, humane
 from lunaris.console.auth import User
 from lunaris.console.live import Hub
 
-__all__ = ["catalogue", "humane", "routes"]
+__all__ = ["TooLarge", "catalogue", "read_body", "routes"]
 
-ANSWER_S = 3.0  # how long a write waits for the twin's answer
 ROVER = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")
+LAST_MAX = 100_000  # the journal's latest events asked for at most
 
 
-def humane(message: str) -> str:
-    """A validation message in plain words: ``Expected `float` <= 1.0 - at `$.fraction```
-    becomes ``fraction must be at most 1.0``."""
-    words = {"<=": "at most", ">=": "at least", "<": "below", ">": "above"}
-    m = re.fullmatch(r"Expected `\w+` (<=|>=|<|>) (\S+) - at `\$\.(\w+)`", message)
-    if m:
-        return f"{m.group(3)} must be {words[m.group(1)]} {m.group(2)}"
-    m = re.fullmatch(r"Expected `(\w+)`, got `(\w+)` - at `\$\.(\w+)`", message)
-    if m:
-        kind = {"float": "a number", "int": "a whole number", "bool": "true or false",
-                "str": "text"}.get(m.group(1), m.group(1))
-        return f"{m.group(3)} must be {kind}, not {m.group(2)}"
-    m = re.fullmatch(r"Object missing required field `(\w+)`(?: - at `\$(.*)`)?", message)
-    if m:
-        return f"{m.group(1)} is missing"
-    m = re.fullmatch(r"Object contains unknown field `(\w+)`(?: - at `\$(.*)`)?", message)
-    if m:
-        return f"{m.group(1)} is not a field of this input"
-    return message
+class TooLarge(Exception):
+    """A request body larger than the route takes."""
+
+
+async def read_body(request: Request, limit: int) -> bytes:
+    """The body, read no further than ``limit`` bytes (:class:`TooLarge` beyond)."""
+    declared = request.headers.get("content-length", "")
+    if declared.isdigit() and int(declared) > limit:
+        raise TooLarge
+    data = bytearray()
+    async for chunk in request.stream():
+        data += chunk
+        if len(data) > limit:
+            raise TooLarge
+    return bytes(data)
 
 
 def _params(struct: type) -> list[dict[str, Any]]:
-    if struct is NoParams:
+    if issubclass(struct, NoParams):
         return []
     info = mi.type_info(struct)
     assert isinstance(info, mi.StructType)
@@ -101,39 +104,43 @@ async def _write(request: Request) -> Response:
                                          "and change nothing")
     if not ROVER.match(rover):
         return _answer(404, "invalid", f"bad rover id {rover!r}")
-    body = await request.body()
-    if len(body) > MAX_INPUT_BYTES:
-        return _answer(413, "invalid", "the payload is too large for an input")
-    deleting = request.method == "DELETE"
     try:
-        checked = check_write([p for p in tail.split("/") if p], None if deleting else body)
+        body = await read_body(request, MAX_INPUT_BYTES)
+    except TooLarge:
+        return _answer(413, "invalid", f"not sent: the payload is too large for an input (at most "
+                                       f"{MAX_INPUT_BYTES} bytes)")
+    except ClientDisconnect:
+        return Response(status_code=400)
+    try:
+        planned = plan_write(rover, tail, None if request.method == "DELETE" else body)
     except BadInput as exc:
         return _answer(422, "invalid", f"not sent: {humane(str(exc))}")
-    if rover not in hub.services:
-        known = ", ".join(sorted(hub.services)) or "none"
+    if rover not in hub.mirror.rovers() or not hub.mirror.services(rover) and hub.mirror.token(
+            rover, planned.owner) is None:
+        known = ", ".join(r for r in hub.mirror.rovers() if hub.mirror.services(r)) or "none"
         return _answer(404, "invalid", f"unknown rover {rover!r} (rovers: {known})")
-    key = keys.under(rover, "/".join(p for p in tail.split("/") if p))
-    answer = hub.expect(key, {checked.accepted, "rejected"})
-    try:
-        await asyncio.to_thread(write, request.app.state.session, key, checked.payload)
-        event = await asyncio.wait_for(answer, ANSWER_S)
-    except TimeoutError:
-        return _answer(504, "no answer", f"no answer from the twin within {ANSWER_S:g} s to {key}: "
-                                         "is the service that owns it running?")
-    finally:
-        hub.forget(answer)
-    if event["kind"] == "rejected":
-        return _answer(409, "rejected", event["message"].removeprefix("rejected: "), event)
-    return _answer(200, "accepted", event["message"], event)
+    assert hub.writer is not None
+    answer = await hub.writer.awrite(planned)
+    got = describe(answer)
+    if isinstance(answer, Accepted):
+        return _answer(200, "accepted", answer.message, got["event"])
+    if isinstance(answer, Rejected):
+        return _answer(409, "rejected", answer.message, got["event"])
+    assert isinstance(answer, NotApplied)
+    return _answer(503 if answer.unreachable else 504, "not applied", answer.message)
 
 
 def _get(session: zenoh.Session, selector: str, timeout_s: float) -> tuple[list[Any], list[str]]:
+    """The JSON answers to ``selector`` and the errors replied, in words."""
     ok, errors = [], []
-    for reply in session.get(selector, timeout=timeout_s):
+    for reply in session.get(selector, timeout=timeout_s, consolidation=zenoh.ConsolidationMode.NONE):
         if reply.ok is not None:
-            ok.append(json.loads(reply.ok.payload.to_bytes()))
+            try:
+                ok.append(json.loads(reply.ok.payload.to_bytes()))
+            except ValueError:
+                errors.append(f"an answer on {reply.ok.key_expr} that is not JSON")
         elif reply.err is not None:
-            errors.append(reply.err.payload.to_string())
+            errors.append(humane(reply.err.payload.to_bytes().decode("utf-8", "replace")))
     return ok, errors
 
 
@@ -148,18 +155,26 @@ async def _query(request: Request) -> Response:
         selector, timeout = keys.faults(rover), 5.0
     elif what == "journal":
         last = q.get("last", "200")
-        if not last.isdigit():
-            return JSONResponse({"message": "last: give a whole number"}, status_code=422)
-        selector, timeout = f"{keys.faults_journal(rover)}?last={last}", 5.0
+        if not last.isdigit() or len(last) > 6 or int(last) > LAST_MAX:
+            return JSONResponse({"message": f"last: give a whole number up to {LAST_MAX}"},
+                                status_code=422)
+        selector, timeout = f"{keys.faults_journal(rover)}?last={int(last)}", 5.0
     elif what == "prediction":
         try:
             hours, samples = float(q.get("hours", "8")), int(q.get("samples", "1000"))
         except ValueError:
             return JSONResponse({"message": "hours and samples must be numbers"}, status_code=422)
-        selector, timeout = f"lunaris/{rover}/prediction?hours={hours:g};samples={samples}", 60.0
+        if not math.isfinite(hours) or hours <= 0 or not 0 < samples <= 1_000_000:
+            return JSONResponse({"message": "hours must be a number above 0, samples a whole "
+                                            "number from 1 to 1000000"}, status_code=422)
+        selector, timeout = f"{keys.prediction(rover)}?hours={hours:g};samples={samples}", 60.0
     else:
         return JSONResponse({"message": f"no such query {what!r}"}, status_code=404)
     ok, errors = await asyncio.to_thread(_get, request.app.state.session, selector, timeout)
+    if what == "faults" and ok and errors:  # never fewer faults without saying so
+        return JSONResponse({"message": "not every owner answered: " + "; ".join(errors),
+                             "faults": [f for answer in ok for f in answer], "missing": errors},
+                            status_code=502)
     if not ok:
         which = ", in a version with the prediction" if what == "prediction" else ""
         why = "; ".join(errors) or (f"nobody answered {selector} (is the service that answers it "
@@ -170,7 +185,10 @@ async def _query(request: Request) -> Response:
 
 async def _live(request: Request) -> Response:
     hub: Hub = request.app.state.hub
-    return StreamingResponse(hub.stream(), media_type="text/event-stream",
+    sign_ins = request.app.state.sign_ins
+    token = request.scope["state"].get("token")
+    alive = None if sign_ins is None else (lambda: sign_ins.user(token) is not None)
+    return StreamingResponse(hub.stream(alive), media_type="text/event-stream",
                              headers={"Cache-Control": "no-store", "X-Accel-Buffering": "no"})
 
 

@@ -11,10 +11,16 @@ The accounts file is JSON, made and changed with ``lunaris console users add|rem
 
     {"users": {"ana": {"role": "instructor", "password_hash": "$argon2id$v=19$..."}}}
 
-Passwords are kept only as Argon2id hashes (``argon2-cffi``). The file is read again when it
-changes, so a user added, removed or given another role counts at once, without a restart;
-a removed user's sign-ins end with it. Sign-ins are random tokens held by the server (an
-HTTP-only, same-site cookie), for ``SESSION_S`` at most.
+Passwords are kept only as Argon2id hashes (``argon2-cffi``); a weak one (shorter than
+``MIN_PASSWORD``, a common one, the user's name, one character repeated, a run of the keyboard
+or of digits) is refused when the user is added. The file is read again when it changes, so a
+user added, removed or given another role counts at once, without a restart; a removed user's
+sign-ins end with it, their live streams too. Sign-ins are random tokens held by the server
+(an HTTP-only, same-site cookie), for ``SESSION_S`` at most.
+
+Failed sign-ins are counted per user name and per address (:class:`Attempts`): past
+``Attempts.FREE`` failures in a row, each further try must wait a lockout that doubles, from
+``Attempts.FIRST_S`` up to ``Attempts.MOST_S``; the page says how long.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ import json
 import os
 import secrets
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -31,13 +38,25 @@ from typing import Literal
 from argon2 import PasswordHasher
 from argon2.exceptions import InvalidHashError, VerificationError
 
-__all__ = ["COOKIE", "ROLES", "Accounts", "AccountsError", "SignIns", "User", "is_loopback", "LOCAL"]
+__all__ = ["COOKIE", "LOCAL", "ROLES", "Accounts", "AccountsError", "Attempts", "SignIns", "User",
+           "is_loopback", "weak_password"]
 
 ROLES = ("instructor", "observer")
 Role = Literal["instructor", "observer"]
 COOKIE = "lunaris_console"
 SESSION_S = 12 * 3600.0
-MIN_PASSWORD = 8
+MIN_PASSWORD = 10
+# The most used passwords of the published breach lists (the ones of 10 characters or more;
+# shorter ones are refused for their length) and a training room's obvious guesses.
+COMMON_PASSWORDS = frozenset("""
+password123 password12 password1234 passw0rd123 1234567890 0123456789 12345678910 1q2w3e4r5t
+qwertyuiop 1qaz2wsx3edc qwerty1234 qwerty12345 abcdefghij abc1234567 iloveyou12 football12
+baseball12 superman12 letmein123 welcome123 welcome1234 monkey1234 dragon1234 sunshine12
+princess12 trustno123 changeme12 changeme123 administrator admin12345 admin123456 lunaris123
+lunaris2024 lunaris2025 instructor instructor1 observer12 mapp123456 rover12345 moonrover1
+""".split())
+_KEYBOARD_RUNS = ("1234567890", "0987654321", "qwertyuiop", "asdfghjkl", "zxcvbnm",
+                  "abcdefghijklmnopqrstuvwxyz", "azertyuiop")
 _hasher = PasswordHasher()
 _DUMMY = _hasher.hash("not a password of anyone")  # verified against for unknown users
 
@@ -58,6 +77,22 @@ class User:
 
 
 LOCAL = User("local user", "instructor", local=True)
+
+
+def weak_password(name: str, password: str) -> str | None:
+    """Why ``password`` is too weak for user ``name``, in words; None when it is not."""
+    low = password.lower()
+    if len(password) < MIN_PASSWORD:
+        return f"the password must have at least {MIN_PASSWORD} characters"
+    if low in COMMON_PASSWORDS:
+        return "this password is one of the most used ones: choose another"
+    if name and name.lower() in low:
+        return "the password must not contain the user's name"
+    if len(set(password)) <= 2:
+        return "the password must not be one or two characters repeated"
+    if any(low in run or low in run * 2 for run in _KEYBOARD_RUNS):
+        return "the password must not be a run of the keyboard or of digits"
+    return None
 
 
 def is_loopback(host: str) -> bool:
@@ -119,8 +154,9 @@ class Accounts:
             raise AccountsError(f"role must be {' or '.join(ROLES)}, got {role!r}")
         if not name or len(name) > 64 or not all(c.isalnum() or c in "._-@" for c in name):
             raise AccountsError(f"bad user name {name!r}: letters, digits, '.', '_', '-', '@'")
-        if len(password) < MIN_PASSWORD:
-            raise AccountsError(f"the password must have at least {MIN_PASSWORD} characters")
+        weak = weak_password(name, password)
+        if weak is not None:
+            raise AccountsError(weak)
         users = _read(path) if path.exists() else {}
         if name in users and not replace:
             raise AccountsError(f"user {name!r} exists (give --replace to change the role or password)")
@@ -170,8 +206,11 @@ class SignIns:
         self._tokens: dict[str, tuple[str, float]] = {}  # token -> (user name, expiry)
 
     def open(self, user: User) -> str:
+        now = time.time()
+        for old in [t for t, (_, expiry) in self._tokens.items() if expiry <= now]:
+            del self._tokens[old]  # the expired go, so the table holds live sign-ins only
         token = secrets.token_urlsafe(32)
-        self._tokens[token] = (user.name, time.time() + SESSION_S)
+        self._tokens[token] = (user.name, now + SESSION_S)
         return token
 
     def close(self, token: str | None) -> None:
@@ -188,3 +227,48 @@ class SignIns:
         if user is None:
             self._tokens.pop(token or "", None)
         return user
+
+
+class Attempts:
+    """Failed sign-ins per key (``user:<name>``, ``address:<ip>``) and the lockouts they earn.
+
+    The first ``FREE`` failures in a row cost nothing more than the wrong password's answer;
+    each one after locks the key for ``FIRST_S`` doubled per failure, at most ``MOST_S``. A
+    success clears the key. The keys held are bounded (``KEEP``, the oldest forgotten first),
+    and a key quiet for ``FORGET_S`` is forgotten. Pure: the caller gives the time.
+    """
+
+    FREE = 5
+    FIRST_S = 2.0
+    MOST_S = 900.0
+    KEEP = 10_000
+    FORGET_S = 3600.0
+
+    def __init__(self) -> None:
+        self._failed: OrderedDict[str, tuple[int, float]] = OrderedDict()  # key -> (count, last)
+
+    def wait_s(self, key: str, now: float) -> float:
+        """How long ``key`` must still wait before its next try (0: it may try now)."""
+        got = self._failed.get(key)
+        if got is None:
+            return 0.0
+        count, last = got
+        if now - last > self.FORGET_S:
+            del self._failed[key]
+            return 0.0
+        if count < self.FREE:
+            return 0.0
+        lock = min(self.MOST_S, self.FIRST_S * 2 ** (count - self.FREE))
+        return max(0.0, last + lock - now)
+
+    def failed(self, key: str, now: float) -> None:
+        count, _ = self._failed.pop(key, (0, now))
+        self._failed[key] = (count + 1, now)
+        while len(self._failed) > self.KEEP:
+            self._failed.popitem(last=False)
+
+    def succeeded(self, key: str) -> None:
+        self._failed.pop(key, None)
+
+    def __len__(self) -> int:
+        return len(self._failed)

@@ -1,12 +1,14 @@
 """The console's longer jobs: scenarios played, sessions recorded, debrief reports drawn.
 
-Each runs as its own ``lunaris`` process, as an instructor would run it in a terminal, with
-the console's own connection settings: ``lunaris scenario run`` (its progress lines and its
-step table, rewritten as it plays, are shown on the page; Stop is Ctrl-C, so the scenario
-ends as it always does: the clock put back, a summary), ``lunaris record`` (Stop is Ctrl-C:
-the file is complete) and ``lunaris report`` (an HTML debrief, drawn once per recording and
-kept beside it). One scenario and one recording at a time: a second start is refused, with
-the reason, rather than doubled.
+A scenario plays in the console itself, on a thread of its own, with the runner
+``lunaris scenario run`` uses (:class:`lunaris.client.runner.Runner`): what it says and its
+step table are shown on the page as it plays (and published on
+``lunaris/<rover>/scenario/progress`` for any other tool); Stop ends it as it always ends: the
+clock put back, the end marked in the journal. A recording and a report run as their own
+``lunaris`` process, as an instructor would run them in a terminal, with the console's own
+connection settings: ``lunaris record`` (Stop is Ctrl-C: the file is complete) and ``lunaris
+report`` (an HTML debrief, drawn once per recording and kept beside it). One scenario and one
+recording at a time: a second start is refused, with the reason, rather than doubled.
 """
 
 from __future__ import annotations
@@ -17,18 +19,22 @@ import re
 import signal
 import subprocess
 import sys
-import tempfile
+import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import zenoh
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Route
 
-from common.scenario import ScenarioError, describe_start, load_scenario
+from common.scenario import Scenario, ScenarioError, describe_start, load_scenario
+from lunaris.client import ToolError
+from lunaris.client.runner import Runner
 from lunaris.console.auth import User
 
 __all__ = ["Extras", "routes"]
@@ -72,16 +78,52 @@ class _Job:
                 self.proc.kill()
 
 
+class _Play:
+    """A scenario playing in the console: the runner on a thread of its own, what it said."""
+
+    def __init__(self, runner: Runner):
+        self.runner = runner
+        self.started = time.time()
+        self.lines: deque[str] = deque(maxlen=LINES)
+        self.code: int | None = None
+        self._thread = threading.Thread(target=self._play, name="scenario", daemon=True)
+        self._thread.start()
+
+    def _play(self) -> None:
+        try:
+            for progress in self.runner.run():
+                self.lines.append(progress.line())
+            self.code = self.runner.code
+        except ToolError as exc:
+            self.lines.append(f"cannot play: {exc}")
+            self.code = exc.code
+        except Exception as exc:  # the console goes on; the page says what ended the run
+            self.lines.append(f"the scenario stopped on an internal error: {exc!r}")
+            self.code = 2
+            raise
+
+    @property
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self) -> None:
+        self.runner.stop()
+
+    def kill(self) -> None:
+        self.runner.stop()
+        self._thread.join(10)
+
+
 class Extras:
     def __init__(self, session: zenoh.Session, scenarios_dir: Path | None, recordings_dir: Path | None,
-                 connection: list[str]):
+                 connection: list[str], live_rovers: Callable[[], list[str]] | None = None):
         self.session = session
         self.scenarios_dir = scenarios_dir
         self.recordings_dir = recordings_dir
         self.connection = connection
-        self.scenario: _Job | None = None
+        self.live_rovers = live_rovers or (lambda: [])
+        self.scenario: _Play | None = None
         self.scenario_file: str | None = None
-        self.status_file = Path(tempfile.mkdtemp(prefix="lunaris-console-")) / "scenario.json"
         self.recording: _Job | None = None
         self.recording_file: Path | None = None
 
@@ -113,22 +155,27 @@ class Extras:
             return f"a scenario is already playing ({self.scenario_file}): stop it first"
         if self.scenarios_dir is None or not NAME.match(file) or not (self.scenarios_dir / file).is_file():
             return f"no scenario {file!r}"
-        self.status_file.unlink(missing_ok=True)
-        self.scenario = _Job(["scenario", "run", str(self.scenarios_dir / file), "--status-json",
-                              str(self.status_file), *self.connection], "scenario")
+        try:
+            scenario: Scenario = load_scenario(self.scenarios_dir / file)
+        except ScenarioError as exc:
+            return f"{file} cannot be played: {'; '.join(exc.problems)}"
+        live = self.live_rovers()
+        if scenario.rover not in live:
+            return (f"{file} is for {scenario.rover}, which is not in this session (rovers: "
+                    f"{', '.join(live) or 'none'})")
+        self.scenario = _Play(Runner(self.session, scenario))
         self.scenario_file = file
         return None
 
     def scenario_status(self) -> dict[str, Any]:
-        job = self.scenario
-        if job is None:
+        play = self.scenario
+        if play is None:
             return {"file": None}
-        try:
-            status = json.loads(self.status_file.read_text())
-        except (OSError, ValueError):
-            status = None
-        return {"file": self.scenario_file, "running": job.running, "exit": job.proc.poll(),
-                "lines": list(job.lines), "status": status, "started": job.started}
+        status = msgspec.to_builtins(play.runner.status())
+        status["finished"] = status["state"] == "ended"
+        return {"file": self.scenario_file, "running": play.running,
+                "exit": None if play.running else play.code, "lines": list(play.lines),
+                "status": status, "started": play.started}
 
     # -- recordings ---------------------------------------------------------------------------
 

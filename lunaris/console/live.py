@@ -1,36 +1,47 @@
 """The console's live view of the twin: what every page is sent, as it changes.
 
-One :class:`Hub` per console. Zenoh calls back on its own threads; each sample is checked
-against its key family's Struct there (a payload that is not what its key carries is
-ignored, and said once), then handed to the asyncio loop in bulk: the first sample after a
-quiet spell schedules one ``call_soon_threadsafe``, and the loop drains everything that came
-meanwhile. The loop keeps the latest payload of every telemetry key, the recent events of
-each rover, the live services, and a short history for the plots, and folds the changes into
+One :class:`Hub` per console, around the client's mirror of every rover
+(:class:`lunaris.client.Mirror`: the latest payload of every telemetry key, the recent events
+of each rover taken once, the live services, each rover's link, a short history for the plots,
+all of it bounded whatever is published) and its writer (:class:`lunaris.client.Writer`, which
+answers the API's writes). The mirror tells the hub of each change on Zenoh's threads; the hub
+hands them to the asyncio loop in bulk (the first change after a quiet spell schedules one
+``call_soon_threadsafe``, the loop drains everything that came meanwhile) and folds them into
 *batches*: the first change after a quiet spell goes out at once, then at most one batch per
 ``flush_s``, so a fault reaches the page within milliseconds while twenty pages at 10 Hz
 telemetry cost the console one encoding per batch, not one per page per sample.
 
 A page gets a *snapshot* (everything), then every batch after it. A page too slow to keep up
-(it fell out of the last ``LOG`` batches) gets a snapshot again. The hub also answers the
-API's writes: :meth:`Hub.answer` waits for the event that accepts or rejects a write.
+(it fell out of the last ``LOG`` batches), or a page whose rovers were forgotten (their
+services long gone), gets a snapshot again. Twice a second the hub looks at the router and at
+each rover's link (lost when its clock has not ticked for 2 s): a change goes out in a batch's
+``links`` (and as a ``link`` message for the router), so a cut shows within 3 s.
+
+The messages (``data:`` lines of the event stream, JSON):
+
+- ``{"type": "snapshot", "v", "values": {key: payload}, "events": [event], "services":
+  {rover: [service]}, "history": {rover: {t, soc, temperature_c, load_w, generation_w}},
+  "connected": bool, "links": {rover: {"state": "up"|"lost"|"unknown", "since": wall time
+  or null, "reason": words}}}``
+- ``{"type": "batch", "v", "values", "events", "services", "links"}``: what changed (``links``
+  holds the rovers whose link changed, often none)
+- ``{"type": "link", "v", "connected": bool}``: the router came or went.
 """
 
 from __future__ import annotations
 
 import asyncio
+import bisect
 import threading
-import time
 from collections import deque
 from collections.abc import AsyncIterator
 from typing import Any
 
 import msgspec
 import zenoh
-import zenoh.ext as zext
 
 from common import keys
-from common.messages import BatteryState, Event, PowerSummary
-from lunaris.tooling import ignored
+from lunaris.client import Change, Link, Mirror, Writer
 
 __all__ = ["Hub"]
 
@@ -39,87 +50,60 @@ EVENTS = 300  # recent events kept per rover
 HISTORY = 900  # points of the plots' history per rover (one a second: 15 minutes)
 HISTORY_S = 1.0
 KEEPALIVE_S = 15.0
-
-
-class _Waiter:
-    __slots__ = ("future", "key", "kinds")
-
-    def __init__(self, future: asyncio.Future, key: str, kinds: set[str]):
-        self.future, self.key, self.kinds = future, key, kinds
+LINKS_S = 0.5  # how often the router and the rovers' links are looked at
+RESTART_S = 5.0  # rovers forgotten: the pages start again from a snapshot at most this often
+PENDING_EVENTS = 2000  # events held for the next batch at most (a flood is cut, not kept)
 
 
 class Hub:
-    def __init__(self, loop: asyncio.AbstractEventLoop, flush_s: float = 0.05):
+    def __init__(self, loop: asyncio.AbstractEventLoop, flush_s: float = 0.05, **mirror: Any):
         self.loop = loop
         self.flush_s = flush_s
-        self.latest: dict[str, bytes] = {}
-        self.events: dict[str, deque[bytes]] = {}
-        self.services: dict[str, set[str]] = {}
-        self.history: dict[str, dict[str, deque]] = {}
+        self.mirror = Mirror("*", keep_events=EVENTS, history={"battery/state": HISTORY,
+                                                               "power/summary": HISTORY},
+                             history_every_s=HISTORY_S, **mirror)
+        self.writer: Writer | None = None
         self.connected = False
+        self.links: dict[str, Link] = {}
         self.version = 0
         self._log: deque[tuple[int, bytes]] = deque(maxlen=LOG)
         self._lock = threading.Lock()
-        self._incoming: list[tuple[str, str, Any]] = []  # (what, key, payload) from Zenoh threads
+        self._incoming: list[Change] = []  # from Zenoh threads
         self._scheduled = False
         self._pending_values: dict[str, bytes] = {}
-        self._pending_events: list[bytes] = []
+        self._pending_events: deque[bytes] = deque(maxlen=PENDING_EVENTS)
         self._pending_services: set[str] = set()
+        self._pending_links: dict[str, Link] = {}
         self._flush_handle: asyncio.TimerHandle | None = None
         self._last_flush = 0.0
         self._changed = asyncio.Event()
-        self._waiters: list[_Waiter] = []
-        self._seen_events: deque[tuple] = deque(maxlen=4096)
-        self._seen_set: set[tuple] = set()
-        self._decoders: dict[type, msgspec.json.Decoder] = {}
-        self._keep: list[Any] = []
-        self._last_point: dict[str, float] = {}
+        self._watch: asyncio.Task | None = None
+        self._restart_due = False
+        self._last_restart = 0.0
         self.closed = False
 
     # -- Zenoh ------------------------------------------------------------------------------
 
     def start(self, session: zenoh.Session) -> None:
-        """Subscribe to every telemetry family of every rover, with the publishers' caches
-        replayed first (a console started mid-session shows the current values at once)."""
-        history = zext.HistoryConfig(detect_late_publishers=True)
-        for family in keys.families("out"):
-            self._keep.append(zext.declare_advanced_subscriber(
-                session, family.pattern("*"), self._on_sample, history=history))
-        self._keep.append(session.liveliness().declare_subscriber(
-            keys.service("*", "*"), self._on_token, history=True))
-        self.session = session
+        """Mirror every rover (the publishers' caches replayed first: a console started
+        mid-session shows the current values at once) and look at the links twice a second."""
+        self.mirror.listen(self._hand)
+        self.mirror.start(session)
+        self.writer = Writer(session, self.mirror, "instructor")
+        self._watch = self.loop.create_task(self._watch_links())
 
     def stop(self) -> None:
         self.closed = True
-        self._keep.clear()
+        if self._watch is not None:
+            self._watch.cancel()
+        if self.writer is not None:
+            self.writer.close()
+        self.mirror.close()
         self._notify()
 
-    def _on_sample(self, s: zenoh.Sample) -> None:  # on a Zenoh thread
-        key = str(s.key_expr)
-        try:
-            _, parts = keys.split(key)
-        except ValueError:
-            return
-        family = keys.telemetry_family(parts)
-        if family is None or s.kind != zenoh.SampleKind.PUT:
-            return
-        payload = s.payload.to_bytes()
-        dec = self._decoders.get(family.payload)
-        if dec is None:
-            dec = self._decoders[family.payload] = msgspec.json.Decoder(family.payload)
-        try:
-            value = dec.decode(payload)
-        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-            ignored(key, f"not a valid {family.payload.__name__} ({exc})")
-            return
-        self._hand("event" if family.name == "event" else "value", key, (payload, value))
-
-    def _on_token(self, s: zenoh.Sample) -> None:  # on a Zenoh thread
-        self._hand("token", str(s.key_expr), s.kind == zenoh.SampleKind.PUT)
-
-    def _hand(self, what: str, key: str, payload: Any) -> None:
+    def _hand(self, change: Change) -> None:  # on a Zenoh thread
         with self._lock:
-            self._incoming.append((what, key, payload))
+            self._incoming.append(change)
             if self._scheduled or self.closed:
                 return
             self._scheduled = True
@@ -131,60 +115,52 @@ class Hub:
         with self._lock:
             items, self._incoming = self._incoming, []
             self._scheduled = False
-        now = time.time()
-        for what, key, payload in items:
-            rover, parts = keys.split(key)
-            if what == "token":
-                live = self.services.setdefault(rover, set())
-                (live.add if payload else live.discard)(parts[-1])
-                self._pending_services.add(rover)
-                continue
-            raw, value = payload
-            if what == "event":
-                self._on_event(rover, raw, value)
-                continue
-            self.latest[key] = raw
-            self._pending_values[key] = raw
-            if parts == ["battery", "state"]:
-                self._point(rover, now)
+        forgot = False
+        for c in items:
+            if c.kind == "value":
+                self._pending_values[c.key] = c.raw
+            elif c.kind == "event":
+                self._pending_events.append(c.raw)
+            elif c.kind == "services":
+                self._pending_services.add(c.rover)
+            else:  # forget: the pages start again from a snapshot without it
+                forgot = True
+        if forgot:
+            self._restart_due = True
+            self._restart()
         self._schedule()
 
-    def _on_event(self, rover: str, raw: bytes, ev: Event) -> None:
-        ident = (rover, ev.source_id, ev.seq) if ev.source_id else (rover, ev.t_s, ev.source, ev.kind,
-                                                                     ev.key, ev.message)
-        if ident in self._seen_set:  # a cache replayed after a reconnection
+    def _restart(self) -> None:
+        """Every page takes a new snapshot (a rover was forgotten), at most every RESTART_S
+        (a flood of forged rovers, each making room for the next, costs the pages little)."""
+        if not self._restart_due or self.loop.time() - self._last_restart < RESTART_S:
             return
-        if len(self._seen_events) == self._seen_events.maxlen:
-            self._seen_set.discard(self._seen_events[0])
-        self._seen_events.append(ident)
-        self._seen_set.add(ident)
-        self.events.setdefault(rover, deque(maxlen=EVENTS)).append(raw)
-        self._pending_events.append(raw)
-        for w in list(self._waiters):
-            if w.key == ev.key and ev.kind in w.kinds and not w.future.done():
-                w.future.set_result(msgspec.structs.asdict(ev))
-                self._waiters.remove(w)
+        self._restart_due, self._last_restart = False, self.loop.time()
+        self.version += 1
+        self._log.clear()
+        self._pending_values, self._pending_services = {}, set()
+        self._pending_events.clear()
+        self._pending_links = {}
+        self._notify()
 
-    def _point(self, rover: str, now: float) -> None:
-        """A point of the plots' history, at most one a second of wall time."""
-        if now - self._last_point.get(rover, 0.0) < HISTORY_S:
-            return
-        self._last_point[rover] = now
-        b = self.value(keys.battery_state(rover), BatteryState)
-        p = self.value(keys.power_summary(rover), PowerSummary)
-        if b is None:
-            return
-        h = self.history.setdefault(rover, {n: deque(maxlen=HISTORY) for n in
-                                            ("t", "soc", "temperature_c", "load_w", "generation_w")})
-        h["t"].append(round(now, 3))
-        h["soc"].append(round(b.soc * 100, 4))
-        h["temperature_c"].append(round(b.temperature_c, 3))
-        h["load_w"].append(round(p.load_power_w, 3) if p else None)
-        h["generation_w"].append(round(p.generation_w, 3) if p else None)
-
-    def value(self, key: str, typ: type) -> Any:
-        raw = self.latest.get(key)
-        return None if raw is None else msgspec.json.decode(raw, type=typ)
+    async def _watch_links(self) -> None:
+        """The router and every rover's link, twice a second; forgetting what is long gone."""
+        while not self.closed:
+            try:
+                connected = await asyncio.to_thread(self.mirror.refresh_connection)
+            except zenoh.ZError:
+                connected = False
+            self.set_connected(connected)
+            links = self.mirror.links()
+            changed = {r: lk for r, lk in links.items()
+                       if (old := self.links.get(r)) is None or old.state != lk.state}
+            self.links = links
+            if changed:
+                self._pending_links.update(changed)
+                self._schedule()
+            self.mirror.sweep()  # a rover forgotten comes to _hand, as every change
+            self._restart()  # one left waiting, if any
+            await asyncio.sleep(LINKS_S)
 
     def _schedule(self) -> None:
         if self._flush_handle is not None:
@@ -195,14 +171,17 @@ class Hub:
     def _flush(self) -> None:
         self._flush_handle = None
         self._last_flush = self.loop.time()
-        if not (self._pending_values or self._pending_events or self._pending_services):
+        if not (self._pending_values or self._pending_events or self._pending_services
+                or self._pending_links):
             return
         self.version += 1
         values = b",".join(msgspec.json.encode(k) + b":" + v for k, v in self._pending_values.items())
-        services = msgspec.json.encode({r: sorted(self.services.get(r, ())) for r in self._pending_services})
-        body = (b'{"type":"batch","v":%d,"values":{%s},"events":[%s],"services":%s}'
-                % (self.version, values, b",".join(self._pending_events), services))
-        self._pending_values, self._pending_events, self._pending_services = {}, [], set()
+        services = msgspec.json.encode({r: sorted(self.mirror.services(r)) for r in self._pending_services})
+        links = msgspec.json.encode({r: lk.as_json() for r, lk in self._pending_links.items()})
+        body = (b'{"type":"batch","v":%d,"values":{%s},"events":[%s],"services":%s,"links":%s}'
+                % (self.version, values, b",".join(self._pending_events), services, links))
+        self._pending_values, self._pending_services, self._pending_links = {}, set(), {}
+        self._pending_events.clear()
         self._log.append((self.version, body))
         self._notify()
 
@@ -220,22 +199,47 @@ class Hub:
 
     # -- what pages are sent ------------------------------------------------------------------
 
+    def history(self) -> dict[str, dict[str, list]]:
+        """The plots' history of each rover: a point a second of the battery's state, with the
+        power summary of that moment."""
+        out = {}
+        for rover in self.mirror.rovers():
+            points = self.mirror.history(keys.battery_state(rover))
+            if not points:
+                continue
+            power = self.mirror.history(keys.power_summary(rover))
+            at = [p.at for p in power]
+            h: dict[str, list] = {n: [] for n in ("t", "soc", "temperature_c", "load_w", "generation_w")}
+            for b in points:
+                i = bisect.bisect_right(at, b.at) - 1
+                p = power[i].value if i >= 0 else None
+                h["t"].append(round(b.at, 3))
+                h["soc"].append(round(b.value.soc * 100, 4))
+                h["temperature_c"].append(round(b.value.temperature_c, 3))
+                h["load_w"].append(round(p.load_power_w, 3) if p else None)
+                h["generation_w"].append(round(p.generation_w, 3) if p else None)
+            out[rover] = h
+        return out
+
     def snapshot(self) -> bytes:
-        values = b",".join(msgspec.json.encode(k) + b":" + v for k, v in self.latest.items())
-        events = b",".join(e for q in self.events.values() for e in q)
+        latest = self.mirror.latest()
+        values = b",".join(msgspec.json.encode(k) + b":" + v.raw for k, v in latest.items())
+        events = b",".join(raw for _, _, raw in self.mirror.events())
         rest = msgspec.json.encode({
-            "services": {r: sorted(s) for r, s in self.services.items()},
-            "history": {r: {n: list(q) for n, q in h.items()} for r, h in self.history.items()},
-            "connected": self.connected})
+            "services": {r: sorted(s) for r, s in self.mirror.all_services().items()},
+            "history": self.history(),
+            "connected": self.connected,
+            "links": {r: lk.as_json() for r, lk in self.mirror.links().items()}})
         return (b'{"type":"snapshot","v":%d,"values":{%s},"events":[%s],%s'
                 % (self.version, values, events, rest[1:]))
 
-    async def stream(self) -> AsyncIterator[bytes]:
+    async def stream(self, alive: Any = None) -> AsyncIterator[bytes]:
         """Server-sent events for one page: a snapshot, then every batch; a keep-alive comment
-        when nothing happens (a page that went away is found out then)."""
+        when nothing happens (a page that went away is found out then). ``alive()``, asked
+        at every turn, ends the stream when false (its user was removed, its sign-in ended)."""
         seen = self.version
         yield b"data: " + self.snapshot() + b"\n\n"
-        while not self.closed:
+        while not self.closed and (alive is None or alive()):
             if self.version == seen:
                 changed = self._changed
                 try:
@@ -243,21 +247,16 @@ class Hub:
                 except TimeoutError:
                     yield b": keep-alive\n\n"
                     continue
+                if self.closed or (alive is not None and not alive()):
+                    break
             if not self._log or self._log[0][0] > seen + 1:
-                seen = self.version  # fell behind: start again from everything
+                seen = self.version  # fell behind, or the rovers changed: start again
                 yield b"data: " + self.snapshot() + b"\n\n"
                 continue
             out = [b"data: " + body + b"\n\n" for v, body in self._log if v > seen]
             seen = self.version
             yield b"".join(out)
 
-    # -- the answers to the API's writes -------------------------------------------------------
-
-    def expect(self, key: str, kinds: set[str]) -> asyncio.Future:
-        """A future for the next event on ``key`` of one of ``kinds`` (register before writing)."""
-        w = _Waiter(self.loop.create_future(), key, kinds)
-        self._waiters.append(w)
-        return w.future
-
-    def forget(self, future: asyncio.Future) -> None:
-        self._waiters = [w for w in self._waiters if w.future is not future]
+    def wake(self) -> None:
+        """Wake every stream (to look at ``alive`` again: a user was removed)."""
+        self._notify()

@@ -1,11 +1,23 @@
-"""The console's web server: Starlette on uvicorn, one Zenoh session, the sign-in gate.
+"""The console's web server: Starlette on uvicorn, one Zenoh session, the gate in front.
 
 Every request goes through :class:`Gate` (pure ASGI, so the live stream is not buffered):
-without an accounts file every request is the local instructor's (the server listens on
-loopback only, :mod:`lunaris.console`); with one, a request without a valid sign-in is sent
-to ``/login`` (a page) or refused with 401 (the API), and a write whose ``Origin`` is another
-site is refused with 403. The Zenoh session is opened before the server starts; the hub
-subscribes in the lifespan, on the server's loop.
+
+- its ``Host`` must be one of the console's own names (the address it listens on, this
+  computer's loopback names, and the names given with ``--allow-host``): a page of another
+  site whose name was made to resolve to this computer (DNS rebinding) is refused with 421,
+  in words;
+- a write whose ``Origin`` is another site is refused with 403;
+- without an accounts file every request is the local instructor's (the server listens on
+  loopback only, :mod:`lunaris.console`); with one, a request without a valid sign-in is sent
+  to ``/login`` (a page) or refused with 401 (the API).
+
+Sign-ins are limited per user name and per address (:class:`~lunaris.console.auth.Attempts`:
+a lockout that doubles, said on the page). A request must be complete (headers and body)
+within :data:`REQUEST_S` of its connection or of the answer before it (:class:`Protocol`, the
+HTTP/1.1 protocol uvicorn runs), or its connection is closed: a half-sent request holds
+nothing for long. A user removed from the accounts file is signed out at once, their live
+streams closed within a second. The Zenoh session is opened before the server starts; the
+hub subscribes in the lifespan, on the server's loop.
 """
 
 from __future__ import annotations
@@ -13,34 +25,75 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import html
+import mimetypes
+import socket
+import time
 import urllib.parse
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Iterable
 from pathlib import Path
 from typing import Any
 
+import h11
 import zenoh
 from starlette.applications import Starlette
-from starlette.requests import Request
+from starlette.requests import ClientDisconnect, Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
+from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from lunaris.console import api, extras
-from lunaris.console.auth import COOKIE, LOCAL, SESSION_S, Accounts, SignIns
+from lunaris.console.auth import COOKIE, LOCAL, SESSION_S, Accounts, AccountsError, Attempts, SignIns
 from lunaris.console.live import Hub
 
-__all__ = ["STATIC", "make_app"]
+__all__ = ["LOCAL_NAMES", "REQUEST_S", "STATIC", "Protocol", "host_names", "make_app"]
 
 STATIC = Path(__file__).resolve().parent / "static"
+mimetypes.add_type("text/javascript", ".js")  # the page's ES modules (RFC 9239), whatever the OS's table says
+# The page runs only its own scripts: a name that reached the document as markup could not run.
+PAGE_POLICY = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+               "img-src 'self' data:; connect-src 'self'; object-src 'none'; base-uri 'none'; "
+               "form-action 'self'; frame-ancestors 'none'")
 PUBLIC = ("/login", "/static/app.css", "/favicon.ico")
 WRITES = {"PUT", "POST", "DELETE", "PATCH"}
+LOCAL_NAMES = ("localhost", "127.0.0.1", "::1", "localhost.localdomain")
+REQUEST_S = 10.0  # a request's headers and body must be in within this long
+LOGIN_BYTES = 4096  # a sign-in form is a name and a password
+VERIFYING = 2  # password checks at once (Argon2id takes a core for ~50 ms each)
+ACCOUNTS_S = 1.0  # how often the accounts file is looked at for removed users
+WRONG_S = 1.0  # what a wrong password costs its sender, besides the lockouts
+
+
+def host_names(listen_host: str, extra: Iterable[str] = ()) -> set[str]:
+    """The names a request's ``Host`` may carry (ports aside): the loopback names, the address
+    the console listens on (every address of this computer, and its names, for ``0.0.0.0``
+    or ``::``) and ``extra`` (``--allow-host``)."""
+    names = {n.lower() for n in (*LOCAL_NAMES, listen_host, *extra) if n}
+    if listen_host in ("0.0.0.0", "::", ""):
+        for name in {socket.gethostname(), socket.getfqdn()}:
+            names.add(name.lower())
+            try:
+                names.update(str(info[4][0]).lower() for info in socket.getaddrinfo(name, None))
+            except OSError:
+                pass
+    return names
+
+
+def _host_of(header: str) -> str:
+    """``name:port`` or ``[v6]:port`` -> the name, lower case."""
+    header = header.strip().lower()
+    if header.startswith("["):
+        return header[1:].split("]", 1)[0]
+    return header.rsplit(":", 1)[0] if header.count(":") == 1 else header
 
 
 class Gate:
-    """Who is asking: the local user, a signed-in user, or nobody (sign in first)."""
+    """Which site is asking (``Host``, ``Origin``) and who: the local user, a signed-in user,
+    or nobody (sign in first)."""
 
-    def __init__(self, app: Any, accounts: Accounts | None, sign_ins: SignIns | None):
-        self.app, self.accounts, self.sign_ins = app, accounts, sign_ins
+    def __init__(self, app: Any, accounts: Accounts | None, sign_ins: SignIns | None,
+                 hosts: set[str]):
+        self.app, self.accounts, self.sign_ins, self.hosts = app, accounts, sign_ins, hosts
 
     async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
         if scope["type"] != "http":
@@ -49,9 +102,17 @@ class Gate:
         scope.setdefault("state", {})
         path = scope["path"]
         headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope["headers"]}
+        host = _host_of(headers.get("host", ""))
+        if host not in self.hosts:
+            shown = ", ".join(sorted(self.hosts))
+            await JSONResponse({"message": f"refused: this console is not {host or 'a nameless host'!r}: "
+                                           f"it answers to {shown} (give lunaris console "
+                                           "--allow-host NAME for another name of this computer)"},
+                               status_code=421)(scope, receive, send)
+            return
         if scope["method"] in WRITES and "origin" in headers:
-            host = urllib.parse.urlsplit(headers["origin"]).netloc
-            if host != headers.get("host"):
+            origin = urllib.parse.urlsplit(headers["origin"]).netloc
+            if origin != headers.get("host"):
                 await JSONResponse({"message": "refused: a request from another site"},
                                    status_code=403)(scope, receive, send)
                 return
@@ -71,6 +132,55 @@ class Gate:
         else:
             nxt = urllib.parse.quote(path)
             await RedirectResponse(f"/login?next={nxt}", status_code=303)(scope, receive, send)
+
+
+class Protocol(H11Protocol):
+    """uvicorn's HTTP/1.1 protocol, with a deadline for each request to be in whole.
+
+    uvicorn closes an idle kept-alive connection, but it waits for ever for a request whose
+    headers or body come slowly or never (75 s and counting, issue 23.10): here a request must
+    be complete within :data:`REQUEST_S` of its connection, or of the answer before it; past
+    that the connection is closed (with a 408 if nothing was answered yet)."""
+
+    _deadline: asyncio.TimerHandle | None = None
+
+    def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
+        super().connection_made(transport)
+        self._arm()
+
+    def _arm(self) -> None:
+        if self._deadline is not None:
+            self._deadline.cancel()
+        self._deadline = self.loop.call_later(REQUEST_S, self._too_slow)
+
+    def handle_events(self) -> None:
+        super().handle_events()
+        if self._deadline is not None and self.conn.their_state in (h11.DONE, h11.MUST_CLOSE,
+                                                                     h11.CLOSED, h11.ERROR):
+            self._deadline.cancel()
+            self._deadline = None
+
+    def on_response_complete(self) -> None:
+        super().on_response_complete()
+        if not self.transport.is_closing():
+            self._arm()  # the next request on this connection, if one comes
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        if self._deadline is not None:
+            self._deadline.cancel()
+            self._deadline = None
+        super().connection_lost(exc)
+
+    def _too_slow(self) -> None:
+        self._deadline = None
+        if self.transport.is_closing() or self.conn.their_state in (h11.DONE, h11.MUST_CLOSE):
+            return
+        if self.cycle is None and self.conn.their_state is h11.IDLE and self.conn.our_state is h11.IDLE:
+            message = (f"the request did not come whole within {REQUEST_S:g} s: closed\n").encode()
+            self.transport.write(b"HTTP/1.1 408 Request Timeout\r\ncontent-type: text/plain; "
+                                 b"charset=utf-8\r\nconnection: close\r\ncontent-length: %d\r\n\r\n%s"
+                                 % (len(message), message))
+        self.transport.close()
 
 
 def _cookie(header: str) -> str | None:
@@ -96,21 +206,51 @@ def _safe_next(nxt: str) -> str:
     return nxt if nxt.startswith("/") and not nxt.startswith("//") else "/"
 
 
+def _login_page(error: str, nxt: str, status: int, headers: dict[str, str] | None = None) -> Response:
+    shown = f'<p class="error" role="alert">{html.escape(error)}</p>' if error else ""
+    return HTMLResponse(_LOGIN.format(error=shown, next=html.escape(nxt)), status_code=status,
+                        headers=headers)
+
+
+def _wait_words(seconds: float) -> str:
+    s = int(seconds + 0.999)
+    return f"{s // 60} min {s % 60} s" if s >= 60 else f"{s} s"
+
+
 async def _login(request: Request) -> Response:
     accounts: Accounts | None = request.app.state.accounts
     if accounts is None:
         return RedirectResponse("/", status_code=303)
     if request.method == "GET":
-        nxt = html.escape(_safe_next(request.query_params.get("next", "/")))
-        return HTMLResponse(_LOGIN.format(error="", next=nxt))
-    form = urllib.parse.parse_qs((await request.body()).decode("utf-8", "replace"))
+        return _login_page("", _safe_next(request.query_params.get("next", "/")), 200)
+    try:
+        body = await api.read_body(request, LOGIN_BYTES)
+    except api.TooLarge:
+        return _login_page("That is not a sign-in.", "/", 413)
+    except ClientDisconnect:
+        return Response(status_code=400)
+    form = urllib.parse.parse_qs(body.decode("utf-8", "replace"))
     name, password = form.get("user", [""])[0], form.get("password", [""])[0]
     nxt = _safe_next(form.get("next", ["/"])[0])
-    user = await asyncio.to_thread(accounts.check, name, password)
+    attempts: Attempts = request.app.state.attempts
+    address = request.client.host if request.client else "unknown"
+    now = time.monotonic()
+    waits = [(attempts.wait_s(f"user:{name}", now), f"for the user {name!r}"),
+             (attempts.wait_s(f"address:{address}", now), f"from this computer ({address})")]
+    wait, whose = max(waits)
+    if wait > 0:
+        return _login_page(f"Too many wrong passwords {whose}: sign-in is locked for "
+                           f"{_wait_words(wait)} more. Try again then.", nxt, 429,
+                           {"Retry-After": str(int(wait + 0.999))})
+    async with request.app.state.verifying:
+        user = await asyncio.to_thread(accounts.check, name, password)
     if user is None:
-        await asyncio.sleep(1.0)  # a guesser pays a second a try
-        error = '<p class="error" role="alert">Wrong user or password.</p>'
-        return HTMLResponse(_LOGIN.format(error=error, next=html.escape(nxt)), status_code=401)
+        attempts.failed(f"user:{name}", time.monotonic())
+        attempts.failed(f"address:{address}", time.monotonic())
+        await asyncio.sleep(WRONG_S)  # a guesser pays a second a try
+        return _login_page("Wrong user or password.", nxt, 401)
+    attempts.succeeded(f"user:{name}")
+    attempts.succeeded(f"address:{address}")
     token = request.app.state.sign_ins.open(user)
     response = RedirectResponse(nxt, status_code=303)
     response.set_cookie(COOKIE, token, max_age=int(SESSION_S), httponly=True, samesite="strict",
@@ -122,6 +262,7 @@ async def _logout(request: Request) -> Response:
     sign_ins: SignIns | None = request.app.state.sign_ins
     if sign_ins is not None:
         sign_ins.close(request.scope["state"].get("token"))
+        request.app.state.hub.wake()  # its live streams end
     response = RedirectResponse("/login" if sign_ins else "/", status_code=303)
     response.delete_cookie(COOKIE)
     return response
@@ -132,24 +273,29 @@ async def _favicon(request: Request) -> Response:
 
 
 async def _index(request: Request) -> Response:
-    return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store"})
+    return FileResponse(STATIC / "index.html", headers={"Cache-Control": "no-store",
+                                                        "Content-Security-Policy": PAGE_POLICY})
 
 
 def make_app(session: zenoh.Session, accounts: Accounts | None, *, tls: bool = False,
              scenarios_dir: Path | None = None, recordings_dir: Path | None = None,
-             connection: list[str] | None = None, flush_s: float = 0.05) -> Any:
-    """The console as an ASGI application around an open Zenoh session."""
+             connection: list[str] | None = None, flush_s: float = 0.05,
+             hosts: Iterable[str] | None = None, **mirror: Any) -> Any:
+    """The console as an ASGI application around an open Zenoh session. ``hosts``: the names
+    a request's ``Host`` may carry (:func:`host_names`; default the loopback names)."""
 
     @contextlib.asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
-        hub = Hub(asyncio.get_running_loop(), flush_s)
+        hub = Hub(asyncio.get_running_loop(), flush_s, **mirror)
         hub.start(session)
         app.state.hub = hub
-        watch = asyncio.create_task(_watch_link(hub, session))
+        app.state.verifying = asyncio.Semaphore(VERIFYING)
+        watch = asyncio.create_task(_watch_accounts(app)) if accounts is not None else None
         try:
             yield
         finally:
-            watch.cancel()
+            if watch is not None:
+                watch.cancel()
             app.state.extras.close()
             hub.stop()
 
@@ -165,18 +311,26 @@ def make_app(session: zenoh.Session, accounts: Accounts | None, *, tls: bool = F
     app.state.session = session
     app.state.accounts = accounts
     app.state.sign_ins = SignIns(accounts) if accounts is not None else None
+    app.state.attempts = Attempts()
     app.state.tls = tls
     app.state.catalogue = api.catalogue()
-    app.state.extras = extras.Extras(session, scenarios_dir, recordings_dir, connection or [])
-    return Gate(app, accounts, app.state.sign_ins)
+    app.state.extras = extras.Extras(
+        session, scenarios_dir, recordings_dir, connection or [],
+        live_rovers=lambda: [r for r in app.state.hub.mirror.rovers() if app.state.hub.mirror.services(r)])
+    return Gate(app, accounts, app.state.sign_ins, set(hosts) if hosts is not None else set(LOCAL_NAMES))
 
 
-async def _watch_link(hub: Hub, session: zenoh.Session) -> None:
-    """Tell the pages whether the router is there (Zenoh reconnects by itself)."""
+async def _watch_accounts(app: Starlette) -> None:
+    """A user removed (or made an observer) counts at once: their live streams are woken, look
+    at their sign-in again, and end."""
+    accounts: Accounts = app.state.accounts
+    users = accounts.users()
     while True:
+        await asyncio.sleep(ACCOUNTS_S)
         try:
-            connected = bool(await asyncio.to_thread(lambda: list(session.info.routers_zid())))
-        except zenoh.ZError:
-            connected = False
-        hub.set_connected(connected)
-        await asyncio.sleep(1.0 if connected else 0.5)
+            now = await asyncio.to_thread(accounts.users)
+        except AccountsError:
+            continue  # a file being written: the next look
+        if now != users:
+            users = now
+            app.state.hub.wake()

@@ -38,10 +38,11 @@ to the same numbers.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from typing import NamedTuple
 
 from common.config import Battery as BatteryConfig
-from common.faults import FactorParams, FaultKey, FractionParams, HeatParams, Params
+from common.faults import CapacityLoss, Disconnect, FaultParams, Heating, Resistance, kind_of
 from common.messages import Severity
 from services.battery.circuit import (
     Books,
@@ -76,14 +77,15 @@ class BatteryReading(NamedTuple):
     heat_w: float
     operational: bool
     time_to_empty_s: float | None
-    faults: list[str]  # active derived and injected battery faults, by name
+    faults: list[str]  # the pack's own alarms (its derived faults), by name
     polarisation_v: list[float]  # the branch voltages v_j
 
 
 class BatteryModel:
     """One pack. ``demand_w`` (net, positive = discharge) is held until the next change;
-    :meth:`step` integrates it over ``dt``. The pack's injected faults (SPEC §6) are applied
-    by :meth:`apply_fault`; ``resistance`` multiplies R0 and every branch resistance."""
+    :meth:`step` integrates it over ``dt``. :meth:`set_faults` applies the injected faults in
+    effect (SPEC §6; ``resistance`` multiplies R0 and every branch resistance), keeping their
+    effect, never a record; it reports only its own alarms (:meth:`derived_faults`)."""
 
     def __init__(self, cfg: BatteryConfig):
         self.cfg = cfg
@@ -103,10 +105,9 @@ class BatteryModel:
         self.temperature_c = cfg.thermal.initial_c
         self.demand_w = 0.0
         self.branch_v = [0.0] * len(self._cj)
-        # injected faults (and capacity_loss, a property)
-        self.resistance_factor = 1.0
-        self.injected_heat_w = 0.0
-        self.disconnected = False
+        # what the injected faults do (and the capacity loss, a property)
+        self.resistance_factor, self.injected_heat_w = 1.0, 0.0
+        self.disconnected = False  # off the bus: its connection open
         # latched protections
         self.depleted = self.soc <= cfg.depleted_soc
         self.thermal_cutoff = False
@@ -147,7 +148,7 @@ class BatteryModel:
         """A pack in the same state with the same injected faults (a prediction's start)."""
         twin = BatteryModel(self.cfg)
         twin.set_state(self.state())
-        twin.apply_capacity_loss(self.capacity_loss)
+        twin._set_capacity_loss(self.capacity_loss)
         twin.energy_j = self.energy_j
         twin.resistance_factor = self.resistance_factor
         twin.injected_heat_w = self.injected_heat_w
@@ -167,7 +168,7 @@ class BatteryModel:
 
     @property
     def capacity_loss(self) -> float:
-        """The injected capacity loss, 0..1 (set it with :meth:`apply_capacity_loss`)."""
+        """The capacity lost to an injected fault, 0..1 (:meth:`set_faults`)."""
         return self._capacity_loss
 
     @property
@@ -251,21 +252,26 @@ class BatteryModel:
             raise ValueError(f"power_w must be finite, got {power_w}")
         self.demand_w = power_w
 
-    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
-        """Inject (``params``) or clear (None) one of the pack's faults."""
-        if fault.kind == "capacity_loss":
-            self.apply_capacity_loss(params.fraction if isinstance(params, FractionParams) else 0.0)
-        elif fault.kind == "resistance":
-            self.resistance_factor = params.factor if isinstance(params, FactorParams) else 1.0
-        elif fault.kind == "heating":
-            self.injected_heat_w = params.heat_w if isinstance(params, HeatParams) else 0.0
-        elif fault.kind == "disconnect":
-            self.disconnected = params is not None
-        else:
-            raise ValueError(f"the battery has no fault kind {fault.kind!r}")
-        self._changed()
+    def set_faults(self, faults: Iterable[FaultParams]) -> None:
+        """Apply the injected faults in effect on the pack, all of them (an empty list: none);
+        a kind that is not the battery's raises ValueError, and nothing changes."""
+        loss, factor, heat_w, off = 0.0, 1.0, 0.0, False
+        for fault in faults:
+            match fault:
+                case CapacityLoss(fraction=fraction):
+                    loss = fraction
+                case Resistance(factor=f):
+                    factor = f
+                case Heating(heat_w=w):
+                    heat_w = w
+                case Disconnect():
+                    off = True
+                case _:
+                    raise ValueError(f"the battery has no fault kind {kind_of(fault)!r}")
+        self.resistance_factor, self.injected_heat_w, self.disconnected = factor, heat_w, off
+        self._set_capacity_loss(loss)
 
-    def apply_capacity_loss(self, fraction: float) -> None:
+    def _set_capacity_loss(self, fraction: float) -> None:
         """Shrink usable capacity; energy above the new capacity is lost for good."""
         self._capacity_loss = fraction
         self._cap = self.cfg.capacity_j * (1.0 - fraction)
@@ -396,6 +402,9 @@ class BatteryModel:
         if self.thermal_cutoff:
             out["thermal_cutoff"] = ("critical", f"pack at {t:.1f} C above cutoff "
                                      f"{th.cutoff_c} C: disconnected itself")
+        elif self.disconnected:  # what its BMS sees: an open output, no protection of its own
+            out["no_output"] = ("critical", "the pack supplies nothing: its connection to the "
+                                "bus is open (bus at 0 V)")
         if self.depleted:
             out["depleted"] = ("critical", f"battery depleted (soc {self.soc:.3f} <= "
                                f"{cfg.depleted_soc})")
@@ -423,10 +432,6 @@ class BatteryModel:
         point = self.operating_point()
         v_oc, r0, rj = self._params()
         faults = list(self.derived_faults(point))
-        faults += [name for name, on in (
-            ("disconnected", self.disconnected), ("heating", self.injected_heat_w > 0.0),
-            ("resistance", self.resistance_factor > 1.0), ("capacity_loss", self.capacity_loss > 0.0),
-        ) if on]
         drain_w = v_oc * point.current_a
         usable_j = self.energy_j - self.cfg.depleted_soc * self.capacity_j
         tte: float | None = None  # idle or charging: never empties

@@ -34,7 +34,7 @@ import zenoh.ext as zext
 
 from common import keys
 from common.config import Rover
-from common.faults import fault_of
+from common.faults import injected
 from common.messages import (
     ActiveFaults,
     BadInput,
@@ -187,10 +187,9 @@ class PredictionQueries:
             if reply.ok is None:
                 continue
             answered = True
-            for fault in decode(reply.ok.payload.to_bytes(), ActiveFaults).faults:
-                _, parts = keys.split(fault.key)
-                if parts[:2] == ["fault", "load"]:
-                    loads.apply_fault(*fault_of("/".join(parts[1:]), fault.params))
+            record = decode(reply.ok.payload.to_bytes(), ActiveFaults).faults
+            for name in loads.names:
+                loads.set_faults(name, injected(record, "load", name))
         if not answered:
             notes.append("the loads service did not answer: no load fault assumed")
         return {name: p for name in loads.names if (p := loads.fault_power(name)) is not None}

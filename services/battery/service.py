@@ -19,7 +19,7 @@ from typing import Any
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey, Params, battery_fault_code
+from common.faults import Fault, battery_fault_code
 from common.messages import BatteryState, Clock, PowerSummary, decode
 from common.runtime import Runtime, Sample
 from services.battery.model import BatteryModel
@@ -91,8 +91,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             held.pop(s.rover, None)
             publish(s.rover)
 
-    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
-        packs[rover].apply_fault(fk, params)
+    def apply_faults(rover: str, _: str | None, faults: tuple[Fault, ...]) -> None:
+        packs[rover].set_faults(faults)
         publish(rover)
 
     def get_state(rover: str) -> dict[str, Any]:
@@ -115,7 +115,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.on_tick(on_tick)
     rt.every(HOLD_S / 4, release_held)
     rt.subscribe(keys.power_summary("*"), on_summary, telemetry=True)
-    rt.faults.own("battery", None, apply_fault)
+    rt.faults.own("battery", None, apply_faults)
     rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S)
     rt.faults.restore()
     for rover in packs:

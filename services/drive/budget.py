@@ -18,7 +18,7 @@ from common.config import Rover
 from common.messages import DriveTraverse
 from common.traverse import length_and_duration, plan
 from services.composed import ComposedTwin
-from services.drive.model import DriveModel
+from services.drive.model import DriveModel, umbilical_holds
 
 __all__ = ["ReserveCrossing", "TraverseBudget", "power_profile", "run_traverse"]
 
@@ -65,7 +65,8 @@ def run_traverse(rover: Rover, traverse: DriveTraverse, reserve_soc: float = 0.2
                  progress: Progress | None = None, progress_every_s: float = 600.0) -> TraverseBudget:
     """Drive ``traverse`` from the rover file's start. ``max_hours`` defaults to three times
     the planned duration plus an hour. Raises ValueError for a rover without a drive or a
-    traverse the drive would refuse (the reasons in the message)."""
+    traverse the drive would refuse (the reasons in the message: a rover file that starts
+    plugged in to an umbilical that does not follow the rover, too)."""
     if rover.drive is None:
         raise ValueError(f"rover {rover.id} has no drive section: it cannot follow a traverse")
     twin = ComposedTwin(rover, seed)
@@ -73,6 +74,9 @@ def run_traverse(rover: Rover, traverse: DriveTraverse, reserve_soc: float = 0.2
     assert drive is not None  # the rover has a drive section
     start = (drive.x_m, drive.y_m, drive.z_m)
     legs, problems = plan(traverse, drive.cfg, start)
+    held = umbilical_holds(rover.umbilical, twin.solar.umbilical_plugged)
+    if held is not None:
+        problems.append(held)
     if problems:
         raise ValueError("; ".join(problems))
     length, duration = length_and_duration(start, legs)

@@ -26,10 +26,10 @@ is what it draws over the next. Pure: no I/O, no clock, no Zenoh.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
-from common.config import Drive
+from common.config import Drive, Umbilical
 from common.messages import DriveStatus
 from common.traverse import Leg
 
@@ -39,8 +39,8 @@ __all__ = [
     "capped_speed",
     "drive_power_w",
     "leg_energy_j",
-    "motors_powered",
     "tractive_force_n",
+    "umbilical_holds",
 ]
 
 _EPS_M = 1e-9  # legs shorter than this are arrived at at once
@@ -79,12 +79,15 @@ def leg_energy_j(force_n: float, distance_m: float, speed_m_per_s: float, effici
     return drive_power_w(force_n, speed_m_per_s, efficiency, idle_w, regen_efficiency) * duration_s
 
 
-def motors_powered(load_on: bool, load_faults: Iterable[str]) -> bool:
-    """Whether the drive load supplies the motors: its rail is on and it is neither open nor
-    shorted (a ``stuck`` load misreports its power, the wheels still turn)."""
-    if not load_on:
-        return False
-    return not any(f == "open" or f == "short" for f in load_faults)
+def umbilical_holds(umbilical: Umbilical, plugged: bool) -> str | None:
+    """Why a traverse cannot start now, or None: while the umbilical is plugged in the rover
+    stays put, unless its cable follows the rover (SPEC §12e)."""
+    if not plugged or umbilical.follows_rover:
+        return None
+    reach = ("it has no slack" if umbilical.cable_m is None
+             else f"its {umbilical.cable_m:g} m cable does not follow the rover")
+    return ("the umbilical is plugged in and " + reach + ": unplug it first "
+            "(input/umbilical false)")
 
 
 class DriveReading(NamedTuple):
@@ -173,8 +176,9 @@ class DriveModel:
         return True
 
     def set_powered(self, powered: bool) -> bool:
-        """The drive load supplies the motors or not (see :func:`motors_powered`); True when
-        that changed. Without power the rover halts where it is and resumes when it returns."""
+        """The drive load supplies the motors or not (see
+        :func:`common.faults.supplies_device`); True when that changed. Without power the
+        rover halts where it is and resumes when it returns."""
         if powered == self.powered:
             return False
         self.powered = powered

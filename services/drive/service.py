@@ -6,8 +6,11 @@ out, see :func:`serves`). A traverse is planned from where the rover is when it 
 waypoint, asks for more than the rover's maximum speed or a leg steeper than its
 ``max_grade_deg``; an accepted one replaces the traverse being driven and is journalled as an
 ``input`` event. ``delete`` stops the rover where it is. The drive load's power comes from
-``drive/state`` (the loads service applies it); its ``load/<name>/power`` tells this service
-whether the motors are supplied (a rail off, an open or shorted load halt the rover).
+``drive/state`` (the loads service applies it); its ``load/<name>/power`` (``on``: its rail is
+on) and the loads' faults in effect (``faults/active/loads``, the fault book's record) tell this
+service whether the motors are supplied (a rail off, an open or shorted load halt the rover).
+A traverse is refused while the umbilical is plugged in (``umbilical/state``), unless its cable
+follows the rover (SPEC §12e; the solar service unplugs a rover that drives past its cable).
 """
 
 from __future__ import annotations
@@ -16,10 +19,22 @@ from typing import Any
 
 from common import keys
 from common.config import Rover
-from common.messages import BadInput, Clock, DriveState, DriveTraverse, LoadPower, decode, decode_input
+from common.faults import injected, supplies_device
+from common.messages import (
+    ActiveFault,
+    ActiveFaults,
+    BadInput,
+    Clock,
+    DriveState,
+    DriveTraverse,
+    LoadPower,
+    UmbilicalState,
+    decode,
+    decode_input,
+)
 from common.runtime import Runtime, Sample
 from common.traverse import length_and_duration, plan
-from services.drive.model import DriveModel, motors_powered
+from services.drive.model import DriveModel, umbilical_holds
 
 __all__ = ["serve", "serves"]
 
@@ -36,6 +51,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         assert r.drive is not None  # serves()
         max_w = next(ld.max_w for ld in r.loads if ld.name == r.drive.load)
         models[rover_id] = DriveModel(r.drive, max_w)
+    load_on = dict.fromkeys(models, True)  # the drive load's rail is on (load/<load>/power)
+    load_faults: dict[str, list[ActiveFault]] = {}  # the loads' faults in effect, per rover
+    plugged = {r: configs[r].umbilical.connected for r in models}  # umbilical/state
 
     def publish(rover: str) -> None:
         if rover in models:
@@ -57,6 +75,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                      f"odometer {m.odometer_m:.1f} m")
             return
         cmd = decode_input(s.payload, DriveTraverse)
+        held = umbilical_holds(configs[s.rover].umbilical, plugged[s.rover])
+        if held is not None:
+            raise BadInput(held)
         start = (m.x_m, m.y_m, m.z_m)
         legs, problems = plan(cmd, m.cfg, start)
         if problems:
@@ -71,12 +92,25 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                  f"{' (returning to the start)' if cmd.return_to_start else ''}",
                  {"waypoints": len(legs), "length_m": length, "duration_s": duration})
 
+    def power(rover: str) -> None:
+        load = configs[rover].drive.load  # type: ignore[union-attr]  # serves(): has a drive
+        if models[rover].set_powered(supplies_device(
+                load_on[rover], injected(load_faults.get(rover, []), "load", load))):
+            publish(rover)
+
     def on_load(s: Sample) -> None:
-        if s.deleted:
-            return
-        p = decode(s.payload, LoadPower)
-        if models[s.rover].set_powered(motors_powered(p.on, p.faults)):
-            publish(s.rover)
+        if not s.deleted:
+            load_on[s.rover] = decode(s.payload, LoadPower).on
+            power(s.rover)
+
+    def on_load_faults(s: Sample) -> None:
+        if not s.deleted and s.rover in models:
+            load_faults[s.rover] = decode(s.payload, ActiveFaults).faults
+            power(s.rover)
+
+    def on_umbilical(s: Sample) -> None:
+        if not s.deleted and s.rover in models:
+            plugged[s.rover] = decode(s.payload, UmbilicalState).connected
 
     def get_state(rover: str) -> dict[str, Any]:
         return models[rover].state() if rover in models else {}
@@ -88,12 +122,16 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def reset(rover: str) -> None:
         if rover in models:
             models[rover].reset()
+            plugged[rover] = configs[rover].umbilical.connected
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.input_drive_traverse("*"), on_traverse)
     for rover_id, r in configs.items():  # each rover's drive load only, not every load's samples
         assert r.drive is not None
         rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load, telemetry=True)
+    if models:
+        rt.subscribe(keys.faults_active("*", "loads"), on_load_faults, history=True)
+        rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
     rt.own_state(get_state, set_state, reset, after=publish)
     for rover in models:
         publish(rover)

@@ -2,7 +2,9 @@
 
 Every tick a load draws ``clip(N(nominal_w, std_w), 0, max_w)`` [W]. It draws
 nothing while its rail is off. Faults (SPEC §6) override the sample: ``short``
-draws ``V_rail^2 / R``, ``open`` nothing, ``stuck`` a constant power.
+draws ``V_rail^2 / R``, ``open`` nothing, ``stuck`` a constant power. The model is given the
+faults in effect on a load (:meth:`LoadsModel.set_faults`) and keeps what they do, never a
+record of them; a load's own alarm is ``over_current`` (drawing above its ``max_w``).
 
 The drive load of a rover with a ``drive`` section draws what the drive sets
 (:meth:`LoadsModel.set_driven`, from ``drive/state``; ``idle_w`` until it says otherwise)
@@ -14,10 +16,12 @@ samples of every load of every rover together, ``BLOCK_TICKS`` ticks at a time.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from common.config import Rover
-from common.faults import FaultKey, Params, ShortParams, StuckParams
+from common.faults import FaultParams, Open, Short, Stuck, kind_of, supplies_device
 
 __all__ = ["BLOCK_TICKS", "LoadsFleet", "LoadsModel", "sample_power"]
 
@@ -43,12 +47,16 @@ class LoadsModel:
         self.nominal_w = np.array([ld.nominal_w for ld in rover.loads], dtype=float)
         self.std_w = np.array([ld.std_w for ld in rover.loads], dtype=float)
         self.max_w = np.array([ld.max_w for ld in rover.loads], dtype=float)
+        self.max_w_of = {ld.name: ld.max_w for ld in rover.loads}
         self.sampled_w = self.nominal_w.copy()
         self.rail_on = {r.name: r.initially_on for r in rover.rails}
         # The drive load: what the drive sets, instead of a sample.
         self.idle_w = {rover.drive.load: rover.drive.idle_w} if rover.drive is not None else {}
         self.driven_w: dict[str, float] = dict(self.idle_w)
-        self.faults: dict[str, dict[str, Params]] = {}  # load -> {kind: params}
+        # what the injected faults do: the power a fault holds a load at while its rail is on
+        # [W], and the loads whose device gets no supply (see common.faults.supplies_device)
+        self.held_w: dict[str, float] = {}
+        self.unsupplied: set[str] = set()
         self.rng = np.random.default_rng(seed)
 
     def sample(self) -> None:
@@ -89,42 +97,58 @@ class LoadsModel:
 
     def fault_power(self, name: str) -> float | None:
         """The power a fault holds a load at while its rail is on [W]; None without a fault."""
-        faults = self.faults.get(name)
-        if not faults:
-            return None
-        # Several faults on one load: a short dominates, then an open circuit, then stuck.
-        short = faults.get("short")
-        if isinstance(short, ShortParams):
-            return self.rail_voltage_v[self.rails[self.index[name]]] ** 2 / short.resistance_ohm
-        if "open" in faults:
-            return 0.0
-        stuck = faults["stuck"]
-        assert isinstance(stuck, StuckParams)
-        return stuck.power_w
+        return self.held_w.get(name)
 
-    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
-        """Inject (``params``) or clear (None) one fault of one load."""
-        if fault.name not in self.index:
-            raise ValueError(f"no load {fault.name!r}")
-        faults = self.faults.setdefault(fault.name, {})
-        if params is None:
-            faults.pop(fault.kind, None)
+    def set_faults(self, name: str, faults: Iterable[FaultParams]) -> None:
+        """Apply the injected faults in effect on one load, all of them (none: it draws its
+        samples again). Several on one load: a short dominates, then an open circuit, then
+        stuck. A kind that is not a load's raises ValueError, and nothing changes."""
+        if name not in self.index:
+            raise ValueError(f"no load {name!r}")
+        faults = list(faults)
+        short_ohm = stuck_w = None
+        is_open = False
+        for fault in faults:
+            match fault:
+                case Short(resistance_ohm=ohm):
+                    short_ohm = ohm
+                case Open():
+                    is_open = True
+                case Stuck(power_w=power_w):
+                    stuck_w = power_w
+                case _:
+                    raise ValueError(f"a load has no fault kind {kind_of(fault)!r}")
+        if short_ohm is not None:
+            held: float | None = self.rail_voltage_v[self.rails[self.index[name]]] ** 2 / short_ohm
         else:
-            faults[fault.kind] = params
+            held = 0.0 if is_open else stuck_w
+        if held is None:
+            self.held_w.pop(name, None)
+        else:
+            self.held_w[name] = held
+        if supplies_device(True, faults):
+            self.unsupplied.discard(name)
+        else:
+            self.unsupplied.add(name)
 
-    def fault_names(self, name: str) -> list[str]:
-        return sorted(self.faults.get(name, {}))
+    def supplied(self, name: str) -> bool:
+        """Whether the device behind a load has power (its rail on, no fault cutting it off)."""
+        return self.rail_on.get(self.rails[self.index[name]], False) and name not in self.unsupplied
+
+    def alarms(self, name: str, power_w: float) -> list[str]:
+        """A load's own alarms at the power it draws: ``over_current`` above its ``max_w``."""
+        return ["over_current"] if power_w > self.max_w_of[name] else []
 
     def powers(self) -> list[tuple[str, float, str, bool]]:
         """``(load, power_w, rail, on)`` for every load: :meth:`power` of each, in one pass."""
         out = []
-        rail_on, faults, driven_w = self.rail_on, self.faults, self.driven_w
+        rail_on, held_w, driven_w = self.rail_on, self.held_w, self.driven_w
         for name, rail, sampled_w in zip(self.names, self.rails, self.sampled_w.tolist(),
                                          strict=True):
             if not rail_on.get(rail, False):
                 out.append((name, 0.0, rail, False))
                 continue
-            held = self.fault_power(name) if faults.get(name) else None
+            held = held_w.get(name)
             if held is None:
                 held = driven_w.get(name, sampled_w)
             out.append((name, held, rail, True))

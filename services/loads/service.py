@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey, Params
+from common.faults import Fault
 from common.messages import Clock, DriveState, LoadPower, RailState, decode
 from common.runtime import Runtime, Sample
 from services.loads.model import LoadsFleet
@@ -21,14 +21,21 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     fleet = LoadsFleet(rovers, seed)
     models = fleet.models
     load_keys = {r.id: [keys.load_power(r.id, ld.name) for ld in r.loads] for r in rovers}
+    alarmed: dict[str, set[str]] = {r.id: set() for r in rovers}  # loads with an alarm up
 
     def publish(rover: str, only: set[str] | None = None) -> None:
         m = models[rover]
         t_s = rt.t_s[rover]
         for key, (name, power_w, rail, on) in zip(load_keys[rover], m.powers(), strict=True):
             if only is None or name in only:
+                alarms = m.alarms(name, power_w)
                 rt.publish(key, LoadPower(t_s=t_s, power_w=power_w, rail=rail, on=on,
-                                          faults=m.fault_names(name)))
+                                          faults=alarms))
+                if bool(alarms) != (name in alarmed[rover]):  # raised or resolved: the book's
+                    alarmed[rover].symmetric_difference_update({name})
+                    rt.faults.sync_derived(rover, f"load/{name}", {a: (
+                        "critical", f"load {name} draws {power_w:.1f} W, above its max_w "
+                        f"{m.max_w_of[name]:g} W") for a in alarms})
 
     def on_tick(rover: str, tick: Clock) -> None:
         if tick.dt_s > 0.0:  # a paused clock holds every load where it is
@@ -52,14 +59,15 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     def reset(rover: str) -> None:
         models[rover].reset_driven()
 
-    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
-        models[rover].apply_fault(fk, params)
-        publish(rover, {fk.name} if fk.name else None)
+    def apply_faults(rover: str, name: str | None, faults: tuple[Fault, ...]) -> None:
+        assert name is not None  # a load fault names its load
+        models[rover].set_faults(name, faults)
+        publish(rover, {name})
 
     rt.on_tick(on_tick)
     rt.subscribe(keys.rail_state("*", "*"), on_rail, telemetry=True)
     rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
-    rt.faults.own("load", lambda rover: models[rover].names, apply_fault)
+    rt.faults.own("load", lambda rover: models[rover].names, apply_faults)
     # No state of its own (rail_on mirrors the PDM, the drive load follows drive/state), but
     # its faults follow resets and snapshots.
     rt.own_state(lambda rover: {}, lambda rover, st: None, reset, after=publish,

@@ -12,10 +12,11 @@ on a descent) feeds the bus through the same converter: ``P_r * efficiency``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import NamedTuple
 
 from common.config import Rail, Rover, SolarRail
-from common.faults import FaultKey, Params
+from common.faults import Fail, FaultParams, kind_of
 from common.messages import RailStateName, Severity
 
 __all__ = ["COMMANDED_OFF", "PowerModel", "RailReading", "RailSwitch", "Summary"]
@@ -83,7 +84,6 @@ class PowerModel:
         self._switch_list = list(self.switches.values())
         self._sheddable = [(sw, sw.cfg.shed_below_soc, sw.restore_soc) for sw in self._switch_list
                            if sw.cfg.shed_below_soc is not None and sw.restore_soc is not None]
-        self.load_rail = {ld.name: ld.rail for ld in rover.loads}
         self.load_power_w = {ld.name: 0.0 for ld in rover.loads}  # its keys never change
         rail_index = {name: i for i, name in enumerate(self.switches)}
         self._load_rail_index = [rail_index[ld.rail] for ld in rover.loads]
@@ -132,14 +132,22 @@ class PowerModel:
         """Every rail as the rover file says: its initial switch, not tripped, not shed."""
         self.set_state({})
 
-    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
-        """Inject (``params``) or clear (None) a converter failure of one rail."""
-        if fault.name == self.solar_rail.name:
-            self.solar_failed = params is not None
-        elif fault.name in self.switches:
-            self.switches[fault.name].failed = params is not None
+    def set_faults(self, rail: str, faults: Iterable[FaultParams]) -> None:
+        """Apply the injected faults in effect on one rail (the solar rail's too), all of
+        them: ``fail`` kills its converter. A kind that is not a rail's raises ValueError."""
+        failed = False
+        for fault in faults:
+            match fault:
+                case Fail():
+                    failed = True
+                case _:
+                    raise ValueError(f"a rail has no fault kind {kind_of(fault)!r}")
+        if rail == self.solar_rail.name:
+            self.solar_failed = failed
+        elif rail in self.switches:
+            self.switches[rail].failed = failed
         else:
-            raise ValueError(f"no rail {fault.name!r}")
+            raise ValueError(f"no rail {rail!r}")
 
     def command(self, rail: str, on: bool | None = None, reset: bool = False) -> None:
         sw = self.switches[rail]

@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 from common import keys
 from common.config import Rover
-from common.faults import FaultKey, Params
+from common.faults import Fault
 from common.messages import (
     BARE_FIELD,
     BadInput,
@@ -159,8 +159,9 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         command(s.rover, [c])
         publish(s.rover)  # at once: the loads follow the new rail state
 
-    def apply_fault(rover: str, fk: FaultKey, params: Params | None) -> None:
-        models[rover].apply_fault(fk, params)
+    def apply_faults(rover: str, rail: str | None, faults: tuple[Fault, ...]) -> None:
+        assert rail is not None  # a rail fault names its rail
+        models[rover].set_faults(rail, faults)
         publish(rover)
 
     rt.subscribe(keys.load_power("*", "*"), on_load, telemetry=True)
@@ -168,7 +169,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.subscribe(keys.solar_power("*", "*"), on_solar, telemetry=True)
     rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
     rt.subscribe(keys.cmd_rail("*", "*"), on_command)
-    rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_fault)
+    rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_faults)
     def reset(rover: str) -> None:
         held.pop(rover, None)  # a command from before a session reset does not outlive it
         models[rover].reset()

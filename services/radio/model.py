@@ -3,7 +3,10 @@
 The rover's position relative to the radio arrives as a distance ``d`` [m] and
 an angle [deg]: ``x = d cos(angle)``, ``y = d sin(angle)``. It is in range when
 ``((x - offset_x) / a)^2 + ((y - offset_y) / b)^2 <= 1``; a ``degraded`` fault
-scales both axes, a ``failure`` means never in range.
+scales both axes, a ``failure`` means never in range. The model is given the faults in
+effect on its radio (:meth:`RadioModel.set_faults`) and keeps what they do, never a record of
+them. A radio needs power: while the load that powers it (``radios[].load``) has none, it is
+out of range, and its one alarm is ``unpowered``.
 
 A radio with a ``site`` on a rover that drives takes the distance and angle from its site
 to the rover's site position instead (:func:`relative_to_site`): the same convention, so
@@ -13,10 +16,11 @@ to the rover's site position instead (:func:`relative_to_site`): the same conven
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from typing import NamedTuple
 
 from common.config import Radio
-from common.faults import FaultKey, Params, RangeScaleParams
+from common.faults import Degraded, Failure, FaultParams, kind_of
 
 __all__ = ["Link", "RadioModel", "in_range", "position_xy", "relative_to_site"]
 
@@ -54,6 +58,7 @@ class RadioModel:
         self.angle_deg = 0.0
         self.failed = False
         self.range_scale = 1.0
+        self.powered = True  # its load has power (a radio without one always has)
 
     def state(self) -> dict[str, float]:
         return {"distance_m": self.distance_m, "angle_deg": self.angle_deg}
@@ -65,19 +70,33 @@ class RadioModel:
         """The rover's position relative to this radio [m, deg]."""
         self.distance_m, self.angle_deg = distance_m, angle_deg
 
-    def apply_fault(self, fault: FaultKey, params: Params | None) -> None:
-        """Inject (``params``) or clear (None) a failure or a degradation of this radio."""
-        if fault.kind == "failure":
-            self.failed = params is not None
-        else:
-            self.range_scale = params.range_scale if isinstance(params, RangeScaleParams) else 1.0
+    def set_faults(self, faults: Iterable[FaultParams]) -> None:
+        """Apply the injected faults in effect on this radio, all of them. A kind that is not
+        a radio's raises ValueError, and nothing changes."""
+        failed, scale = False, 1.0
+        for fault in faults:
+            match fault:
+                case Failure():
+                    failed = True
+                case Degraded(range_scale=s):
+                    scale = s
+                case _:
+                    raise ValueError(f"a radio has no fault kind {kind_of(fault)!r}")
+        self.failed, self.range_scale = failed, scale
 
-    def faults(self) -> list[str]:
-        return (["failure"] if self.failed else []) + (
-            ["degraded"] if self.range_scale < 1.0 else [])
+    def set_powered(self, powered: bool) -> bool:
+        """Whether the radio's load has power; True when that changed."""
+        changed = powered != self.powered
+        self.powered = powered
+        return changed
+
+    def alarms(self) -> list[str]:
+        """The radio's own alarms: ``unpowered`` while its load has no power."""
+        return [] if self.powered else ["unpowered"]
 
     def link(self) -> Link:
         x, y = position_xy(self.distance_m, self.angle_deg)
         c, s = self.cfg, self.range_scale
-        ok = not self.failed and in_range(x, y, c.a_m * s, c.b_m * s, c.offset_x_m, c.offset_y_m)
+        ok = self.powered and not self.failed and in_range(x, y, c.a_m * s, c.b_m * s,
+                                                           c.offset_x_m, c.offset_y_m)
         return Link(ok, x, y)

@@ -203,3 +203,51 @@ def test_any_value_anywhere_gives_problems_not_a_crash(path, value):
         parse_rover(yaml.safe_dump(data))
     except ConfigError as exc:
         assert exc.problems and all(isinstance(p, str) for p in exc.problems)
+
+
+def test_lunaris_check_names_every_problem_of_a_file_in_one_run(tmp_path):
+    """Issue 24: a missing field, a bad efficiency, a short curve and a load on an unknown
+    rail, all four in one run (the unknown rail used to show only once the others were fixed:
+    a rail that was not well formed hid every rail's name)."""
+    bad = tmp_path / "four.yaml"
+    bad.write_text(broken(
+        MAPP,
+        ("{name: 12V,     voltage_v: 12.0, current_limit_a: 10.0,", "{name: 12V,     voltage_v: 12.0,"),
+        ("current_limit_a: 5.0,  efficiency: 0.90, essential",
+         "current_limit_a: 5.0,  efficiency: 1.5, essential"),
+        ("4.11, 4.20]", "4.11]"),
+        ("rail: 5V_CH2,  nominal_w: 3.5", "rail: 5V_CH9,  nominal_w: 3.5"),
+    ))
+    run = subprocess.run(lunaris_cmd("check", str(bad)), capture_output=True, text=True,
+                         cwd=ROOT, timeout=60)
+    assert run.returncode == 1
+    assert "4 problem(s)" in run.stderr, run.stderr
+    for want in ("rails[0].current_limit_a: missing required field",
+                 "rails[1].efficiency: must be <= 1.0, got 1.5",
+                 "battery.ocv_curve.volts: expected 11 values, got 10",
+                 "loads[4].rail: no rail named '5V_CH9' (rails: 12V, 5V_CH1, 5V_CH2, 3V3_CH1, 3V3_CH2)"):
+        assert want in run.stderr, (want, run.stderr)
+
+
+def test_a_radio_s_load_and_the_umbilical_s_cable():
+    mapp = load_rover(ROVERS / "mapp.yaml")
+    assert mapp.radios[0].load == "uhf_radio"
+    assert (mapp.umbilical.cable_m, mapp.umbilical.follows_rover) == (10.0, False)
+    ltv = load_rover(ROVERS / "ltv.yaml")
+    assert [r.load for r in ltv.radios] == ["s_band_radio", "s_band_radio"]
+    with pytest.raises(ConfigError) as info:
+        parse_rover(broken(MAPP, ("load: uhf_radio}", "load: walkie_talkie}"),
+                           ("  cable_m: 10 ", "  follows_rover: true\n  #"),
+                           ("rail: 5V_CH1,  nominal_w: 4.0,  max_w: 8.0,  std_w: 0.6}",
+                            "rail: 5V_CH1,  nominal_w: -4.0,  max_w: 8.0,  std_w: 0.6}")))
+    assert sorted(info.value.problems) == sorted([
+        "loads[3].nominal_w: must be >= 0.0, got -4.0",  # not well formed: its name still counts
+        "radios[0].load: no load named 'walkie_talkie' (loads: drive_motors, survival_heater, "
+        "flight_computer, uhf_radio, nav_camera, hazard_cameras, imu, sun_sensor, "
+        "nir_spectrometer, thermal_imager)",
+        "umbilical.follows_rover: a cable that follows the rover needs its length, cable_m",
+    ])
+    minimal = broken(MAPP, (", site: {x_m: 0, y_m: 0},\n     load: uhf_radio}", ", site: {x_m: 0, y_m: 0}}"),
+                     ("  cable_m: 10 ", "  #"))
+    r = parse_rover(minimal)
+    assert r.radios[0].load is None and r.umbilical.cable_m is None  # always powered; no slack

@@ -158,14 +158,27 @@ def settle(driver) -> None:
         "const done = arguments[0]; requestAnimationFrame(() => requestAnimationFrame(() => done()));")
 
 
-def shoot(driver, artefacts: Path, name: str, width: int = 1280, height: int = 800) -> Path:
-    """A screenshot of what the page shows at this size, kept as a test artefact."""
-    size_viewport(driver, width, height)
+TABLET = (820, 1180)
+
+
+def save_shot(driver, artefacts: Path, name: str, doc: bool = True) -> Path:
+    """What the page shows now, kept as a test artefact (and as ``docs/images/console-<name>.png``
+    with ``LUNARIS_DOC_IMAGES=1``, unless ``doc`` is false)."""
     settle(driver)
     path = artefacts / f"{name}.png"
     driver.save_screenshot(str(path))
-    if os.environ.get("LUNARIS_DOC_IMAGES"):
+    if doc and os.environ.get("LUNARIS_DOC_IMAGES"):
         DOC_IMAGES.mkdir(parents=True, exist_ok=True)
         driver.save_screenshot(str(DOC_IMAGES / f"console-{name}.png"))
-    size_viewport(driver, 1280, 800)
     return path
+
+
+def shoot(driver, artefacts: Path, name: str, doc: bool = True) -> Path:
+    """Screenshots of what the page shows on a 1280x800 laptop (``<name>``) and an 820x1180
+    tablet (``<name>-tablet``); the page is left at the laptop's size."""
+    try:
+        size_viewport(driver, *TABLET)
+        save_shot(driver, artefacts, f"{name}-tablet", doc)
+    finally:
+        size_viewport(driver, 1280, 800)
+    return save_shot(driver, artefacts, name, doc)

@@ -5,6 +5,11 @@ one goes the same way, and the test waits for the allowed one before it asserts 
 denied ones never arrived. A round trip of the denied client to the router (a query) sits
 in between, so the router has dealt with the denied message before the allowed one is
 even sent.
+
+Allowed writes go through declared publishers, as the services and the console send:
+Zenoh's client sends a declared publisher's samples only once the router told it of a
+matching subscriber, so a rule that hides a subscriber from the writer shows here (a plain
+``put`` is always sent and would hide it). Forged writes are plain puts: the worst case.
 """
 
 from __future__ import annotations
@@ -108,8 +113,10 @@ def test_no_identity_forges_another_services_telemetry_tokens_or_answers(router:
                     keys.snapshots_of(ROVER, service),
                     lambda q, who=who: q.reply(q.key_expr, json.dumps(f"forged by {who}"))))
         _barrier(session)
-    for key, owner in OWNED:
-        sessions[f"lunaris-{owner}"].put(key, f"from {owner}")
+    owners = [sessions[f"lunaris-{owner}"].declare_publisher(key) for key, owner in OWNED]
+    for pub, (_key, owner) in zip(owners, OWNED, strict=True):
+        _wait_subscribed(pub, f"{owner} to see the reader's subscriber on lunaris/{ROVER}/**")
+        pub.put(f"from {owner}")
     wait_for(lambda: len(_received(got)) >= len(OWNED), "every owner's sample")
     assert sorted(p.decode() for _, p in _received(got)) == sorted(f"from {o}" for _, o in OWNED)
     tokens_seen = [str(r.ok.key_expr) for r in reader.liveliness().get(
@@ -200,10 +207,14 @@ def test_the_crew_reads_effects_not_the_instructors_faults(router: Router) -> No
     faults.declare_queryable(keys.faults(ROVER), lambda q: q.reply(q.key_expr, b"[]"))
     for session in readers.values():
         _barrier(session)
-    instructor.put(keys.fault(ROVER, "battery", "heating"), b"40")
-    battery.put(keys.event(ROVER), b'{"kind": "fault_injected"}')
-    battery.put(keys.faults_active(ROVER, "battery"), b'{"faults": []}')
-    battery.put(keys.battery_state(ROVER), b'{"temperature_c": 30}')  # the effect
+    writes = [(instructor, keys.fault(ROVER, "battery", "heating"), b"40"),
+              (faults, keys.event(ROVER), b'{"kind": "fault_injected"}'),
+              (battery, keys.faults_active(ROVER, "battery"), b'{"faults": []}'),
+              (battery, keys.battery_state(ROVER), b'{"temperature_c": 30}')]  # the effect
+    pubs = [session.declare_publisher(key) for session, key, _ in writes]
+    for pub, (_, key, payload) in zip(pubs, writes, strict=True):
+        _wait_subscribed(pub, f"the writer of {key} to see the debrief's subscriber")
+        pub.put(payload)
     wait_for(lambda: len(seen["debrief"].items) >= 4, "the debrief identity's samples")
     wait_for(lambda: seen["observer"].items, "the observer's telemetry")
     assert [str(s.key_expr) for s in seen["observer"].items] == [keys.battery_state(ROVER)]
@@ -291,12 +302,12 @@ def test_services_run_with_their_own_identities(secrets) -> None:
             debrief = router.open("debrief")
             observer = router.open("observer")
             instructor = router.open("instructor")
-            state, events = Collector(), Collector()
+            state, active = Collector(), Collector()
             zext.declare_advanced_subscriber(
                 observer, keys.battery_state(ROVER), state,
                 history=zext.HistoryConfig(detect_late_publishers=True))
             zext.declare_advanced_subscriber(
-                debrief, keys.event(ROVER), events,
+                debrief, keys.faults_active(ROVER, "*"), active,
                 history=zext.HistoryConfig(detect_late_publishers=True))
 
             def running() -> list[str]:
@@ -309,11 +320,12 @@ def test_services_run_with_their_own_identities(secrets) -> None:
             _wait_subscribed(fault, "the battery service's fault subscriber")
             fault.put(b"40")
 
-            def event_keys() -> list[str]:
-                return [json.loads(s.payload.to_bytes())["key"] for s in events.items]
+            def in_effect() -> list[str]:
+                return [f["key"] for s in active.items
+                        for f in json.loads(s.payload.to_bytes())["faults"]]
 
-            wait_for(lambda: keys.fault(ROVER, "battery", "heating") in event_keys(),
-                     "the battery service's event for the instructor's fault")
+            wait_for(lambda: keys.fault(ROVER, "battery", "heating") in in_effect(),
+                     "the battery service's faults in effect to list the instructor's fault")
             (listed,) = [json.loads(r.ok.payload.to_bytes())
                          for r in debrief.get(keys.faults(ROVER), timeout=5.0) if r.ok is not None]
             assert [f["key"] for f in listed] == [keys.fault(ROVER, "battery", "heating")]
@@ -321,3 +333,44 @@ def test_services_run_with_their_own_identities(secrets) -> None:
             router.close_sessions()
             for proc in procs:
                 stop_process(proc)
+
+
+# -- events are authenticated by their key (DECISIONS D1) -----------------------------------
+
+
+@pytest.mark.timeout(60)
+def test_a_service_publishes_events_only_on_its_own_key_and_the_journal_relays_them(
+        router: Router) -> None:
+    """``lunaris-<service>`` puts its events on ``event/<service>`` only; only
+    ``lunaris-faults`` puts on the rover's ``event``. A forged event (the bridge's identity
+    claiming to be the battery, or writing the journal's stream) is refused by the router;
+    the crew's identities read neither stream."""
+    own, journal = f"{keys.event(ROVER)}/battery", keys.event(ROVER)
+    debrief = router.open("debrief")
+    got = Collector()
+    debrief.declare_subscriber(f"{journal}/**", got)  # `event` and every `event/<service>`
+    crew = {who: Collector() for who in ("observer", "dashboard")}
+    for who, seen in crew.items():
+        router.open(who).declare_subscriber("lunaris/**" if who == "observer" else "**", seen)
+    forgers = {who: router.open(who) for who in ("lunaris-bridge", "lunaris-battery", "instructor",
+                                                  "dashboard")}
+    for who, session in forgers.items():
+        if who != "lunaris-battery":
+            session.put(own, f"forged by {who}")
+        session.put(journal, f"forged by {who}")
+        session.put(f"{journal}/faults", f"forged by {who}")
+        _barrier(session)
+    battery = router.open("lunaris-battery").declare_publisher(own)
+    faults = router.open("lunaris-faults")
+    relay = faults.declare_publisher(journal)
+    faults_own = faults.declare_publisher(f"{journal}/faults")
+    for pub, payload in ((battery, b"battery's own"), (relay, b"relayed by the journal"),
+                         (faults_own, b"the journal's own")):
+        _wait_subscribed(pub, "the event's publisher to see the debrief's subscriber")
+        pub.put(payload)
+    wait_for(lambda: len(got.items) >= 3, "the three genuine events")
+    assert sorted((str(s.key_expr), s.payload.to_bytes()) for s in got.items) == sorted([
+        (own, b"battery's own"), (journal, b"relayed by the journal"),
+        (f"{journal}/faults", b"the journal's own")])
+    _barrier(debrief)
+    assert [str(s.key_expr) for c in crew.values() for s in c.items] == []

@@ -19,6 +19,7 @@ import pytest
 import yaml
 
 from lunaris.deploy import check_secrets
+from lunaris.deploy_site import load_site
 from tests.deploy.conftest import REPO, make_test_secrets
 
 SECRETS = REPO / "deploy" / "secrets"
@@ -238,3 +239,72 @@ def test_the_console_runs_with_its_own_identity_and_requires_a_sign_in(compose: 
                                 [{"host_ip": "127.0.0.1", "published": "8080", "target": 8080,
                                   "protocol": "tcp", "mode": "ingress"}])
     assert command[command.index("--recordings") + 1].startswith(STATE_DIR)
+
+
+# -- the three-machine case: docker-compose.site.yml, the site of deploy/site.yaml ------------
+
+
+@pytest.fixture(scope="module")
+def site_compose(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    if DOCKER_COMPOSE is None:
+        pytest.skip("docker-compose is not installed (apt-get install docker-compose)")
+    result = subprocess.run(
+        [DOCKER_COMPOSE, "-f", "docker-compose.site.yml", "config"],
+        cwd=REPO, capture_output=True, text=True, timeout=60,
+        env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+             "HOME": str(tmp_path_factory.mktemp("home"))},
+    )
+    assert result.returncode == 0, result.stderr
+    return yaml.safe_load(result.stdout)
+
+
+@pytest.fixture(scope="module")
+def site_secrets(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from lunaris.deploy_routers import make_site_secrets
+    folder = tmp_path_factory.mktemp("site-secrets") / "s"
+    make_site_secrets(folder, load_site(REPO / "deploy" / "site.yaml"))
+    return folder
+
+
+def test_each_machine_of_the_site_is_a_profile_with_its_router_and_its_services(
+        site_compose: dict[str, Any], site_secrets: Path) -> None:
+    site = load_site(REPO / "deploy" / "site.yaml")
+    services = site_compose["services"]
+    for spec in site.routers:
+        mine = {n: s for n, s in services.items() if s.get("profiles") == [spec.name]}
+        router = mine[f"{spec.name}-router"]
+        assert router["image"].startswith("eclipse/zenoh:")
+        assert router["command"] == ["-c", "/etc/zenoh/secrets/zenohd.json5"]
+        assert Path(_mounts(router)["/etc/zenoh/secrets"]) == SECRETS / spec.name
+        assert router["networks"]["default"]["aliases"] == [spec.hosts[0]]
+        published = {str(p["target"]) if isinstance(p, dict) else p.split(":")[-1].split("/")[0]
+                     for p in router["ports"]}
+        assert published == {"7447"} | ({"7448"} if site.linked_from(spec.name) else set())
+        pre = mine[f"{spec.name}-preflight"]
+        assert pre["command"] == ["deploy", "check", "/etc/lunaris/secrets", "--site",
+                                  "deploy/site.yaml", "--router", spec.name]
+        assert Path(_mounts(pre)["/etc/lunaris/secrets"]) == SECRETS / spec.name
+        ran = {}
+        for service in mine.values():
+            command = service.get("command", [])
+            if command[:1] == ["run"]:
+                ran[command[1]] = service
+            elif command[:1] == ["console"]:
+                ran["console"] = service
+        assert sorted(ran) == sorted(spec.runs), spec.name
+        for what, service in ran.items():
+            identity = f"lunaris-{what}" if what != "console" else "console"
+            config = service["environment"]["LUNARIS_ZENOH_CONFIG"]
+            assert Path(_mounts(service)[config]) == SECRETS / spec.name / f"client-{identity}.json5"
+            assert service["depends_on"][f"{spec.name}-preflight"]["condition"] == \
+                "service_completed_successfully"
+        for name, service in mine.items():
+            for source in _mounts(service).values():
+                if source in site_compose.get("volumes", {}):
+                    continue
+                path = Path(source)
+                if SECRETS in path.parents:
+                    assert (site_secrets / path.relative_to(SECRETS)).exists(), (name, source)
+                else:
+                    assert path.exists(), (name, source)
+    assert all(s.get("profiles") for s in services.values()), "a service on every machine"

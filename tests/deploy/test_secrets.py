@@ -84,3 +84,94 @@ def test_rotating_one_password_leaves_the_others_and_locks_out_the_old(tmp_path:
         with pytest.raises(zenoh.ZError):
             zenoh.open(router.client_config(base=old, fail_fast=True)).close()
     assert lunaris("deploy", "secrets", str(folder), "--rotate", "nobody").returncode == 2
+
+
+def _set_password(folder: Path, user: str, password: str) -> None:
+    """The router's dictionary and the user's client file agree on ``password``."""
+    creds = read_credentials(folder / "credentials.txt")
+    creds[user] = password
+    (folder / "credentials.txt").write_text("".join(f"{u}:{p}\n" for u, p in creds.items()))
+    path = folder / f"client-{user}.json5"
+    config = json.loads(path.read_text())
+    config["transport"]["auth"]["usrpwd"]["password"] = password
+    path.write_text(json.dumps(config))
+
+
+@pytest.fixture
+def folder(tmp_path: Path) -> Path:
+    folder = tmp_path / "s"
+    make_secrets(folder, ["localhost"], "tls/127.0.0.1:7447")
+    assert check_secrets(folder) == []
+    return folder
+
+
+def test_secrets_open_to_others_are_refused_each_named(folder: Path) -> None:
+    folder.chmod(0o755)
+    (folder / "credentials.txt").chmod(0o644)
+    (folder / "tls" / "router.key").chmod(0o640)
+    (folder / "client-observer.json5").chmod(0o604)
+    out = lunaris("deploy", "check", str(folder))
+    assert out.returncode == 1, out.stderr
+    for words in (f"{folder}: the folder is open to others (mode 755, not 700): chmod 700",
+                  "credentials.txt: readable by others (mode 644, not 600): chmod 600",
+                  "tls/router.key: readable by others (mode 640, not 600)",
+                  "client-observer.json5: readable by others (mode 604, not 600)"):
+        assert words in out.stderr, out.stderr
+    assert "ca.crt" not in out.stderr  # a certificate is public
+    assert "REFUSED" in out.stderr
+
+
+@pytest.mark.parametrize(("password", "words"), [
+    ("aaaaaaaaaaaaaaaa", "the password of observer is one character repeated"),
+    ("abababababababababab", "the password of observer uses only 2 different characters"),
+    ("demo-observer-password-1234", "observer still has a shipped demo password"),
+    ("Demo-Observer-Password-1234", "observer still has a shipped demo password"),
+    ("DEMO_observer_password_1234", "observer still has a shipped demo password"),
+    ("observer-change-me-12345678", "observer still has a shipped demo password"),
+    ("Xy7-short", "the password of observer is shorter than 16 characters"),
+])
+def test_weak_and_demo_passwords_are_refused(folder: Path, password: str, words: str) -> None:
+    _set_password(folder, "observer", password)
+    out = lunaris("deploy", "check", str(folder))
+    assert out.returncode == 1 and f"credentials.txt: {words}" in out.stderr, out.stderr
+
+
+def test_an_identity_the_deployment_does_not_know_is_refused(folder: Path) -> None:
+    with (folder / "credentials.txt").open("a") as f:
+        f.write("mallory:x\n")
+    lines = len((folder / "credentials.txt").read_text().splitlines())
+    out = lunaris("deploy", "check", str(folder))
+    assert out.returncode == 1
+    assert (f"credentials.txt: 'mallory' (line {lines}) is no identity of this deployment, "
+            "and the router would let it in: remove its line") in out.stderr, out.stderr
+    # rotating another identity keeps the line, and the check still names it
+    assert lunaris("deploy", "secrets", str(folder), "--rotate", "observer").returncode == 0
+    assert any("'mallory'" in p for p in check_secrets(folder))
+
+
+@pytest.mark.parametrize("password", ["demo-instructor-password", "Demo-Instructor-1234567",
+                                      "instructor-CHANGE-ME-123"])
+def test_every_client_refuses_a_demo_password(folder: Path, password: str) -> None:
+    _set_password(folder, "instructor", password)
+    with pytest.raises(ConnectionConfigError, match="demo password"):
+        make_config(config_file=folder / "client-instructor.json5")
+
+
+
+def test_the_dashboards_files_are_for_the_deployments_rovers(tmp_path: Path) -> None:
+    one = tmp_path / "one"
+    out = lunaris("deploy", "secrets", str(one), "--rover", "config/rovers/ltv.yaml")
+    assert out.returncode == 0, out.stderr
+    assert sorted(p.name for p in one.glob("zenoh-bridge-ros2dds-*")) == ["zenoh-bridge-ros2dds-ltv-1.json5"]
+    plugin = json.loads((one / "zenoh-bridge-ros2dds-ltv-1.json5").read_text())["plugins"]["ros2dds"]
+    # a fleet of one: the bridge's keys are the plain topic names, no namespace; domain 0
+    assert plugin["domain"] == 0 and "namespace" not in plugin
+    two = tmp_path / "two"
+    out = lunaris("deploy", "secrets", str(two), "--rover", "config/rovers/ltv.yaml",
+                  "--rover", "config/rovers/mapp.yaml")
+    assert out.returncode == 0, out.stderr
+    plugins = {r: json.loads((two / f"zenoh-bridge-ros2dds-{r}.json5").read_text())["plugins"]["ros2dds"]
+               for r in ("ltv-1", "mapp-1")}
+    assert [(p["namespace"], p["domain"]) for p in plugins.values()] == [("/ltv_1", 0), ("/mapp_1", 1)]
+    bad = lunaris("deploy", "secrets", str(tmp_path / "bad"), "--rover", "no-such-rover.yaml")
+    assert bad.returncode == 2 and "no-such-rover.yaml" in bad.stderr

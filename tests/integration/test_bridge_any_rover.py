@@ -38,7 +38,7 @@ SCOUT = "scout-7"
 
 def other_names_rover(folder: Path) -> Path:
     """The MAPP rover with every name changed: id, radio, rails (the solar one too), loads,
-    panels, and the drive's load."""
+    panels, and the drive's and the radio's loads."""
     data = yaml.safe_load((ROVERS / "mapp.yaml").read_text())
     data["rover"]["id"] = SCOUT
     data["radios"][0]["name"] = "base_station"
@@ -53,6 +53,9 @@ def other_names_rover(folder: Path) -> Path:
         panel["name"] = f"wing_{panel['name']}"
     if data.get("drive"):
         data["drive"]["load"] = loads[data["drive"]["load"]]
+    for radio in data["radios"]:  # the load that powers it
+        if radio.get("load"):
+            radio["load"] = loads[radio["load"]]
     path = folder / "scout.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

@@ -56,9 +56,11 @@ def test_inputs_sun_panel_position_umbilical(live):
     # the dashboard's dust on one panel, a layer over the instructor's dust fault
     done = run_tool("input", R, "solar/left/dust", "0.5", "--connect", ep)
     assert done.returncode == 0 and "dust 0.5 on panel left" in done.stdout, done.stdout + done.stderr
-    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5 and s["faults"] == [])
+    half = p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5 and s["faults"] == [])
     p.put(keys.fault(R, "solar/left", "dust"), 0.3)
-    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == pytest.approx(0.65))
+    # 1 - (1 - 0.3)(1 - 0.5) = 0.65 of the light lost; dust reports the input, never the fault
+    p.wait_value(keys.solar_power(R, "left"), lambda s: s["dust"] == 0.5
+                 and s["power_w"] == pytest.approx(0.7 * half["power_w"]))
     p.delete(keys.fault(R, "solar/left", "dust"))
     done = run_tool("input", R, "solar/left/dust", "--delete", "--connect", ep)
     assert "no dust input on panel left" in done.stdout, done.stdout + done.stderr
@@ -74,7 +76,7 @@ def test_inputs_sun_panel_position_umbilical(live):
     assert run_tool("input", R, "radio/lander/position", "0", "0", "--connect", ep).returncode == 0
     # Refused before sending, in the Struct's words; refused by the twin, in its words.
     bad = run_tool("input", R, "sun_angle", "500", "--connect", ep)
-    assert bad.returncode == 1 and "<= 360" in bad.stderr
+    assert bad.returncode == 1 and "angle_deg must be at most 360" in bad.stderr
     bad = run_tool("input", R, "solar/middle/sun_angle", "5", "--connect", ep)
     assert bad.returncode == 1 and "has no panel 'middle'" in bad.stdout
     bad = run_tool("input", R, "drive/traverse", '{"waypoints": [{"x_m": 1, "y_m": 0, "z_m": 0}]}',
@@ -102,3 +104,25 @@ def test_reset_and_snapshots(live):
     p.wait_value(keys.clock(R), lambda c: c["cause"] == "reset")
     gone = run_tool("reset", "no-such-rover", "--connect", ep, "--wait", "3")
     assert gone.returncode == 2 and "unknown rover" in gone.stderr
+
+
+@pytest.mark.parametrize("command", [["pdm", "--interval", "0.2"], ["watch", "--interval", "0.2"]])
+def test_a_reader_that_goes_away_ends_the_tool_without_a_traceback(live, command):
+    """``lunaris pdm | head``: the tool's next print finds the pipe closed and ends quietly."""
+    import subprocess
+
+    from tests.harness import ROOT, env_without_zenoh_config, lunaris_cmd
+    proc = subprocess.Popen(lunaris_cmd(*command, "--rover", R, "--connect", live.endpoint),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+                            env=env_without_zenoh_config(), stdin=subprocess.DEVNULL)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline()  # it prints ...
+        proc.stdout.close()  # ... and its reader goes, as head does after its lines
+        proc.wait(20)
+        err = proc.stderr.read().decode() if proc.stderr else ""
+        assert "Traceback" not in err and "BrokenPipeError" not in err, err
+        assert proc.returncode == 0, err
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

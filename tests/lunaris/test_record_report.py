@@ -89,7 +89,8 @@ def test_a_session_recorded_to_mcap_reads_back_and_renders(live, tmp_path):
     assert counted[prefix + "battery/state"] >= 15 and counted[prefix + "load/nav_camera/power"] >= 15
 
     fault = [msgspec.json.decode(m.data) for t, _, m in messages if t == prefix + "fault/load/imu/stuck"]
-    assert [(f["op"], f["value"]) for f in fault] == [("put", 1.4), ("delete", None)]
+    # checked, and sent as the Struct
+    assert [(f["op"], f["value"]) for f in fault] == [("put", {"power_w": 1.4}), ("delete", None)]
     sun = [msgspec.json.decode(m.data)["value"] for t, _, m in messages if t == prefix + "input/sun_angle"]
     assert sun == [55, 60]
     events = [msgspec.json.decode(m.data) for t, _, m in messages if t == prefix + "event"]

@@ -237,7 +237,7 @@ def test_steps_fire_at_their_time_after_their_predecessor_or_on_their_condition(
     for t, w in writes:
         by_step.setdefault(w.step, []).append((t - 100, w))
     (_, inj), = by_step[0]
-    assert (inj.key, inj.payload, inj.answer) == ("lunaris/mapp-1/fault/solar/left/dust", b"0.5",
+    assert (inj.key, inj.payload, inj.accepted) == ("lunaris/mapp-1/fault/solar/left/dust", b"0.5",
                                                   "fault_injected")
     ramp = by_step[1]
     angles = [json.loads(w.payload)["angle_deg"] for _, w in ramp]
@@ -247,7 +247,7 @@ def test_steps_fire_at_their_time_after_their_predecessor_or_on_their_condition(
     (_, rail), = by_step[2]
     assert (rail.key, json.loads(rail.payload)) == ("lunaris/mapp-1/cmd/rail/5V_CH2", {"on": False})
     (_, clr), = by_step[3]
-    assert clr.payload is None and clr.answer == "fault_cleared"  # a clear is a delete
+    assert clr.payload is None and clr.accepted == "fault_cleared"  # a clear is a delete
     assert 4 not in by_step  # a checkpoint writes nothing
 
 
@@ -308,7 +308,7 @@ def test_a_traverse_step_writes_the_traverse_and_stop_deletes_it(tmp_path):
     assert player.tick(0.0, lambda parts: values.get(parts)) == []  # the start
     first = player.tick(1.0, lambda parts: values.get(parts))
     (w,) = first
-    assert w.key == "lunaris/mapp-1/input/drive/traverse" and w.answer == "input"
+    assert w.key == "lunaris/mapp-1/input/drive/traverse" and w.accepted == "input"
     assert json.loads(w.payload) == {"speed_m_per_s": 0.1, "waypoints": [{"x_m": 5, "y_m": 50, "z_m": 0}],
                                      "return_to_start": True}
     assert player.tick(2.0, lambda parts: values.get(parts)) == []

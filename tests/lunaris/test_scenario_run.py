@@ -98,11 +98,11 @@ def test_a_scenario_plays_every_step_at_its_time_or_condition(live, tmp_path):
         after("lost the lander", "drive away", 3.6, ticks=2)
         outcomes = {label: (s["status"], s["outcome"]) for label, s in steps.items()}
         assert outcomes == {
-            "dust": ("fired", "accepted"), "sun ramp": ("done", "sent"),
+            "dust": ("fired", "accepted"), "sun ramp": ("done", "accepted"),
             "short once the sun is low": ("fired", "accepted"), "tripped": ("fired", "reached"),
             "clear the short": ("fired", "accepted"), "reset the channel": ("fired", "accepted"),
-            "faster clock": ("fired", "accepted"), "drive away": ("done", "sent"),
-            "lost the lander": ("fired", "accepted"), "plugged in": ("fired", "sent"),
+            "faster clock": ("fired", "accepted"), "drive away": ("done", "accepted"),
+            "lost the lander": ("fired", "accepted"), "plugged in": ("fired", "accepted"),
         }
 
         # the twin's own journal agrees with the player's times
@@ -115,8 +115,11 @@ def test_a_scenario_plays_every_step_at_its_time_or_condition(live, tmp_path):
             assert abs(journal[(kind, key)] - fired(label)) <= max_tick, (kind, key)
 
         # the effects, on the keys
-        left = p.samples(keys.solar_power(R, "left"))
-        assert any(s["dust"] == 0.5 for s in left) and left[-1]["dust"] == 0.0
+        # the dust, as less power: the left panel against the clean right one, tick by tick
+        right = {s["t_s"]: s["power_w"] for s in p.samples(keys.solar_power(R, "right"))}
+        ratios = [s["power_w"] / right[s["t_s"]] for s in p.samples(keys.solar_power(R, "left"))
+                  if right.get(s["t_s"])]
+        assert any(r == pytest.approx(0.5) for r in ratios) and ratios[-1] == pytest.approx(1.0)
         angles = sorted({round(s["sun_angle_deg"], 3) for s in p.samples(keys.solar_power(R, "right"))})
         assert angles[0] == 60.0 and angles[-1] == 80.0 and len(angles) >= 6  # a ramp, not a jump
         states = [s["state"] for s in p.samples(keys.rail_state(R, "5V_CH2"))]
@@ -158,6 +161,13 @@ steps:
     assert "no active fault umbilical/disconnect to clear" in summary["steps"][0]["detail"]
     assert "did not hold within 2 s" in summary["steps"][1]["detail"]
     assert "NOT every step played as planned" in done.stdout
+    # its progress, published as it played, for the console and any other tool
+    progress = live.probe.samples(keys.under(R, "scenario/progress"))
+    assert progress and progress[-1]["state"] == "ended" and progress[-1]["ok"] is False
+    assert progress[-1]["scenario"] == "rejected" and progress[-1]["actor"] == "scenario"
+    assert [(s["status"], s["outcome"]) for s in progress[-1]["steps"]] == [
+        ("fired", "rejected"), ("timed out", "")]
+    assert any(m["state"] == "playing" for m in progress)
 
 
 def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_path):
@@ -179,7 +189,8 @@ def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_pa
         p.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "tripped")
         p.put(keys.cmd_rail(R, "5V_CH2"), {"on": False, "reset": True})  # the crew safes the channel
         wait_for(lambda: any("step 5/8 camera lost" in line for line in lines), 10, "the camera isolated")
-        p.wait_value(keys.load_power(R, "nav_camera"), lambda v: "open" in v["faults"])
+        p.wait_value(keys.faults_active(R, "loads"), lambda v: any(
+            f["key"] == keys.fault(R, "load/nav_camera", "open") for f in v["faults"]))
         p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})  # ... and restores it
         proc.wait(40)
         reader.join(5)
@@ -192,7 +203,7 @@ def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_pa
     summary = json.loads(summary_path.read_text())
     assert all(s["status"] == "fired" for s in summary["steps"]), summary
     assert p.value(keys.rail_state(R, "5V_CH2"))["state"] == "on"
-    wait_for(lambda: not p.value(keys.load_power(R, "nav_camera"))["faults"], 5, "the camera repaired")
+    wait_for(lambda: not p.value(keys.faults_active(R, "loads"))["faults"], 5, "the camera repaired")
 
 
 def test_scenario_check_and_start_errors(live, tmp_path):

@@ -287,7 +287,7 @@ def test_closing_a_session_waits_for_zenohs_callback_threads():
     """A callback thread zenoh started from a daemon thread (watch declares from its opener)
     is a daemon too; left running at exit, it woke during the interpreter's shutdown and the
     process aborted (exit -6, 'FATAL: exception not rethrown'). close_session waits for it."""
-    from lunaris.tooling import close_session
+    from lunaris.client import close_session
 
     closed = threading.Event()
 

@@ -37,7 +37,7 @@ def _parameterless(key: str) -> bool:
     _, parts = keys.split(key)
     if parts[0] != "fault":
         return False
-    return CATALOGUE[parts[1]][parts[-1]].params is NoParams
+    return issubclass(CATALOGUE[parts[1]][parts[-1]].params, NoParams)
 
 
 def bad_payloads(key: str, rng: random.Random) -> bytes | None:

@@ -58,6 +58,5 @@ def test_faults_and_diagnostics_survive_restarts_in_every_order(whole_twin):
         wait_for(lambda: diagnosed(p) == EXPECTED_DIAG, 15,
                  lambda o=order: f"/diagnostics after restarting {o}: {diagnosed(p)}")
     # Still in effect, not only listed: the pack still heats, the rail is still tripped.
-    b = p.wait_value(keys.battery_state(R), lambda b: "heating" in b["faults"])
-    assert b["heat_w"] >= 5.0
+    p.wait_value(keys.battery_state(R), lambda b: b["heat_w"] >= 5.0)
     assert p.wait_value(keys.rail_state(R, "5V_CH2"))["state"] == "tripped"

@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import Battery
-from common.faults import DERIVED, FAULT_CODES, battery_fault_code, fault_of
+from common.faults import DERIVED, FAULT_CODES, CapacityLoss, Resistance, battery_fault_code
 from services.battery.model import BatteryModel
 from tests.services.test_battery_model import MAPP_BATTERY
 
@@ -139,7 +139,7 @@ def test_resistance_curves_are_interpolated_and_held_flat_outside():
 
 def test_a_resistance_fault_multiplies_every_resistance():
     pack = BatteryModel(pack_cfg(rc_pairs=ONE_PAIR))
-    pack.apply_fault(*fault_of("battery/resistance", {"factor": 2.0}))
+    pack.set_faults([Resistance(factor=2.0)])
     assert_allclose(pack.resistance_ohm, 0.2, rtol=1e-12)
     held_current(pack, 4.0)
     pack.step(20.0)  # R1 = 0.1, tau = 20 s: v = (1 - e^-1) * 0.4
@@ -309,8 +309,7 @@ def test_circuit_books_close_and_nothing_comes_from_nothing(pairs, r0, cutoff, s
                    initial_soc=soc, capacity_j=capacity_j, cells_series=1,
                    ocv_curve={"soc": [0.0, 0.1, 1.0], "volts": [3.0, 3.6, 4.2]})
     pack = BatteryModel(cfg)
-    pack.apply_fault(*fault_of("battery/capacity_loss", {"fraction": faults[0]}))
-    pack.apply_fault(*fault_of("battery/resistance", {"factor": faults[1]}))
+    pack.set_faults([CapacityLoss(fraction=faults[0]), Resistance(factor=faults[1])])
     e0, cap0 = pack.energy_j + pack.books.lost_j, pack.capacitor_j
     flow = 0.0
     for demand, dt, repeat in profile:

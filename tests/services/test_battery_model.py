@@ -11,7 +11,16 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import Battery, load_rover
-from common.faults import battery_fault_code, fault_of
+from common.faults import (
+    CATALOGUE,
+    DERIVED,
+    CapacityLoss,
+    Disconnect,
+    Dust,
+    Heating,
+    Resistance,
+    battery_fault_code,
+)
 from services.battery.model import BatteryModel, ocv, solve_bus, thermal_step
 from tests.harness import ROVERS
 
@@ -175,24 +184,29 @@ def test_depleted_pack_recovers_only_above_the_hysteresis():
 
 def test_capacity_loss_loses_energy_above_the_new_capacity():
     pack = BatteryModel(battery_cfg())
-    pack.apply_fault(*fault_of("battery/capacity_loss", {"fraction": 0.4}))
+    pack.set_faults([CapacityLoss(fraction=0.4)])
     assert_allclose(pack.energy_j, 0.6 * 5.3e5)
     assert_allclose(pack.soc, 1.0)
-    pack.apply_fault(*fault_of("battery/capacity_loss"))  # cleared: capacity back, the lost energy is not
+    assert pack.reading().faults == []  # the pack's own alarms only: a smaller capacity_j shows it
+    assert_allclose(pack.reading().capacity_j, 0.6 * 5.3e5)
+    pack.set_faults([])  # cleared: capacity back, the lost energy is not
     assert_allclose(pack.soc, 0.6)
 
 
 def test_overheating_raises_alarm_then_cutoff_then_recovers_below_max():
     pack = BatteryModel(battery_cfg())
-    pack.apply_fault(*fault_of("battery/heating", {"heat_w": 200.0}))  # T_inf = 20 + 200 / 0.8 = 270 C
+    pack.set_faults([Heating(heat_w=200.0)])  # T_inf = 20 + 200 / 0.8 = 270 C
+    pack.step(1.0)
+    assert pack.temperature_c > 20.0 and pack.reading().faults == []  # rising, no alarm yet
     while pack.temperature_c <= 60.0:
         pack.step(1.0)
     assert "over_temperature" in pack.derived_faults() and pack.operational
+    assert pack.reading().faults == ["over_temperature"] and battery_fault_code(["over_temperature"]) == 1
     while pack.temperature_c <= 75.0:
         pack.step(1.0)
     assert pack.thermal_cutoff and not pack.operational
     assert battery_fault_code(pack.reading().faults) == 6
-    pack.apply_fault(*fault_of("battery/heating"))
+    pack.set_faults([])
     while pack.temperature_c >= 60.0:
         pack.step(10.0)
     assert not pack.thermal_cutoff and pack.operational
@@ -200,11 +214,41 @@ def test_overheating_raises_alarm_then_cutoff_then_recovers_below_max():
 
 def test_disconnected_pack_supplies_nothing():
     pack = BatteryModel(battery_cfg())
-    pack.apply_fault(*fault_of("battery/disconnect", {}))
+    pack.set_faults([Disconnect()])
     pack.set_demand(50.0)
     r = pack.reading()
     assert (r.voltage_v, r.current_a, r.operational) == (0.0, 0.0, False)
-    assert battery_fault_code(r.faults) == 7
+    assert r.faults == ["no_output"] and battery_fault_code(r.faults) == 7  # what its BMS sees
+    pack.set_faults([])
+    assert pack.reading().operational and pack.reading().faults == []
+
+
+def test_the_pack_applies_every_fault_it_is_given_and_refuses_another_components():
+    # R0 = 0.06 ohm x 2 = 0.12; 20 W of heat; 30 % of 5.3e5 J lost; then the list replaced whole
+    pack = BatteryModel(battery_cfg())
+    pack.set_faults([Resistance(factor=2.0), Heating(heat_w=20.0), CapacityLoss(fraction=0.3)])
+    assert_allclose((pack.resistance_ohm, pack.injected_heat_w, pack.capacity_j),
+                    (0.12, 20.0, 0.7 * 5.3e5))
+    pack.set_faults([Heating(heat_w=5.0)])  # the others cleared: what is not given is not in effect
+    assert_allclose((pack.resistance_ohm, pack.injected_heat_w, pack.capacity_j), (0.06, 5.0, 5.3e5))
+    with pytest.raises(ValueError, match="the battery has no fault kind 'dust'"):
+        pack.set_faults([Dust(fraction=0.5)])
+    assert pack.injected_heat_w == 5.0  # nothing changed
+
+
+@pytest.mark.parametrize("fault", [Heating(heat_w=0.0), Resistance(factor=1.0),
+                                   CapacityLoss(fraction=0.0), Heating(heat_w=3.0),
+                                   Resistance(factor=4.0), CapacityLoss(fraction=0.5), Disconnect()])
+def test_the_pack_names_no_injected_fault(fault):
+    """SPEC §12b: the reading carries the pack's own alarms only; a fault of any parameters,
+    a zero-change one too, never shows by its name (the fault book lists it)."""
+    pack = BatteryModel(battery_cfg())
+    pack.set_faults([fault])
+    pack.set_demand(20.0)
+    pack.step(1.0)
+    faults = pack.reading().faults
+    assert set(faults) <= set(DERIVED["battery"])
+    assert not set(faults) & set(CATALOGUE["battery"])
 
 
 # -- properties ----------------------------------------------------------------------------
@@ -228,9 +272,7 @@ def test_no_input_gives_nan_negative_energy_or_soc_outside_0_1(demands, dts, r_o
                                                                 heat, loss, factor):
     pack = BatteryModel(battery_cfg(internal_resistance_ohm=r_ohm, capacity_j=capacity_j,
                                     initial_soc=soc))
-    pack.apply_fault(*fault_of("battery/heating", {"heat_w": heat}))
-    pack.apply_fault(*fault_of("battery/resistance", {"factor": factor}))
-    pack.apply_fault(*fault_of("battery/capacity_loss", {"fraction": loss}))
+    pack.set_faults([Heating(heat_w=heat), Resistance(factor=factor), CapacityLoss(fraction=loss)])
     for demand, dt in zip(demands, dts * len(demands), strict=False):
         pack.set_demand(demand)
         pack.step(dt)
@@ -256,7 +298,6 @@ def test_discharge_current_is_limited_by_the_bms():
 
 
 def test_every_derived_fault_is_in_the_catalogue_of_derived_faults():
-    from common.faults import DERIVED
     pack = BatteryModel(battery_cfg())
     pack.temperature_c = 200.0
     pack.energy_j = 0.0

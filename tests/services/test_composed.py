@@ -9,11 +9,12 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import Rover, load_rover
-from common.faults import fault_of
+from common.faults import Short
 from common.messages import DriveTraverse, TraverseWaypoint
 from common.traverse import plan
 from services.composed import ComposedTwin, run_budget
 from services.drive.budget import power_profile, run_traverse
+from services.drive.model import umbilical_holds
 from tests.harness import ROOT, ROVERS, lunaris_cmd, static_rover
 
 
@@ -58,7 +59,8 @@ def test_a_long_run_sheds_in_order_then_depletes(mapp):
 
 def test_a_short_trips_the_rail_and_darkens_its_loads(mapp):
     twin = ComposedTwin(mapp, seed=1)
-    twin.loads.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+    twin.set_faults("load", "nav_camera", [Short(resistance_ohm=0.05)])
+    assert twin.power.switches["5V_CH2"].tripped  # at once, as the services do
     twin.step()
     assert twin.power.switches["5V_CH2"].tripped
     assert twin.loads.power("hazard_cameras") == (0.0, False)
@@ -97,7 +99,7 @@ def test_the_drive_moves_and_sets_its_load_in_the_composed_twin(driving):
     assert twin.drive.y_m == pytest.approx(0.1)  # 10 ticks of 0.1 s at 0.1 m/s
     assert twin.loads.power("drive_motors") == (pytest.approx(9.5), True)
     # a short on the 12 V rail's heater trips it: the drive loses its power and halts
-    twin.loads.apply_fault(*fault_of("load/survival_heater/short", {"resistance_ohm": 0.05}))
+    twin.set_faults("load", "survival_heater", [Short(resistance_ohm=0.05)])
     twin.step()
     assert twin.power.switches["12V"].tripped
     y = twin.drive.y_m
@@ -169,10 +171,10 @@ def test_the_fast_path_computes_what_the_general_path_computes(mapp):
     for tick in range(4000):
         if tick == 500:
             for twin in (fast, general):
-                twin.loads.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+                twin.set_faults("load", "nav_camera", [Short(resistance_ohm=0.05)])
         if tick == 800:
             for twin in (fast, general):
-                twin.loads.apply_fault(*fault_of("load/nav_camera/short"))
+                twin.set_faults("load", "nav_camera", [])
                 twin.power.command("5V_CH2", reset=True)
         if tick == 1200:
             for twin in (fast, general):
@@ -184,3 +186,36 @@ def test_the_fast_path_computes_what_the_general_path_computes(mapp):
         assert fast.loads.rail_on == general.loads.rail_on, tick
     assert fast.battery.depleted or fast.battery.uv_cutoff  # the run went all the way down
     assert fast.power.state() == general.power.state()
+
+
+# -- the umbilical's cable (SPEC §12e) ---------------------------------------------------------
+
+
+def plugged_in(rover: Rover, **umbilical) -> Rover:
+    raw = msgspec.to_builtins(rover)
+    raw["umbilical"] = {"connected": True, "power_w": 120.0, **umbilical}
+    return msgspec.convert(raw, Rover)
+
+
+def test_a_traverse_does_not_start_plugged_in_unless_the_cable_follows(driving):
+    assert umbilical_holds(driving.umbilical, plugged=False) is None
+    with pytest.raises(ValueError, match="the umbilical is plugged in and it has no slack"):
+        run_traverse(plugged_in(driving), north(1.0, driving))
+    with pytest.raises(ValueError, match="its 10 m cable does not follow the rover"):
+        run_traverse(plugged_in(driving, cable_m=10.0), north(1.0, driving))
+    # a cable that follows: 1 m north at 0.1 m/s, plugged in all the way (1 m < 10 m)
+    b = run_traverse(plugged_in(driving, cable_m=10.0, follows_rover=True), north(1.0, driving))
+    assert b.outcome == "arrived"
+
+
+def test_driving_past_the_cable_pulls_it_out_in_the_composed_twin(driving):
+    # 2.5 m of tether from the start (5, 0, 0), driving north at 0.1 m/s: past it after 25 s
+    twin = ComposedTwin(plugged_in(driving, cable_m=2.5, follows_rover=True), seed=1)
+    assert twin.drive is not None and twin.summary.generation_w > 119.0  # 120 W and the sun
+    twin.drive.start(plan(north(10.0, driving), driving.drive, (5.0, 0.0, 0.0))[0])
+    for _ in range(250):  # 25.0 s: 2.5 m, on the cable's reach
+        twin.step()
+    assert twin.solar.umbilical_plugged and twin.drive.y_m == pytest.approx(2.5)
+    twin.step()  # 2.51 m
+    assert not twin.solar.umbilical_plugged
+    assert twin.power.umbilical_w == 0.0 and twin.summary.generation_w < 50.0  # the sun only

@@ -13,6 +13,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from common.config import Drive, DriveStart, Radio, RadioSite
+from common.faults import Open, Short, Stuck, supplies_device
 from common.messages import DriveTraverse, TraverseWaypoint
 from common.traverse import Leg, plan
 from services.drive.model import (
@@ -20,7 +21,6 @@ from services.drive.model import (
     capped_speed,
     drive_power_w,
     leg_energy_j,
-    motors_powered,
     tractive_force_n,
 )
 from services.radio.model import RadioModel, relative_to_site
@@ -183,8 +183,9 @@ def test_without_power_the_rover_halts_and_resumes():
     m.start(square_course())
     run(m, 10.0)
     assert m.set_powered(False) and not m.set_powered(False)
-    assert motors_powered(True, []) and motors_powered(True, ["stuck"])
-    assert not motors_powered(False, []) and not motors_powered(True, ["short"])
+    assert supplies_device(True, []) and supplies_device(True, [Stuck(power_w=1.0)])
+    assert not supplies_device(False, []) and not supplies_device(True, [Short()])
+    assert not supplies_device(True, [Stuck(power_w=1.0), Open()])
     e = m.energy_j
     run(m, 20.0)
     r = m.reading()

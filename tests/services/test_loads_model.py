@@ -8,7 +8,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from common.config import load_rover
-from common.faults import fault_of
+from common.faults import Dust, Open, Short, Stuck
 from services.loads.model import LoadsFleet, LoadsModel, sample_power
 from tests.harness import ROVERS, copies_of
 
@@ -51,15 +51,26 @@ def test_a_load_draws_nothing_while_its_rail_is_off(mapp):
 
 def test_faults_short_open_stuck(mapp):
     m = LoadsModel(mapp, seed=3)
-    m.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+    m.set_faults("nav_camera", [Short(resistance_ohm=0.05)])
     assert_allclose(m.power("nav_camera")[0], 5.0**2 / 0.05)  # V_rail^2 / R = 500 W
-    m.apply_fault(*fault_of("load/drive_motors/stuck", {"power_w": 77.0}))
-    assert m.power("drive_motors")[0] == 77.0
-    m.apply_fault(*fault_of("load/imu/open", {}))
-    assert m.power("imu")[0] == 0.0
-    m.apply_fault(*fault_of("load/nav_camera/short"))
+    assert m.alarms("nav_camera", 500.0) == ["over_current"]  # above its max_w of 5 W
+    m.set_faults("drive_motors", [Stuck(power_w=77.0)])
+    assert m.power("drive_motors")[0] == 77.0 and m.alarms("drive_motors", 77.0) == []  # max 90 W
+    m.set_faults("imu", [Open()])
+    assert m.power("imu")[0] == 0.0 and m.alarms("imu", 0.0) == []
+    assert not m.supplied("imu") and not m.supplied("nav_camera") and m.supplied("drive_motors")
+    m.set_faults("nav_camera", [])
     m.sample()
-    assert 0.0 <= m.power("nav_camera")[0] <= 5.0
+    assert 0.0 <= m.power("nav_camera")[0] <= 5.0 and m.supplied("nav_camera")
+    # several on one load: a short, then an open circuit, then stuck; whatever their order
+    m.set_faults("imu", [Stuck(power_w=1.2), Open()])
+    assert m.power("imu")[0] == 0.0
+    m.set_faults("imu", [Stuck(power_w=1.2), Short(resistance_ohm=3.3), Open()])
+    assert_allclose(m.power("imu")[0], 3.3**2 / 3.3)  # 3.3 W on the 3.3 V rail
+    with pytest.raises(ValueError, match="a load has no fault kind 'dust'"):
+        m.set_faults("imu", [Dust(fraction=0.1)])
+    with pytest.raises(ValueError, match="no load 'wheel'"):
+        m.set_faults("wheel", [])
 
 
 def test_the_drive_load_draws_what_the_drive_sets_and_its_faults_still_win(mapp):
@@ -70,9 +81,9 @@ def test_the_drive_load_draws_what_the_drive_sets_and_its_faults_still_win(mapp)
     assert not m.set_driven("nav_camera", 1.0)  # the drive owns only its load
     m.sample()
     assert m.power("drive_motors") == (9.5, True)
-    m.apply_fault(*fault_of("load/drive_motors/stuck", {"power_w": 77.0}))
+    m.set_faults("drive_motors", [Stuck(power_w=77.0)])
     assert m.power("drive_motors")[0] == 77.0
-    m.apply_fault(*fault_of("load/drive_motors/short", {"resistance_ohm": 0.5}))
+    m.set_faults("drive_motors", [Stuck(power_w=77.0), Short(resistance_ohm=0.5)])
     assert_allclose(m.power("drive_motors")[0], 12.0**2 / 0.5)  # a short wins: 288 W
     m.set_rail("12V", False)
     assert m.power("drive_motors") == (0.0, False)
@@ -146,7 +157,7 @@ def test_a_fleets_rovers_keep_their_own_rails_faults_and_drive(mapp):
     a, b = fleet.models["r0"], fleet.models["r1"]
     fleet.sample("r0")
     fleet.sample("r1")
-    b.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
+    b.set_faults("nav_camera", [Short(resistance_ohm=0.05)])
     b.set_rail("3V3_CH1", False)
     b.set_driven("drive_motors", 9.5)
     assert_allclose(b.power("nav_camera")[0], 5.0**2 / 0.05)  # 500 W
@@ -158,9 +169,9 @@ def test_a_fleets_rovers_keep_their_own_rails_faults_and_drive(mapp):
 def test_powers_is_power_of_each_load(mapp):
     m = LoadsModel(mapp, seed=4)
     m.sample()
-    m.apply_fault(*fault_of("load/nav_camera/short", {"resistance_ohm": 0.05}))
-    m.apply_fault(*fault_of("load/imu/open", {}))
-    m.apply_fault(*fault_of("load/uhf_radio/stuck", {"power_w": 7.0}))
+    m.set_faults("nav_camera", [Short(resistance_ohm=0.05)])
+    m.set_faults("imu", [Open()])
+    m.set_faults("uhf_radio", [Stuck(power_w=7.0)])
     m.set_rail("3V3_CH2", False)
     m.set_driven("drive_motors", 12.5)
     assert m.powers() == [(name, *m.power(name)[:1], rail, m.power(name)[1])

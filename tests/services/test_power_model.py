@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import load_rover
-from common.faults import fault_of
+from common.faults import Dust, Fail
 from common.messages import PowerSummary, RailState
 from services.power.model import PowerModel, RailReading, Summary
 from tests.harness import ROVERS
@@ -96,9 +96,18 @@ def test_shedding_and_restoring_with_hysteresis(pdm):
 
 def test_a_failed_converter_gives_zero_volts(pdm):
     pdm.load_power_w.update(flight_computer=6.0)
-    pdm.apply_fault(*fault_of("rail/5V_CH1/fail", {}))
+    pdm.set_faults("5V_CH1", [Fail()])
     r, _ = rails(pdm)
     assert (r["5V_CH1"].state, r["5V_CH1"].voltage_v, r["5V_CH1"].power_w) == ("failed", 0.0, 0.0)
+    pdm.set_faults("5V_CH1", [])
+    r, _ = rails(pdm)
+    assert (r["5V_CH1"].state, r["5V_CH1"].voltage_v, r["5V_CH1"].power_w) == ("on", 5.0, 6.0)
+    pdm.set_faults("SOLAR", [Fail()])  # the panels' own rail
+    assert pdm.solar_failed and rails(pdm)[0]["SOLAR"].state == "failed"
+    with pytest.raises(ValueError, match="a rail has no fault kind 'dust'"):
+        pdm.set_faults("5V_CH1", [Dust(fraction=0.1)])
+    with pytest.raises(ValueError, match="no rail '48V'"):
+        pdm.set_faults("48V", [Fail()])
 
 
 @settings(max_examples=200, deadline=None)

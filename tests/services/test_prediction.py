@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from common.config import Rover, load_rover
-from common.faults import fault_of
+from common.faults import Dust, Heating, Stuck
 from services.battery.circuit import solve_bus
 from services.battery.packs import Packs
 from services.battery.prediction import clipped_moments, percentiles, predict, start_of
@@ -82,13 +82,13 @@ SCENARIOS = {
         6000, lambda t, socs: rises_then_falls(socs), None),
     "mapp: thermal cut-off": (
         variant("mapp.yaml"), 600, lambda t, socs: t.battery.thermal_cutoff,
-        lambda t: t.battery.apply_fault(*fault_of("battery/heating", {"heat_w": 3000.0}))),
+        lambda t: t.set_faults("battery", None, [Heating(heat_w=3000.0)])),
     "mapp: trip, command, dust": (
         variant("mapp.yaml", capacity_j=1e4), 5000,
         lambda t, socs: t.power.switches["5V_CH1"].tripped and min(socs) == 0.0,
-        lambda t: (t.loads.apply_fault(*fault_of("load/uhf_radio/stuck", {"power_w": 30.0})),
+        lambda t: (t.set_faults("load", "uhf_radio", [Stuck(power_w=30.0)]),
                    t.power.command("3V3_CH2", on=False),
-                   t.solar.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.5})))),
+                   t.set_faults("solar", "left", [Dust(fraction=0.5)]))),
 }
 
 

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import pytest
 from numpy.testing import assert_allclose
 
-from common.config import Radio, load_rover
-from common.faults import fault_of
+from common.config import Radio, Rover, load_rover
+from common.faults import Degraded, Disconnect, Dust, Failure, Short
 from services.clock.model import ClockModel
 from services.radio.model import RadioModel, in_range, position_xy
 from services.solar.model import SolarModel, panel_power
@@ -31,16 +32,25 @@ def test_panel_power_formula(angle, dust, degradation, expected):
 
 def test_panel_faults_and_umbilical():
     m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
-    m.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.3}))
-    m.apply_fault(*fault_of("solar/right/disconnect", {}))
-    powers = {name: p for name, p, _, _ in m.panels()}
-    assert_allclose(powers["left"], 1361 * 0.12 * 0.29 * 0.5 * 0.7)
-    assert powers["right"] == 0.0
+    m.set_panel_faults("left", [Dust(fraction=0.3)])
+    m.set_panel_faults("right", [Disconnect()])
+    panels = {name: (p, dust) for name, p, dust in m.panels()}
+    assert_allclose(panels["left"][0], 1361 * 0.12 * 0.29 * 0.5 * 0.7)
+    assert panels["left"][1] == 0.0  # the environment's dust: a dust fault shows as less power
+    assert panels["right"] == (0.0, 0.0)
     assert (m.umbilical_connected, m.umbilical_power_w) == (False, 0.0)
-    m.umbilical_plugged = True
+    m.plug(True)
     assert m.umbilical_power_w == 120.0
-    m.apply_fault(*fault_of("umbilical/disconnect", {}))
-    assert m.umbilical_power_w == 0.0
+    m.set_umbilical_faults([Disconnect()])
+    assert m.umbilical_power_w == 0.0 and m.umbilical_plugged  # no supply, still plugged in
+    m.set_umbilical_faults([])
+    assert m.umbilical_power_w == 120.0
+    m.set_panel_faults("left", [Dust(fraction=0.0)])  # in effect, and changes nothing
+    assert_allclose(m.panels()[0][1], 1361 * 0.12 * 0.29 * 0.5)
+    with pytest.raises(ValueError, match="a panel has no fault kind 'short'"):
+        m.set_panel_faults("left", [Short()])
+    with pytest.raises(ValueError, match="the umbilical has no fault kind 'dust'"):
+        m.set_umbilical_faults([Dust(fraction=0.1)])
 
 
 # Ellipse a = 400, b = 250 centred at (100, -50).
@@ -67,14 +77,15 @@ def test_radio_faults():
     m = RadioModel(Radio(name="lander", a_m=400, b_m=250, offset_x_m=100, offset_y_m=0))
     m.distance_m, m.angle_deg = 450.0, 0.0      # ((450 - 100) / 400)^2 = 0.766: in range
     assert m.link().in_range
-    m.apply_fault(*fault_of("radio/lander/degraded", {"range_scale": 0.5}))  # ((350) / 200)^2 = 3.06: out
+    m.set_faults([Degraded(range_scale=0.5)])  # ((350) / 200)^2 = 3.06: out
     assert not m.link().in_range
-    m.apply_fault(*fault_of("radio/lander/degraded", {"range_scale": 0.0}))  # zero size holds nothing
+    m.set_faults([Degraded(range_scale=0.0)])  # zero size holds nothing
     m.distance_m = 100.0
     assert not m.link().in_range
-    m.apply_fault(*fault_of("radio/lander/degraded"))
-    m.apply_fault(*fault_of("radio/lander/failure", {}))
+    m.set_faults([Failure()])
     assert not m.link().in_range
+    m.set_faults([])
+    assert m.link().in_range and m.alarms() == []  # a failure is no alarm: the link is lost
 
 
 def test_clock_ticks_scales_and_pauses():
@@ -92,17 +103,65 @@ def test_clock_ticks_scales_and_pauses():
 
 def test_dust_as_an_input_is_a_second_layer_over_the_dust_fault():
     m = SolarModel(load_rover(ROVERS / "mapp.yaml"))
-    clean = {name: p for name, p, _, _ in m.panels()}["left"]
+    clean = {name: p for name, p, _ in m.panels()}["left"]
     m.set_input_dust("left", 0.5)
-    (name, power, dust, faults), _ = m.panels()
-    assert (name, dust, faults) == ("left", 0.5, [])  # exact with one layer
+    (name, power, dust), _ = m.panels()
+    assert (name, dust) == ("left", 0.5)  # exact with one layer
     assert_allclose(power, clean * 0.5)
-    m.apply_fault(*fault_of("solar/left/dust", {"fraction": 0.3}))
-    _, power, dust, faults = m.panels()[0]
-    assert faults == ["dust"] and dust == pytest.approx(1 - 0.7 * 0.5)  # 0.65
-    assert_allclose(power, clean * 0.7 * 0.5)
+    m.set_panel_faults("left", [Dust(fraction=0.3)])
+    _, power, dust = m.panels()[0]
+    assert dust == 0.5  # the environment's, the input: never the fault's
+    assert_allclose(power, clean * 0.7 * 0.5)  # 1 - (1 - 0.3)(1 - 0.5) = 0.65 of it gone
     assert m.state()["input_dust"] == {"left": 0.5}  # kept across a restart
     m.set_input_dust("left", None)
-    assert m.panels()[0][2] == 0.3
+    assert m.panels()[0][2] == 0.0
+    assert_allclose(m.panels()[0][1], clean * 0.7)
     with pytest.raises(ValueError, match="no panel 'wing'"):
         m.set_input_dust("wing", 0.1)
+
+
+# -- the parts agree (SPEC §12e) ------------------------------------------------------------
+
+
+def test_a_radio_without_power_is_out_of_range_whatever_the_distance():
+    m = RadioModel(Radio(name="lander", a_m=400, b_m=250, load="uhf_radio"))
+    m.set_position(10.0, 0.0)  # (10 / 400)^2 = 0.000625: deep inside
+    assert m.link().in_range and m.alarms() == []
+    assert m.set_powered(False) and not m.set_powered(False)
+    assert not m.link().in_range and m.alarms() == ["unpowered"]
+    assert m.link().x_m == pytest.approx(10.0)  # the position is still known
+    assert m.set_powered(True) and m.link().in_range and m.alarms() == []
+
+
+def cabled(cable_m: float | None, follows: bool = False) -> SolarModel:
+    """The MAPP (drive start (5, 0, 0)) with an umbilical of ``cable_m``, plugged in at the start."""
+    raw = msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml"))
+    raw["umbilical"] = {"connected": True, "power_w": 120.0, "cable_m": cable_m,
+                        "follows_rover": follows}
+    return SolarModel(msgspec.convert(raw, Rover))
+
+
+def test_a_rover_that_drives_past_its_cable_pulls_the_umbilical_out():
+    m = cabled(10.0, follows=True)
+    assert m.umbilical_plugged and m.plugged_at_m == (5.0, 0.0, 0.0)
+    # (5, 0, 0) -> (11, 8, 0): sqrt(6^2 + 8^2) = 10.0 m, on the cable's reach: still plugged
+    assert m.move_rover(11.0, 8.0, 0.0) is None and m.umbilical_power_w == 120.0
+    # (5, 0, 0) -> (11, 8, 0.5): sqrt(100 + 0.25) = 10.0125 m: pulled out
+    assert m.move_rover(11.0, 8.0, 0.5) == pytest.approx(math.sqrt(100.25))
+    assert not m.umbilical_plugged and m.umbilical_power_w == 0.0 and m.plugged_at_m is None
+    assert m.move_rover(50.0, 0.0, 0.0) is None  # unplugged: nothing more to pull out
+    m.plug(True)  # plugged in again where the rover is now: (50, 0, 0)
+    assert m.plugged_at_m == (50.0, 0.0, 0.0) and m.move_rover(45.0, 0.0, 0.0) is None
+    assert m.move_rover(39.0, 0.0, 0.0) == pytest.approx(11.0)
+
+
+def test_without_a_cable_length_any_move_pulls_it_out_and_state_keeps_the_plug():
+    m = cabled(None)
+    assert m.cable_m == 0.0 and m.move_rover(5.0, 0.0, 0.0) is None  # parked where plugged
+    saved = m.state()
+    assert saved["plugged_at_m"] == [5.0, 0.0, 0.0]
+    assert m.move_rover(5.0, 0.001, 0.0) == pytest.approx(0.001) and not m.umbilical_plugged
+    m.set_state(saved)  # a snapshot restored: plugged in where it was
+    assert m.umbilical_plugged and m.plugged_at_m == (5.0, 0.0, 0.0)
+    m.reset()  # the rover file: plugged in at the drive's start
+    assert m.umbilical_plugged and m.plugged_at_m == (5.0, 0.0, 0.0)

@@ -1,0 +1,191 @@
+// The page's state: the latest value of every key of every rover, their recent events, the
+// live services, the plots' history, and what the instructor has chosen (rover, view). One
+// object, changed only through this module and the modules that own a part of it; every
+// change asks for one redraw (at most one an animation frame).
+
+/** @typedef {import("./types.js").ActiveFault} ActiveFault */
+/** @typedef {import("./types.js").ActiveFaults} ActiveFaults */
+/** @typedef {import("./types.js").BatteryState} BatteryState */
+/** @typedef {import("./types.js").Clock} Clock */
+/** @typedef {import("./types.js").DriveState} DriveState */
+/** @typedef {import("./types.js").Event} TwinEvent */
+/** @typedef {import("./types.js").LoadPower} LoadPower */
+/** @typedef {import("./types.js").PowerSummary} PowerSummary */
+/** @typedef {import("./types.js").RadioLink} RadioLink */
+/** @typedef {import("./types.js").RailState} RailState */
+/** @typedef {import("./types.js").SolarPower} SolarPower */
+/** @typedef {import("./types.js").UmbilicalState} UmbilicalState */
+
+/**
+ * The plots' history of one rover, by simulated time (`t`: the battery state's `t_s`): a point
+ * every sim second at most, the older points thinned as the history grows.
+ * @typedef {{t: number[], soc: number[], temperature_c: number[], load_w: (number | null)[],
+ *   generation_w: (number | null)[]}} History
+ */
+
+/** @typedef {{name: string, role: string, local: boolean, may_act: boolean, accounts: boolean}} Me */
+
+/**
+ * The fault catalogue the forms are built from (`GET /api/catalogue`).
+ * @typedef {{name: string, type: string, ge?: number, gt?: number, le?: number, lt?: number,
+ *   default: number | null}} CatalogueParam
+ * @typedef {{description: string, params: CatalogueParam[]}} CatalogueKind
+ * @typedef {{named: boolean, kinds: Record<string, CatalogueKind>}} CatalogueComponent
+ * @typedef {{components: Record<string, CatalogueComponent>, derived: Record<string, unknown>}} Catalogue
+ */
+
+/** @typedef {"ok" | "lost"} RoverLink */
+
+export const EVENTS_KEPT = 300;
+/** Points of a rover's plots kept; past it, the older half is thinned to every other point. */
+export const HISTORY_KEPT = 2400;
+/** The spans of sim time the plots may show, in seconds, and their words. */
+export const SPANS = /** @type {const} */ ([[900, "15 min"], [3600, "1 h"], [8 * 3600, "8 h"]]);
+
+export const store = {
+  /** @type {Record<string, unknown>} the latest payload of every key, by its full key */
+  values: {},
+  /** @type {Record<string, TwinEvent[]>} recent events by rover, oldest first */
+  events: {},
+  /** @type {Record<string, string[]>} live services by rover */
+  services: {},
+  /** @type {Record<string, History>} */
+  history: {},
+  /** @type {Record<string, RoverLink>} each rover's link, where the console says it */
+  links: {},
+  /** @type {boolean | null} whether the console reaches the twin (null: not known yet) */
+  connected: /** @type {boolean | null} */ (null),
+  /** @type {string} what to say when the page has lost the console itself */
+  streamError: "",
+  /** @type {string | null} */
+  rover: /** @type {string | null} */ (null),
+  view: "live",
+  /** @type {Me | null} */
+  me: /** @type {Me | null} */ (null),
+  /** @type {Catalogue | null} */
+  cat: /** @type {Catalogue | null} */ (null),
+  /** @type {Set<string>} the actions sent and not answered yet (their buttons wait) */
+  pending: new Set(),
+  /** the span of sim time the plots show, in seconds (one of SPANS) */
+  span: 900,
+};
+
+/** @type {Set<() => void>} */
+const listeners = new Set();
+let asked = false;
+
+/** Ask for a redraw: the listeners run once, at the next animation frame. */
+export function changed() {
+  if (asked) return;
+  asked = true;
+  requestAnimationFrame(() => {
+    asked = false;
+    for (const fn of listeners) fn();
+  });
+}
+
+/** Redraw now: after the instructor's own choices (a view, a rover, a select), so what
+ * depends on the choice is there as soon as the choice is made. */
+export function redraw() {
+  for (const fn of listeners) fn();
+}
+
+/** @param {() => void} fn called after every change (once a frame at most) */
+export function onChange(fn) {
+  listeners.add(fn);
+}
+
+/** May the signed-in user change the twin? (An observer may not; the server refuses anyway.) */
+export const mayAct = () => !!store.me?.may_act;
+
+// -- reading the values ---------------------------------------------------------------------
+
+/** @param {string} rover @param {string} tail the key under lunaris/<rover>/ */
+export const key = (rover, tail) => `lunaris/${rover}/${tail}`;
+
+/**
+ * The latest payload of a key of the rover (typed by the key: see types.js's Payload).
+ * @template {string} K
+ * @param {string} rover
+ * @param {K} tail the key under lunaris/<rover>/
+ * @returns {import("./types.js").Payload<K> | undefined}
+ */
+export const val = (rover, tail) => /** @type {import("./types.js").Payload<K> | undefined} */ (store.values[key(rover, tail)]);
+
+/** @param {string} rover @returns {BatteryState | undefined} */
+export const battery = (rover) => val(rover, "battery/state");
+/** @param {string} rover @returns {Clock | undefined} */
+export const clock = (rover) => val(rover, "clock");
+/** @param {string} rover @returns {PowerSummary | undefined} */
+export const powerSummary = (rover) => val(rover, "power/summary");
+/** @param {string} rover @param {string} name @returns {RailState | undefined} */
+export const rail = (rover, name) => val(rover, `rail/${name}/state`);
+/** @param {string} rover @param {string} name @returns {LoadPower | undefined} */
+export const load = (rover, name) => val(rover, `load/${name}/power`);
+/** @param {string} rover @param {string} name @returns {SolarPower | undefined} */
+export const panel = (rover, name) => val(rover, `solar/${name}/power`);
+/** @param {string} rover @param {string} name @returns {RadioLink | undefined} */
+export const radio = (rover, name) => val(rover, `radio/${name}/link`);
+/** @param {string} rover @returns {DriveState | undefined} */
+export const drive = (rover) => val(rover, "drive/state");
+/** @param {string} rover @returns {UmbilicalState | undefined} */
+export const umbilical = (rover) => val(rover, "umbilical/state");
+
+// -- what a rover has, from its keys ----------------------------------------------------------
+
+/** Every rover the console has heard of (a live service or a value), sorted. */
+export function rovers() {
+  const set = new Set(Object.keys(store.services));
+  for (const k of Object.keys(store.values)) set.add(k.split("/")[1]);
+  return [...set].sort();
+}
+
+/**
+ * The names of a family's components: `named(r, "load", "power")` -> the loads.
+ * @param {string} rover @param {string} head @param {string} tail
+ */
+export function named(rover, head, tail) {
+  const pre = `lunaris/${rover}/${head}/`, out = [];
+  for (const k of Object.keys(store.values)) {
+    if (k.startsWith(pre) && k.endsWith(`/${tail}`)) {
+      const n = k.slice(pre.length, -tail.length - 1);
+      if (n && !n.includes("/")) out.push(n);
+    }
+  }
+  return out.sort();
+}
+
+/** @typedef {{rails: string[], loads: string[], panels: string[], radios: string[], drive: boolean, umbilical: boolean}} Parts */
+
+/** @param {string} rover @returns {Parts} what the rover has */
+export function parts(rover) {
+  return {rails: named(rover, "rail", "state"), loads: named(rover, "load", "power"),
+          panels: named(rover, "solar", "power"), radios: named(rover, "radio", "link"),
+          drive: !!drive(rover), umbilical: !!umbilical(rover)};
+}
+
+/** @param {string} rover @returns {ActiveFault[]} every fault in effect, oldest first */
+export function activeFaults(rover) {
+  const pre = `lunaris/${rover}/faults/active/`, out = [];
+  for (const [k, v] of Object.entries(store.values)) {
+    if (k.startsWith(pre)) out.push(.../** @type {ActiveFaults} */ (v).faults);
+  }
+  return out.sort((a, b) => a.since_t_s - b.since_t_s || a.key.localeCompare(b.key));
+}
+
+/** @param {string} rover @returns {boolean} the console says the rover's link is lost */
+export const linkLost = (rover) => store.links[rover] === "lost";
+
+// -- choices --------------------------------------------------------------------------------
+
+/** @param {string} rover */
+export function pickRover(rover) {
+  store.rover = rover;
+  redraw();
+}
+
+/** @param {string} view */
+export function pickView(view) {
+  store.view = view;
+  redraw();
+}

@@ -1,0 +1,150 @@
+// Session: pause, resume and speed the clock; reset the rover to its rover file; save and
+// restore snapshots; ask the battery prediction.
+
+import {html, nothing} from "../vendor/lit-html/lit-html.js";
+import {answer, query, send} from "../api.js";
+import {clockText, dur, fmt, nameProblem, plainMessage, wallTime} from "../format.js";
+import {changed, clock} from "../state.js";
+import {actionButton, eventsCard, field} from "../widgets.js";
+
+/** @typedef {import("../types.js").SnapshotInfo} SnapshotInfo */
+/** @typedef {import("../types.js").Prediction} Prediction */
+/** @typedef {import("../types.js").Percentiles} Percentiles */
+/** @template T @typedef {{ok: true, data: T} | {ok: false, message: string}} Result */
+
+/** What the twin answered to the last queries, by rover. */
+const answers = {
+  /** @type {Record<string, Result<SnapshotInfo[]>>} */
+  snapshots: {},
+  /** @type {Record<string, Result<Prediction> | "computing">} */
+  prediction: {},
+};
+
+/** @param {string} rover */
+async function loadSnapshots(rover) {
+  answers.snapshots[rover] = await query(`/api/rovers/${encodeURIComponent(rover)}/snapshots`);
+  changed();
+}
+
+/** @param {string} rover */
+async function predict(rover) {
+  const value = (/** @type {string} */ id) => /** @type {HTMLInputElement | null} */ (document.getElementById(id))?.value ?? "";
+  answers.prediction[rover] = "computing";
+  changed();
+  answers.prediction[rover] = await query(`/api/rovers/${encodeURIComponent(rover)}/prediction?hours=${
+    encodeURIComponent(value("pr-h"))}&samples=${encodeURIComponent(value("pr-n"))}`);
+  changed();
+}
+
+/** @param {number | undefined} x the clock's speed @returns {string} what it means */
+const speedWords = (x) => (x === undefined ? "" : x === 1 ? "(real time: a simulated second every second)"
+  : `(${x} simulated seconds every second)`);
+
+/** @param {string} r */
+function clockCard(r) {
+  /** @param {Record<string, unknown>} body */
+  const control = (body) => () => send("PUT", "clock/control", JSON.stringify(body), r);
+  const other = () => {
+    const v = /** @type {HTMLInputElement | null} */ (document.getElementById("scale"))?.value ?? "";
+    return send("PUT", "clock/control", JSON.stringify({time_scale: v === "" ? null : Number(v)}), r);
+  };
+  return html`<section class="card"><h2>Simulated time</h2>
+    <p>Sim time ${field(r, "clock", "t_s", "clock")}, at ${field(r, "clock", "time_scale", "x")}
+      <small>${speedWords(clock(r)?.time_scale)}</small> ${field(r, "clock", "paused", "", {hidden: true})}</p>
+    <div class="row">${actionButton({action: "clock-pause", label: "Pause", rover: r, run: control({paused: true})})}
+      ${actionButton({action: "clock-resume", label: "Resume", rover: r, run: control({paused: false})})}
+      ${[1, 2, 5, 10, 20, 50, 100].map((x) => actionButton({action: "clock-scale", label: `×${x}`, rover: r,
+                                                           target: {scale: String(x)}, run: control({time_scale: x})}))}</div>
+    <div class="row"><label>Other speed [×]<input type="number" id="scale" min="0.01" max="10000" step="any"></label>
+      ${actionButton({action: "clock-scale", label: "Set", rover: r, target: {scale: ""}, run: other})}</div></section>`;
+}
+
+/** @param {string} r */
+function resetCard(r) {
+  const reset = () => confirm(`Reset ${r} to its rover file? Every injected fault is cleared and the clock goes back to 0.`)
+    && send("PUT", "control/reset", "", r);
+  return html`<section class="card"><h2>Start again</h2><p class="help">Puts ${r} back to its rover file: full stored
+      energy, temperature, rails and inputs as at the start, every injected fault cleared, the clock at 0.</p>
+    ${actionButton({action: "reset", label: `Reset ${r}`, rover: r, cls: "danger", run: reset})}</section>`;
+}
+
+/** @param {Percentiles} t @param {"p05" | "p50" | "p95"} p @param {number} horizon */
+const within = (t, p, horizon) => (t[p] === null ? `more than ${dur(horizon)}` : dur(t[p]));
+
+/** @param {Result<Prediction> | "computing" | undefined} res */
+function prediction(res) {
+  if (res === undefined) return nothing;
+  if (res === "computing") return html`<p>Computing the futures…</p>`;
+  if (!res.ok) return html`<p class="error">No prediction: ${plainMessage(res.message)}</p>`;
+  const d = res.data, t = d.time_to_empty_s, s = d.soc_at_horizon, h = d.horizon_s;
+  return html`<table><tr><th></th><th class="num">pessimistic</th><th class="num">typical</th><th class="num">optimistic</th></tr>
+    <tr><td>time until the battery cuts off</td><td class="num">${within(t, "p05", h)}</td>
+      <td class="num">${within(t, "p50", h)}</td><td class="num">${within(t, "p95", h)}</td></tr>
+    <tr><td>charge after ${dur(h)}</td><td class="num">${fmt(s.p05, "pct")}</td><td class="num">${fmt(s.p50, "pct")}</td>
+      <td class="num">${fmt(s.p95, "pct")}</td></tr></table>
+    <p class="help">The battery cuts off when its charge reaches the rover's empty level, or when its voltage under
+      load falls below the cut-off voltage of its battery management: whichever comes first. So it can cut off with
+      some charge left. Pessimistic: only 1 future in 20 does worse; optimistic: only 1 in 20 does better.</p>
+    <p class="help">${d.samples} futures from sim time ${clockText(d.t_s)}, computed in ${d.computed_in_s.toFixed(1)} s.
+      ${(d.notes ?? []).map((n) => plainMessage(n)).join(" ")}</p>`;
+}
+
+/** @param {string} r */
+function predictionCard(r) {
+  return html`<section class="card"><h2>Battery prediction</h2>
+    <p class="help">Many possible futures of the rover from its state now, the inputs held as they are.</p>
+    <div class="row"><label>hours ahead<input type="number" id="pr-h" min="0.1" max="168" step="any" value="8"></label>
+      <label>futures to try<input type="number" id="pr-n" min="1" max="10000" value="1000"></label>
+      <button type="button" class="act" id="predict" ?disabled=${answers.prediction[r] === "computing"}
+        @click=${() => predict(r)}>Predict</button></div>
+    <div id="prediction">${prediction(answers.prediction[r])}</div></section>`;
+}
+
+/** @param {Result<SnapshotInfo[]> | undefined} res @param {string} r */
+function snapshotList(res, r) {
+  if (res === undefined) return nothing;
+  if (!res.ok) return html`<p class="error">${res.message}</p>`;
+  if (!res.data.length) return html`<p>No snapshot yet.</p>`;
+  /** @param {string} name */
+  const restore = (name) => () => confirm(`Restore the snapshot "${name}" of ${r}? The twin goes back to where it was when it was saved.`)
+    && send("PUT", `control/restore/${name}`, "", r);
+  return html`<table><tr><th>name</th><th class="num">sim time</th><th>saved on</th><th></th></tr>${res.data.map((s) => html`<tr>
+    <td>${s.name}</td><td class="num">${clockText(s.t_s)}</td><td>${wallTime(s.saved_at)}</td>
+    <td>${actionButton({action: "snapshot-restore", label: "Restore", rover: r, target: {snapshot: s.name},
+                        run: restore(s.name)})}</td></tr>`)}</table>`;
+}
+
+/** @param {string} r */
+function snapshotsCard(r) {
+  const save = async () => {
+    const box = /** @type {HTMLInputElement | null} */ (document.getElementById("snap-name"));
+    const name = box?.value.trim() ?? "", wrong = nameProblem(name, "snapshot", 64);
+    box?.setAttribute("aria-invalid", String(!!wrong));
+    if (wrong) {
+      answer("invalid", wrong);
+      return;
+    }
+    const res = await send("PUT", `control/snapshot/${name}`, "", r);
+    await loadSnapshots(r);
+    return res;
+  };
+  return html`<section class="card"><h2>Snapshots <button type="button" class="act" id="snap-refresh"
+      @click=${() => loadSnapshots(r)}>Refresh</button></h2>
+    <p class="help">A snapshot keeps the state of every service (stored energy, temperature, rails, inputs, faults, time)
+      under a name; restoring it puts the twin back exactly there.</p>
+    <div class="row"><label>Name <small>one word: letters, digits, - _ .</small><input type="text" id="snap-name"
+        placeholder="before-storm" pattern="[A-Za-z0-9_.\-]{1,64}"></label>
+      ${actionButton({action: "snapshot-save", label: "Save snapshot", rover: r, cls: "primary", run: save})}</div>
+    <div id="snapshots">${snapshotList(answers.snapshots[r], r)}</div></section>`;
+}
+
+export const session = {
+  name: "session",
+  label: "Session",
+  /** @param {{rover: string}} ctx */
+  render: ({rover}) => html`<div class="grid two">
+    <div class="col">${clockCard(rover)}${resetCard(rover)}${predictionCard(rover)}</div>
+    <div class="col">${snapshotsCard(rover)}${eventsCard(rover)}</div></div>`,
+  /** @param {{rover: string}} ctx */
+  enter: ({rover}) => loadSnapshots(rover),
+};
