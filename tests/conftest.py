@@ -32,12 +32,14 @@ KINDS: dict[str, tuple[str, ...]] = {
     "common/test_config.py": ("twin",),  # lunaris check and lunaris run as processes
     "common/test_connection.py": ("twin",),
     "console": ("twin", "browser"),
+    "console/test_server.py": ("twin",),  # the server in-process, a router and a stand-in rover
     "console/test_up_console.py": ("twin",),
     "deploy": ("twin",),
     "integration": ("twin",),
     "integration/test_bridge_ros2.py": ("twin", "ros2"),
     "integration/test_bridge_rmw_zenoh_sdk.py": ("twin", "ros2"),
     "lunaris": ("twin",),
+    "lunaris/test_client.py": ("unit",),
     "lunaris/test_record_offline.py": ("unit",),
     "lunaris/test_scenario_model.py": ("unit",),
     "lunaris/test_scenario_waiting.py": ("unit",),

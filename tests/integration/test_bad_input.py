@@ -3,7 +3,7 @@
 Every kind of bad payload goes to every kind of key an instructor or dashboard may put on
 (:data:`CASES`). Each case is refused at the decoding layer the services decode with (the
 fault catalogue's key and parameters, the input Structs of the key's family), in words, and
-by the tools' own check (:func:`common.writes.check_write`) the same way: unit tests, all of
+by the tools' own check (:func:`common.writes.plan_write`) the same way: unit tests, all of
 them. Through a live twin go one case per key (and each payload wrong everywhere, once) and
 the cases only the twin can refuse (names of loads, rails, panels, radios and rovers it
 alone knows; commands that decode but ask for nothing): each must come back as a rejection
@@ -18,7 +18,7 @@ import pytest
 from common import keys
 from common.faults import parse_fault_key, parse_params
 from common.messages import BARE_FIELD, BadInput, decode_input
-from common.writes import check_write
+from common.writes import plan_write
 from tests.harness import ALL_SERVICES, Probe
 
 pytestmark = pytest.mark.timeout(60)
@@ -127,9 +127,9 @@ def test_the_decoders_refuse_it_in_words_and_so_do_the_tools(key, payload):
     reason = decoders_say(key, payload)
     assert reason is not None, "decoded as a valid write"
     assert len(reason) > 5 and "\n" not in reason and "Traceback" not in reason, reason
-    _, parts = keys.split(key)
+    rover, parts = keys.split(key)
     with pytest.raises(BadInput) as refused:  # lunaris rail / clock / input / fault, the console
-        check_write(parts, payload)
+        plan_write(rover, parts, payload)
     assert str(refused.value).startswith(reason), (str(refused.value), reason)
 
 
