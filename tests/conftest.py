@@ -49,9 +49,15 @@ KINDS: dict[str, tuple[str, ...]] = {
 }
 
 
+def _under_tests(path: Path) -> str:
+    """``path`` relative to tests/ (a path elsewhere as it is)."""
+    resolved = path.resolve()
+    return resolved.relative_to(TESTS).as_posix() if resolved.is_relative_to(TESTS) else str(resolved)
+
+
 def kinds_of(path: Path) -> tuple[str, ...]:
     """The kinds :data:`KINDS` gives a test module at ``path``."""
-    rel = path.resolve().relative_to(TESTS).as_posix()
+    rel = _under_tests(path)
     found = [k for k in KINDS if rel == k or rel.startswith(k + "/")]
     return KINDS[max(found, key=len)] if found else ("twin",)
 
@@ -62,7 +68,7 @@ FIRST = ("services", "reliability", "lunaris", "integration", "deploy", "console
 
 
 def _rank(item: pytest.Item) -> int:
-    folder = item.path.resolve().relative_to(TESTS).parts[0]
+    folder = _under_tests(item.path).split("/")[0]
     return FIRST.index(folder) if folder in FIRST else len(FIRST)
 
 
@@ -78,7 +84,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         info = getattr(item, "_fixtureinfo", None)
         defs = info.name2fixturedefs.values() if info is not None else ()
         if any(d.scope in ("class", "module", "package") for fds in defs for d in fds):
-            item.add_marker(pytest.mark.xdist_group(item.path.resolve().relative_to(TESTS).as_posix()))
+            item.add_marker(pytest.mark.xdist_group(_under_tests(item.path)))
     items.sort(key=_rank)  # stable: a module's tests stay together, in their order
 
 
