@@ -5,7 +5,7 @@ BIN      = $(VENV)/bin
 ROVER   ?= config/rovers/mapp.yaml
 PORT    ?= 8080
 STATE   ?= var/state
-WORKERS ?= 4
+WORKERS ?= 3
 # what running needs: the package and its dependencies, no extra
 RUN_STAMP  = $(VENV)/.installed-run
 # and what the tests need besides (the dev and test-ros2 extras)
