@@ -10,6 +10,8 @@ WORKERS ?= 3
 RUN_STAMP  = $(VENV)/.installed-run
 # and what the tests need besides (the dev and test-ros2 extras)
 TEST_STAMP = $(VENV)/.installed
+# the console page's linters (ESLint, the TypeScript checker), from the npm registry
+NODE_STAMP = node_modules/.installed
 START := $(shell date +%s)
 
 .PHONY: run test lint typecheck reference bench system-deps clean
@@ -27,6 +29,10 @@ $(TEST_STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,test-ros2]'
 	@touch $@ $(RUN_STAMP)
+
+$(NODE_STAMP): package.json package-lock.json
+	npm ci --no-audit --no-fund --loglevel=error
+	@touch $@
 
 # docker-compose (v1, Debian) validates docker-compose.yml in the tests; no engine needed.
 # chromium and chromium-driver (Debian) are the real browser the console's tests drive.
@@ -48,8 +54,9 @@ system-deps:
 run: $(RUN_STAMP)
 	$(BIN)/lunaris up --rover $(ROVER) --state-dir $(STATE) --console 127.0.0.1:$(PORT)
 
-lint: $(TEST_STAMP)
+lint: $(TEST_STAMP) $(NODE_STAMP)
 	$(BIN)/ruff check .
+	npm run --silent lint
 
 typecheck: $(TEST_STAMP)
 	$(BIN)/mypy
@@ -73,4 +80,4 @@ bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis .mypy_cache .coverage .coverage.*
+	rm -rf $(VENV) node_modules .pytest_cache .ruff_cache .hypothesis .mypy_cache .coverage .coverage.*
