@@ -105,7 +105,10 @@ def answer_of(parts: list[str] | tuple[str, ...], delete: bool) -> tuple[str, st
         fk = parse_fault_key(list(parts[1:]))
         return ("fault_cleared" if delete else "fault_injected"), FAULT_OWNERS[fk.component]
     if head == "control":
-        return ("scenario" if list(parts) == ["control", "scenario"] else "session"), "faults"
+        if list(parts) == ["control", "scenario"]:
+            return "scenario", "faults"
+        # the clock is the one decider of a restore: it checks every service's part first
+        return "session", ("clock" if list(parts[1:2]) == ["restore"] else "faults")
     family = keys.family_of(list(parts))
     if family is None or family.direction != "in" or head not in _ACCEPTED:
         writable = ", ".join(f.name for f in keys.families("in"))
