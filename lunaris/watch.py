@@ -4,7 +4,9 @@ With ``--rover`` it shows the battery (energy, state of charge, voltage, current
 temperature, time to empty), the power summary, solar panels and umbilical,
 radios, the PDM table (every rail with its loads), the active faults and the
 latest events; alarms are coloured by severity. Without it, one line per rover,
-the fleet's active faults and events.
+the fleet's active faults and events. Each rover is shown in its trainee session: the header
+names the trainee (and the session's id), and the events are the session's only (a new
+session starts the list empty: :class:`lunaris.client.Mirror`).
 
 What it shows is the client's mirror of the twin (:class:`lunaris.client.Mirror`): values
 appear at once when the tool joins a running session (the publishers' caches), events are
@@ -73,7 +75,8 @@ def snapshot_of(mirror: Mirror) -> Snapshot:
     for listed in faults.values():
         listed.sort(key=lambda f: (f["since_t_s"], f["key"]))
     events = sorted(((rover, ev) for rover, ev, _ in mirror.events()), key=lambda re: re[1].t_s)
-    return Snapshot(latest, events, faults, mirror.all_services(), links=mirror.links())
+    return Snapshot(latest, events, faults, mirror.all_services(), links=mirror.links(),
+                    sessions=mirror.sessions())
 
 
 COMPACT_BELOW = 110  # columns: narrower than this, the compact layout (an 80x24 terminal)
