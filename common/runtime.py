@@ -37,7 +37,12 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk;
 - the trainee session (SPEC §12c): :attr:`Runtime.session_id` is the session the clock's
   ticks say is running, and every event the service publishes carries it (``session``); it is
-  saved with the time, so a restarted service is in its session before its first tick;
+  saved with the time, so a restarted service is in its session before its first tick. What
+  ends with a session is that session's: a fault cleared or an alarm resolved within
+  ``SESSION_GRACE_S`` of a new session's beginning, when it was injected or raised in the
+  session that ended, carries that session (the previous trainee's short, cleared by the new
+  session's reset, and the trip it caused, resolved as the rails come back on, are never in
+  the next trainee's timeline);
 - time that never goes back within an epoch: the sim time a service has reached (and its
   epoch) is saved under ``--state-dir`` (``<service>-time.json``); a restarted service
   starts from it (or from the running clock, if that is later), publishes nothing stamped
@@ -116,6 +121,14 @@ class Sample(NamedTuple):
     age_s: float = 0.0  # how long after sent_at the write arrived here [s]
 
 
+# A fault cleared or an alarm resolved this soon after a session began is the ending session's
+# when it began in that one (see Runtime.event): the reset's consequences reach every service
+# within a tick or two (0.1 s each) of the clock's.
+SESSION_GRACE_S = 2.0
+_OPENS = frozenset({"fault_injected", "fault_raised"})
+_CLOSES = frozenset({"fault_cleared", "fault_resolved"})
+OPENED_KEPT = 4096  # (rover, key) of the faults in effect whose session is remembered
+
 # Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
 TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
 WriteRole = Literal["own", "follow", "gate"]
@@ -136,6 +149,9 @@ class Runtime:
         self.epoch: dict[str, int] = dict.fromkeys(self.rovers, 0)  # the epoch of t_s
         # the trainee session of t_s, as the ticks say (the clock: as it begins them)
         self.session_id: dict[str, str] = dict.fromkeys(self.rovers, "")
+        self._session_ended: dict[str, tuple[str, float]] = {}  # rover -> (session, monotonic)
+        self._sessions_left: dict[str, list[str]] = {}  # rover -> the sessions it has ended
+        self._opened_in: dict[tuple[str, str], str] = {}  # (rover, fault key) -> its session
         self.store = StateStore(state_dir, name)
         # Rovers whose time came from the disk, not from a tick: nothing stamped with time is
         # published for them until the clock's first tick has reached that time.
@@ -443,11 +459,42 @@ class Runtime:
         self._waiting.discard(rover)
         self.epoch[rover], self.t_s[rover] = tick.epoch, tick.t_s
         if tick.session:  # (the keeper, at a new epoch, has taken it already)
-            self.session_id[rover] = tick.session
+            self.enter_session(rover, tick.session)
         if resumed and self._faults is not None:
             self._faults.publish(rover)  # held back until now: the record with a current time
         for fn in self._tick_handlers:
             fn(rover, tick)
+
+    def enter_session(self, rover: str, session: str) -> None:
+        """From now on the events of ``rover`` are ``session``'s (see :meth:`event` for what
+        ends with the previous one). A session ended never runs again: a tick of it still in
+        flight (a service that heard of the next session first) changes nothing."""
+        previous = self.session_id.get(rover, "")
+        left = self._sessions_left.setdefault(rover, [])
+        if not session or session == previous or session in left:
+            return
+        if previous:
+            self._session_ended[rover] = (previous, time.monotonic())
+            left.append(previous)
+            del left[:-8]
+        self.session_id[rover] = session
+
+    def _session_of(self, rover: str, kind: str, key: str) -> str:
+        """The session an event of ``rover`` belongs to: the running one, but for a fault
+        cleared or an alarm resolved just after a new session began that was injected or
+        raised in the one that ended (:data:`SESSION_GRACE_S`)."""
+        current = self.session_id.get(rover, "")
+        if kind in _OPENS:
+            if len(self._opened_in) >= OPENED_KEPT:
+                del self._opened_in[next(iter(self._opened_in))]
+            self._opened_in[(rover, key)] = current
+        elif kind in _CLOSES:
+            opened = self._opened_in.pop((rover, key), None)
+            ended = self._session_ended.get(rover)
+            if opened and ended is not None and opened == ended[0] != current \
+                    and time.monotonic() - ended[1] < SESSION_GRACE_S:
+                return opened
+        return current
 
     def _clock_behind(self, rover: str, tick: Clock) -> None:
         if tick.epoch < self.epoch[rover] or rover in self._behind:
@@ -789,7 +836,7 @@ class Runtime:
         ekey = keys.event_of(rover, self.name)
         ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,
                    key=key, message=message, params=params, source_id=self._zid, seq=seq,
-                   actor=actor, session=self.session_id.get(rover, ""))
+                   actor=actor, session=self._session_of(rover, kind, key) if served else "")
         if not served:
             self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
                                    congestion_control=zenoh.CongestionControl.BLOCK,

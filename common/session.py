@@ -274,8 +274,7 @@ class SessionKeeper:
     def _enter(self, rover: str, session: str) -> None:
         """From here the service's events are ``session``'s (once the ending session's faults
         are cleared)."""
-        if session:
-            self.rt.session_id[rover] = session
+        self.rt.enter_session(rover, session)
 
     def reset(self, rover: str, session: str = "") -> None:
         """Every injected fault cleared (journalled), the state back to the rover file's."""

@@ -19,10 +19,11 @@ It begins the trainee sessions (SPEC §12c): ``control/session`` ``{"trainee",
 "from_snapshot"?}`` ends the running session and begins a new one with a new epoch, a reset
 (or the snapshot's restore, checked part by part as any restore: all or nothing), and every
 tick from there carries the new session's id (:func:`services.clock.model.session_id`). The
-clock answers it with a ``session`` event whose ``params`` say the new session (``session``,
-``trainee``, ``from_snapshot``, ``started_wall``, ``start_t_s``) and the one that ended
-(``previous``: ``session``, ``trainee``, ``end_t_s``), or refuses it in words (a bad name, an
-unknown or damaged snapshot: the running session goes on). A twin that never got a
+session that ends is closed by a ``session`` event of its own (key ``sessions``, ``params``:
+``session``, ``trainee``, ``end_t_s``); the clock answers the write with the ``session`` event
+that opens the new one (``params``: ``session``, ``trainee``, ``from_snapshot``,
+``started_wall``, ``start_t_s``; nothing of the previous session), or refuses it in words (a
+bad name, an unknown or damaged snapshot: the running session goes on). A twin that never got a
 ``control/session`` is in a first session all the same (trainee ``""``), begun (and said in
 such an event) when its clock first starts. The session is kept with the clock's state; a
 clock whose state is lost learns it back with the time, from the services
@@ -310,7 +311,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         ``snapshot`` (every part checked already), in a new epoch whose ticks carry the new
         session's id; answered with the ``session`` event that opens it in the journal."""
         clock = clocks[rover]
-        before = clock.session, clock.trainee, clock.t_s
+        if clock.session:  # closed in its own words, in its own segment of the journal
+            rt.event(rover, "info", "session", keys.sessions(rover),
+                     f"session {clock.session} of {_who(clock.trainee)} ends at t={clock.t_s:.1f} s: "
+                     "the next trainee's session begins",
+                     {"session": clock.session, "trainee": clock.trainee, "end_t_s": clock.t_s},
+                     actor=actor)
         if snapshot is None:
             rt.keeper.reset(rover)  # a new epoch, t = 0
             how = "the twin back to its rover file"
@@ -323,34 +329,31 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                 return
             clock.new_epoch(RESTORE + snapshot)
             how = f"snapshot {snapshot!r} restored (every part checked: {', '.join(held)})"
-        announce(rover, key, trainee, snapshot, how, before, actor)
-        begin(rover)
+        announce(rover, key, trainee, snapshot, how, actor, tick=True)
 
     def announce(rover: str, key: str, trainee: str, snapshot: str | None, how: str,
-                 before: tuple[str, str, float] | None, actor: str | None) -> None:
-        """Begin the clock's record of a new session and say it (before its first tick)."""
+                 actor: str | None, tick: bool = False) -> None:
+        """Begin the clock's record of a new session and say it; ``tick``: its first tick
+        goes out first (the writer told of the new session writes again in it: the services
+        have its tick before they have that write)."""
         clock = clocks[rover]
         wall = time.time()
         sid = clock.begin_session(trainee, wall)
-        rt.session_id[rover] = sid
+        rt.enter_session(rover, sid)
         rt.t_s[rover] = clock.t_s
+        if tick:
+            begin(rover)
         params: dict[str, Any] = {"session": sid, "trainee": trainee, "from_snapshot": snapshot,
                                   "started_wall": wall, "start_t_s": clock.t_s}
-        ended = ""
-        if before is not None and before[0]:
-            params["previous"] = {"session": before[0], "trainee": before[1],
-                                  "end_t_s": before[2]}
-            ended = (f"; the session {before[0]} of {_who(before[1])} ended at "
-                     f"t={before[2]:.1f} s")
-        rt.event(rover, "info", "session", key,
-                 f"session {sid} of {_who(trainee)} begins: {how}{ended}", params, actor=actor)
+        rt.event(rover, "info", "session", key, f"session {sid} of {_who(trainee)} begins: {how}",
+                 params, actor=actor)
 
     def first_session(rover: str) -> None:
         """A twin that never got a control/session is in a session all the same."""
         if clocks[rover].session or rover in holding:
             return
         announce(rover, keys.control_session(rover), "", None,
-                 "the twin's first session (lunaris session start names a trainee)", None, "twin")
+                 "the twin's first session (lunaris session start names a trainee)", "twin")
         save()
 
     def begin(rover: str) -> None:

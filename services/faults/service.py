@@ -122,6 +122,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                      f"({ev.kind}: {shown(ev.message)}); not journalled")
             return
         relay(s.rover, journals[s.rover].record(ev, time.monotonic()))
+        if ev.source == "clock" and ev.kind == "session" and ev.session > rt.session_id[s.rover] \
+                and "started_wall" in (ev.params or {}):
+            # the clock's word that a session begins: a write answered here after it is in
+            # that session, whether its first tick has come or not (ids grow: a session's
+            # event replayed from a cache never takes this service back)
+            rt.enter_session(s.rover, ev.session)
 
     def relay(rover: str, written: list[Event]) -> None:
         """What the journal wrote, unchanged, on ``lunaris/<rover>/event``: the journal's

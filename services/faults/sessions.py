@@ -3,9 +3,9 @@ and what ``get lunaris/<rover>/sessions`` lists. The logic, without files or Zen
 
 Every event carries the session its service was in (``Event.session``, from the clock's
 ticks). The clock opens each session with a ``session`` event whose ``params`` say it
-(``session``, ``trainee``, ``from_snapshot``, ``started_wall``, ``start_t_s``) and the one
-that ended (``previous``: ``session``, ``end_t_s``). :class:`SessionIndex` reads the events
-in the journal's order:
+(``session``, ``trainee``, ``from_snapshot``, ``started_wall``, ``start_t_s``), and closes the
+one that ends with another (``params``: ``session``, ``trainee``, ``end_t_s``).
+:class:`SessionIndex` reads the events in the journal's order:
 
 - an event names its session; a session id not seen before is a new segment, the running
   one from then on when it is later than the running one (ids are the UTC time each began,
@@ -14,7 +14,7 @@ in the journal's order:
   sessions) belongs to the session running when it was journalled, or, before any session is
   known, to the first one that comes;
 - a session's trainee, start and wall time come from the event that opened it, its end from
-  the event that opened the next; without them (the journal lost them), its first and last
+  the event that closed it; without them (the journal lost them), its first and last
   events' sim times stand in.
 """
 
@@ -33,7 +33,7 @@ class _Segment:
     id: str
     trainee: str = ""
     start_t_s: float | None = None  # from the event that opened it
-    end_t_s: float | None = None  # from the event that opened the next
+    end_t_s: float | None = None  # from the event that closed it
     first_t_s: float = 0.0  # sim time of its first and last events journalled
     last_t_s: float = 0.0
     started_wall: float | None = None
@@ -70,9 +70,12 @@ class SessionIndex:
                 self._unplaced.clear()
         self.of_line.append(sid)
         self._count(seg, ev)
-        opened = _opening(ev)
-        if opened is not None and opened.get("session") == sid:
-            self._opened(seg, opened)
+        said = _clock_says(ev)
+        if said is not None and said.get("session") == sid:
+            if "started_wall" in said:
+                self._opened(seg, said)
+            elif (end := _number(said.get("end_t_s"))) is not None:
+                seg.end_t_s = end
         return sid
 
     def _count(self, seg: _Segment, ev: Event) -> None:
@@ -85,12 +88,6 @@ class SessionIndex:
         seg.started_wall = _number(p.get("started_wall"))
         snapshot = p.get("from_snapshot")
         seg.from_snapshot = str(snapshot) if snapshot else None
-        previous = p.get("previous")
-        if isinstance(previous, dict):
-            before = self._segments.get(str(previous.get("session", "")))
-            end = _number(previous.get("end_t_s"))
-            if before is not None and before is not seg and end is not None:
-                before.end_t_s = end
 
     def known(self, sid: str) -> bool:
         return sid in self._segments
@@ -117,10 +114,11 @@ class SessionIndex:
         return out
 
 
-def _opening(ev: Event) -> dict[str, Any] | None:
-    """The params of the clock's event that opens a session, or None."""
+def _clock_says(ev: Event) -> dict[str, Any] | None:
+    """The params of the clock's event that opens or closes a session, or None."""
     p = ev.params
-    if ev.kind == "session" and ev.source == "clock" and isinstance(p, dict) and "started_wall" in p:
+    if ev.kind == "session" and ev.source == "clock" and isinstance(p, dict) and (
+            "started_wall" in p or "end_t_s" in p):
         return p
     return None
 

@@ -46,14 +46,17 @@ def ev(seq: int, session: str, kind: str = "fault_injected", source: str = "batt
                  source_id=f"id-{source}", seq=seq, session=session)
 
 
-def opening(seq: int, session: str, trainee: str, previous: str = "", end_t_s: float = 0.0,
-            start_t_s: float = 0.0) -> Event:
+def opening(seq: int, session: str, trainee: str, start_t_s: float = 0.0) -> Event:
     """The clock's event that opens a session."""
     params: dict = {"session": session, "trainee": trainee, "from_snapshot": None,
                     "started_wall": 1.7e9 + seq, "start_t_s": start_t_s}
-    if previous:
-        params["previous"] = {"session": previous, "trainee": "", "end_t_s": end_t_s}
     return ev(seq, session, "session", "clock", start_t_s, f"session {session} begins", params)
+
+
+def closing(seq: int, session: str, end_t_s: float) -> Event:
+    """The clock's event that closes a session."""
+    return ev(seq, session, "session", "clock", end_t_s, f"session {session} ends",
+              {"session": session, "trainee": "", "end_t_s": end_t_s})
 
 
 def battery(soc: float) -> bytes:
@@ -137,23 +140,24 @@ def test_the_journal_lists_its_sessions_and_gives_each_its_own_events(tmp_path):
     j.record(ev(1, "", "session", "faults", message="journal opened"), 0.0)  # before any tick
     j.record(opening(1, S1, ""), 0.0)
     j.record(ev(2, S1, t_s=5.0), 0.0)
-    j.record(opening(2, S2, "Ana", previous=S1, end_t_s=7.5), 0.0)
+    j.record(closing(2, S1, 7.5), 0.0)
+    j.record(opening(3, S2, "Ana"), 0.0)
     j.record(ev(3, S1, "fault_cleared", t_s=7.5), 0.0)  # the first session's clearing, late
     j.record(ev(4, S2, t_s=2.0), 0.0)
     j.record(ev(5, "", "mark", "faults", t_s=3.0), 0.0)  # no session said: the running one
     infos = j.session_infos()
     assert [(i.id, i.trainee, i.start_t_s, i.end_t_s, i.events) for i in infos] == [
-        (S1, "", 0.0, 7.5, 4), (S2, "Ana", 0.0, None, 3)]
-    assert infos[1].started_wall == 1.7e9 + 2
+        (S1, "", 0.0, 7.5, 5), (S2, "Ana", 0.0, None, 3)]
+    assert infos[1].started_wall == 1.7e9 + 3
 
     def seqs(session: str | None) -> list[tuple[str, int]]:
         return [(e["source"], e["seq"]) for e in map(json.loads, j.lines(session))]
-    assert seqs(S1) == [("faults", 1), ("clock", 1), ("battery", 2), ("battery", 3)]
-    assert seqs(S2) == [("clock", 2), ("battery", 4), ("faults", 5)]
-    assert len(seqs(None)) == 7
+    assert seqs(S1) == [("faults", 1), ("clock", 1), ("battery", 2), ("clock", 2), ("battery", 3)]
+    assert seqs(S2) == [("clock", 3), ("battery", 4), ("faults", 5)]
+    assert len(seqs(None)) == 8
     # read back after a restart: the same sessions, the same segments
     again = Journal(path, rover=R)
-    assert again.session_infos() == infos and [json.loads(x)["seq"] for x in again.lines(S2)] == [2, 4, 5]
+    assert again.session_infos() == infos and [json.loads(x)["seq"] for x in again.lines(S2)] == [3, 4, 5]
     # a running session the journal has no event of yet (the tick said it first): listed last
     assert [(i.id, i.end_t_s) for i in j.session_infos(running=S3)][-2:] == [(S2, 3.0), (S3, None)]
 
@@ -178,7 +182,7 @@ def test_the_mirror_drops_the_previous_session_s_history_and_events_when_a_new_o
     m.feed(keys.event_of(R, "battery"), msgspec.json.encode(ev(2, S1)))
     assert len(m.history(keys.battery_state(R))) == 3 and len(m.events(R)) == 2
     # the next trainee's: the clock's event comes before its first tick
-    m.feed(keys.event_of(R, "clock"), msgspec.json.encode(opening(2, S2, "Ben", previous=S1)))
+    m.feed(keys.event_of(R, "clock"), msgspec.json.encode(opening(2, S2, "Ben")))
     assert [e.seq for _, e, _ in m.events(R)] == [1, 2]  # not read before the tick says so
     m.feed(keys.clock(R), tick(0.0, S2, epoch=2))
     assert m.session_of(R) == Session(S2, "Ben")
@@ -196,7 +200,7 @@ def test_watch_names_the_trainee_and_shows_the_session_s_events_only():
     m.feed(keys.event_of(R, "clock"), msgspec.json.encode(opening(1, S1, "Ana")))
     m.feed(keys.event_of(R, "faults"), msgspec.json.encode(
         ev(1, S1, "mark", "faults", message="mark: ana's drill")))
-    m.feed(keys.event_of(R, "clock"), msgspec.json.encode(opening(2, S2, "Ben", previous=S1)))
+    m.feed(keys.event_of(R, "clock"), msgspec.json.encode(opening(2, S2, "Ben")))
     m.feed(keys.clock(R), tick(0.0, S2, epoch=2))
     m.feed(keys.event_of(R, "faults"), msgspec.json.encode(
         ev(2, S2, "mark", "faults", message="mark: ben's drill")))
