@@ -23,12 +23,9 @@ Then, with no more code in the service:
   service acts at the same point of simulated time, a tick from before a reset is never
   integrated after it, and a service that was down during a reset catches up with it when
   it comes back (the epoch it last followed is persisted with its state);
-- **trainee sessions** (``control/session``, SPEC §12c) are epochs too: the clock begins
-  the new session's epoch (a reset, or a restore) and its ticks carry the new session's id
-  (``session``). A service clears its injected faults in the session that ends (the end of
-  the previous trainee's faults is the previous trainee's), then enters the new one
-  (:attr:`common.runtime.Runtime.session_id`: its events carry it from there), then resets
-  or restores (a snapshot's faults, re-injected, are the new session's);
+- **trainee sessions** (``control/session``, SPEC §12c) begin with an epoch whose ticks carry
+  the new ``session``: a service clears its faults in the ending session, enters the new one
+  (``Runtime.enter_session``), then resets or restores (re-injected faults are the new one's);
 - ``lunaris/<rover>/snapshots/<service>`` answers a query with the snapshots this service
   holds (the faults service gathers them for ``get lunaris/<rover>/snapshots``); with
   ``?check=<name>`` it checks its part of that snapshot as a restore would read it, and
@@ -73,9 +70,8 @@ NO_PART = "no part"  # check_part: this service holds no part of the snapshot
 
 
 def parse_control(parts: list[str]) -> tuple[str, str] | None:
-    """``("reset", "")``, ``("session", "")``, ``("mark", "")``, ``("snapshot", name)`` or
-    ``("restore", name)`` from a control key's chunks after ``lunaris/<rover>/``; None when
-    it is none of them."""
+    """``(action, name)`` of a control key's chunks after ``lunaris/<rover>/``: ``reset``,
+    ``session``, ``mark`` (name ""), ``snapshot`` or ``restore`` (a name); None for others."""
     what = parts[1:] if parts[:1] == ["control"] else []
     if what in (["reset"], ["session"], ["mark"]):
         return what[0], ""
@@ -272,9 +268,7 @@ class SessionKeeper:
             self._enter(rover, session)
 
     def _enter(self, rover: str, session: str) -> None:
-        """From here the service's events are ``session``'s (once the ending session's faults
-        are cleared)."""
-        self.rt.enter_session(rover, session)
+        self.rt.enter_session(rover, session)  # once the ending session's faults are cleared
 
     def reset(self, rover: str, session: str = "") -> None:
         """Every injected fault cleared (journalled), the state back to the rover file's."""

@@ -1,5 +1,8 @@
 """A live mirror of the twin: what every tool that shows the twin reads (STYLE habit 11).
 
+Longer than 450 lines: one lock over everything a tool reads of the twin (values, history,
+events, trainee sessions, services, links), kept and bounded together.
+
 One :class:`Mirror` per tool subscribes, for one rover or every rover (``"*"``), to
 
 - the telemetry key families it is asked for (advanced subscribers with history: a tool that
@@ -47,7 +50,7 @@ import zenoh.ext as zext
 from common import keys
 from common.conditions import Lookup
 from common.messages import Event
-from lunaris.client.events import EventWindow, event_identity, source_mismatch
+from lunaris.client.events import EventWindow, event_identity, in_session, session_opened, source_mismatch
 from lunaris.client.link import LINK_TIMEOUT_S, Link, LinkTracker, clock_time
 from lunaris.client.records import Change, Session, Token, Value, _Rover
 from lunaris.client.session import ignored
@@ -292,7 +295,7 @@ class Mirror:
             r = self._admit(rover, key, now)
             if r is None:
                 return None, None
-            opened = _opened(ev)
+            opened = session_opened(ev)
             if opened is not None and opened[0] not in r.trainees:
                 r.trainees[opened[0]] = opened[1]
                 while len(r.trainees) > TRAINEES_KEPT:
@@ -305,7 +308,7 @@ class Mirror:
             r.events.append((ev, raw))
             while len(r.events) > self.keep_events:
                 r.events.popleft()
-            if not _current(ev, r.session):
+            if not in_session(ev, r.session):
                 return None, told  # a later session's: told once its first tick has come
         return Change("event", rover, key, raw, ev), told
 
@@ -425,7 +428,7 @@ class Mirror:
         with self._lock:
             names = [rover] if rover is not None else sorted(self._rovers)
             return [(n, ev, raw) for n in names if n in self._rovers
-                    for ev, raw in self._rovers[n].events if _current(ev, self._rovers[n].session)]
+                    for ev, raw in self._rovers[n].events if in_session(ev, self._rovers[n].session)]
 
     def session_of(self, rover: str) -> Session | None:
         """The rover's running session (None before its clock's first tick)."""
@@ -489,19 +492,3 @@ class Mirror:
                     "history": sum(len(h) for r in self._rovers.values() for h in r.history.values()),
                     "bytes": self._bytes, "event_window": len(self._window)}
 
-
-def _current(ev: Event, session: str) -> bool:
-    """Whether ``ev`` is read as the running session's: of it, of no session (a service that
-    had heard no tick), or any while no session is known."""
-    return not session or not ev.session or ev.session == session
-
-
-def _opened(ev: Event) -> tuple[str, str] | None:
-    """(session, trainee) of the clock's event that opens a session, or None."""
-    p = ev.params
-    if ev.kind != "session" or ev.source != "clock" or not isinstance(p, dict):
-        return None
-    session, trainee = p.get("session"), p.get("trainee")
-    if "started_wall" not in p or not isinstance(session, str) or not isinstance(trainee, str):
-        return None
-    return session, trainee

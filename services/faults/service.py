@@ -301,9 +301,19 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if journal.damage:
             rt.state_damaged(rover, f"faults journal of {rover} damaged: {journal.damage}",
                              keys.faults_journal(rover))
-        if journal.count == 0:  # a new session: its first line
+    # A new journal's first line, in the session the clock's ticks say (once one has come)
+    unopened = {rover for rover, journal in journals.items() if journal.count == 0}
+
+    def open_journal(rover: str, tick: object = None) -> None:
+        if rover in unopened and rt.session_id.get(rover):
+            unopened.discard(rover)
             rt.event(rover, "info", "session", keys.faults_journal(rover),
-                     f"journal opened: the session of {rover} begins")
+                     f"journal opened: the journal of {rover} begins in session "
+                     f"{rt.session_id[rover]}")
+
+    for rover in sorted(unopened):
+        open_journal(rover)
+    rt.on_tick(lambda rover, tick: open_journal(rover) if unopened else None)
     rt.every(1.0, end_floods)
     rt.on_exit(lambda: end_floods(force=True))
     def on_one_chunk(s: Sample) -> None:
