@@ -106,6 +106,7 @@ class Mirror:
         self._last_sweep = clock()
         self._forgotten: deque[str] = deque(maxlen=1024)  # told at the next sweep
         self.session: zenoh.Session | None = None
+        self.started_at: float | None = None  # when start() subscribed
 
     # -- Zenoh ------------------------------------------------------------------------------
 
@@ -115,6 +116,7 @@ class Mirror:
         with one answers such questions itself, from what it has heard so far (at first,
         nothing)."""
         self.session = session
+        self.started_at = self.clock()
         history = zext.HistoryConfig(detect_late_publishers=True)
         for family in self.families:
             self._keep.append(zext.declare_advanced_subscriber(
@@ -468,9 +470,15 @@ class Mirror:
                 since = self.disconnected_at or now
                 return Link("lost", since, f"the router is unreachable since {clock_time(since)}")
             r = self._rovers.get(rover)
-            if r is None:
-                return Link("unknown", None, "nothing heard of it yet")
-            return r.link.state(now)
+            link = Link("unknown", None, "nothing heard of it yet") if r is None else r.link.state(now)
+            waited = now - self.started_at if self.started_at is not None else 0.0
+            if link.state == "unknown" and self.connected and waited > self.link_timeout_s:
+                # a rover asked for that has not ticked since the tool connected: cut off, or
+                # not running (a tool started during a partition must say so, not wait)
+                return Link("lost", self.started_at, f"no clock tick of {rover} in the {waited:.0f} s "
+                                                     "since this tool connected: unreachable or not "
+                                                     "running")
+            return link
 
     def links(self) -> dict[str, Link]:
         return {rover: self.link(rover) for rover in self.rovers()}

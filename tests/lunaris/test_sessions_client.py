@@ -20,7 +20,7 @@ from lunaris.watch_view import Connection
 from services.clock.model import ClockModel, session_id
 from services.faults.journal import Journal
 
-pytestmark = pytest.mark.timeout(30)
+pytestmark = [pytest.mark.unit, pytest.mark.timeout(30)]
 
 R = "mapp-1"
 S1, S2, S3 = "20250114-195312", "20250114-195500", "20250114-200000"
