@@ -470,8 +470,10 @@ class Runtime:
         ends with the previous one). A session ended never runs again: a tick of it still in
         flight (a service that heard of the next session first) changes nothing."""
         previous = self.session_id.get(rover, "")
+        if not session or session == previous:
+            return  # (every tick)
         left = self._sessions_left.setdefault(rover, [])
-        if not session or session == previous or session in left:
+        if session in left:
             return
         if previous:
             self._session_ended[rover] = (previous, time.monotonic())
