@@ -201,3 +201,26 @@ def test_restarts_of_the_faults_service_and_of_the_clock_keep_the_session(twin):
     opened = [e for e in p.events(R) if e["kind"] == "session" and e["source"] == "clock"
               and "started_wall" in (e["params"] or {})]
     assert opened[-1]["session"] == dana
+
+
+def test_a_clock_that_lost_its_state_learns_the_session_back_from_the_services(twin):
+    """Its saved state and time gone (a new state folder, a disk replaced): the services say
+    where the twin was, the session included (``faults/active/<service>`` carries it)."""
+    p, t = twin
+    ana = begin(p, "Ana")
+    reached = p.wait_value(keys.clock(R), lambda c: c["session"] == ana and c["t_s"] > 2)["t_s"]
+    proc = t.procs["clock"]
+    proc.kill()
+    proc.wait(10)
+    lost = list(t.state_dir.glob("clock-*.json"))
+    assert lost
+    for f in lost:
+        f.unlink()
+    t.start("clock")
+    p.wait_services(R, ("clock",))
+    p.wait_value(keys.clock(R), lambda c: c["session"] == ana and c["t_s"] >= reached, timeout_s=15)
+    listed = sessions(p)
+    assert listed[-1]["id"] == ana and listed[-1]["trainee"] == "Ana"
+    opened = [e for e in p.events(R) if e["kind"] == "session" and e["source"] == "clock"
+              and "started_wall" in (e["params"] or {})]
+    assert opened[-1]["session"] == ana  # no session begun by the restart
