@@ -235,12 +235,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if action == "session":
             start = decode_input(s.payload, SessionStart)  # a bad name: refused in its words
             trainee, name = start.trainee, start.from_snapshot or ""
-            if not name:
-                new_session(s.rover, s.key, trainee, None, [], actor)
-                return
-        if s.rover in checking:
+        if s.rover in checking:  # a restore or a session waits for it: one at a time
             raise BadInput(f"snapshot {checking[s.rover]!r} is being checked for a restore: "
                            "send it again in a moment")
+        if trainee is not None and not name:
+            new_session(s.rover, s.key, trainee, None, [], actor)
+            return
         checking[s.rover] = name
         answers: list[tuple[str, str | None]] = []  # (service, None: intact | NO_PART | damage)
 
