@@ -4,7 +4,9 @@ With ``--rover`` it shows the battery (energy, state of charge, voltage, current
 temperature, time to empty), the power summary, solar panels and umbilical,
 radios, the PDM table (every rail with its loads), the active faults and the
 latest events; alarms are coloured by severity. Without it, one line per rover,
-the fleet's active faults and events.
+the fleet's active faults and events. Each rover is shown in its trainee session: the header
+names the trainee (and the session's id), and the events are the session's only (a new
+session starts the list empty: :class:`lunaris.client.Mirror`).
 
 What it shows is the client's mirror of the twin (:class:`lunaris.client.Mirror`): values
 appear at once when the tool joins a running session (the publishers' caches), events are
@@ -77,7 +79,8 @@ def snapshot_of(mirror: Mirror, rover: str | None = None) -> Snapshot:
     links = mirror.links()
     if rover is not None and rover not in links:
         links[rover] = mirror.link(rover)
-    return Snapshot(latest, events, faults, mirror.all_services(), links=links)
+    return Snapshot(latest, events, faults, mirror.all_services(), links=links,
+                    sessions=mirror.sessions())
 
 
 COMPACT_BELOW = 110  # columns: narrower than this, the compact layout (an 80x24 terminal)
