@@ -334,7 +334,8 @@ class Family(NamedTuple):
         if (name is None) != (self.placeholder is None):
             wants = f"a {self.placeholder}" if self.placeholder else "no"
             raise TypeError(f"the key of {self.name} takes {wants} name")
-        return "/".join([ROOT, rover, *((name or c) if c.startswith("{") else c for c in self.chunks)])
+        named = name or ""  # "" gives a prefix: faults_active(rover, "") -> .../faults/active/
+        return "/".join([ROOT, rover, *(named if c.startswith("{") else c for c in self.chunks)])
 
     def matches(self, parts: list[str] | tuple[str, ...]) -> bool:
         return len(parts) == len(self.chunks) and all(
