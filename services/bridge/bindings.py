@@ -22,7 +22,7 @@ from typing import NamedTuple
 from common import keys
 from common.config import Rover
 from common.datafile import ConfigError
-from services.bridge.mapping import ROS_TOPIC, BridgeOptions, Mapping, MappingFile, ros_name
+from services.bridge.mapping import PLACEHOLDERS, ROS_TOPIC, BridgeOptions, Mapping, MappingFile, ros_name
 from services.bridge.rmw_zenoh import rmw_topic_key
 
 __all__ = ["Binding", "RoverNames", "domain_of", "expand", "open_keyexpr", "rover_names", "zenoh_key"]
@@ -135,7 +135,7 @@ def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mappin
             place = fleet.index(rover.id)
             if shape.owner == "drive" and not rover.drives:
                 continue
-            if placeholder is None:
+            if placeholder not in PLACEHOLDERS:  # none, or every owner's (faults/active/*)
                 items: tuple[str | None, ...] = (None,)
             elif item is not None and item.startswith("{"):
                 items = getattr(rover, placeholder)

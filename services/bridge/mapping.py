@@ -170,16 +170,25 @@ class MappingFile(Strict, frozen=True):
 
 
 class Converter(NamedTuple):
+    """A whole-message converter: the message it makes, the twin key it reads (``also``:
+    older spellings still accepted) and its options."""
+
     type: str
-    shape: tuple[str, ...]
+    key: str
     options: frozenset[str]
+    also: tuple[str, ...] = ()
 
 
 CONVERTERS: dict[str, Converter] = {
-    "battery_state": Converter("sensor_msgs/msg/BatteryState", ("battery", "state"),
+    "battery_state": Converter("sensor_msgs/msg/BatteryState", "lunaris/{rover}/battery/state",
                                frozenset({"technology", "location", "serial_number"})),
-    "diagnostics": Converter("diagnostic_msgs/msg/DiagnosticArray", ("event",), frozenset()),
-    "odometry": Converter("nav_msgs/msg/Odometry", ("drive", "state"), frozenset({"child_frame_id"})),
+    # every owning service's faults in effect and the components' telemetry (which says each
+    # is alive, and in the crew's view what it shows); `event` was its first, untrue spelling
+    "diagnostics": Converter("diagnostic_msgs/msg/DiagnosticArray",
+                             "lunaris/{rover}/faults/active/*", frozenset(),
+                             also=("lunaris/{rover}/event",)),
+    "odometry": Converter("nav_msgs/msg/Odometry", "lunaris/{rover}/drive/state",
+                          frozenset({"child_frame_id"})),
 }
 
 # -- parsing and validation ---------------------------------------------------------------------
@@ -373,9 +382,8 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
             return problems
         if m.type != conv.type:
             problems.append(f"type: the {m.convert} converter makes {conv.type}, not {m.type}")
-        if shape.chunks != conv.shape:
-            problems.append(f"key: the {m.convert} converter reads lunaris/{{rover}}/"
-                            f"{'/'.join(conv.shape)}")
+        if m.key != conv.key and m.key not in conv.also:
+            problems.append(f"key: the {m.convert} converter reads {conv.key}")
         for name, value, unset in (("field", m.field, None), ("fields", m.fields, None),
                                    ("scale", m.scale, 1.0), ("integer", m.integer, None),
                                    ("default", m.default, None)):

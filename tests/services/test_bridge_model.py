@@ -74,6 +74,8 @@ def test_default_mapping_covers_what_the_dashboard_uses():
     assert inbound["/curr_to_receiving_radio_m"].mapping.fields == ["distance_m", "angle_deg"]
     assert out["/battery_state"].mapping.type == "sensor_msgs/msg/BatteryState"
     assert out["/diagnostics"].mapping.type == "diagnostic_msgs/msg/DiagnosticArray"
+    # what the DiagnosticArray is made of: every owner's faults in effect, not the journal
+    assert out["/diagnostics"].mapping.key == "lunaris/{rover}/faults/active/*"
     for load in MAPP.loads:
         assert out[f"/load_{load.name}_power_w"].key == f"lunaris/mapp-1/load/{load.name}/power"
     pdm = {t: b for t, b in out.items() if b.mapping.group == "pdm"}
@@ -86,6 +88,19 @@ def test_default_mapping_covers_what_the_dashboard_uses():
             assert b.key == f"lunaris/mapp-1/rail/{rail}/state"
             assert (b.mapping.type, b.mapping.scale) == ("std_msgs/msg/Int32", 1000.0)
     assert {b.mapping.unit for b in pdm.values()} == {"mV", "mA", "mW"}
+
+
+def test_the_diagnostics_converter_reads_the_faults_in_effect_and_its_old_spelling_still_works():
+    for key in ("lunaris/{rover}/faults/active/*", "lunaris/{rover}/event"):
+        mf = mapping(one(topic="/d", type="diagnostic_msgs/msg/DiagnosticArray", key=f"'{key}'",
+                         field=None, scale=None, convert="diagnostics"))
+        (b,) = bd.expand(mf, [bd.rover_names(MAPP)])
+        assert (b.topic, b.item) == ("/d", None)
+    with pytest.raises(ConfigError, match=r"the diagnostics converter reads "
+                                          r"lunaris/\{rover\}/faults/active/\*"):
+        mapping(one(topic="/d", type="diagnostic_msgs/msg/DiagnosticArray",
+                    key="'lunaris/{rover}/faults/active/battery'", field=None, scale=None,
+                    convert="diagnostics"))
 
 
 def test_a_fleet_keeps_the_plain_topics_one_ros_domain_per_rover():
