@@ -23,6 +23,7 @@ from common import messages as m
 from common.scenario_progress import ScenarioProgress
 
 __all__ = [
+    "DELETABLE",
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
@@ -340,6 +341,11 @@ FAMILIES: tuple[Family, ...] = (
     _f("prediction", m.Prediction, "battery", "query"),
     _f("scenario/progress", ScenarioProgress, "*", "out"),  # put by the scenario runner (a tool)
 )
+
+
+# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
+# gone, the rover stopped (by family name).
+DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
 
 
 def families(direction: Direction | None = None) -> tuple[Family, ...]:

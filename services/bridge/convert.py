@@ -110,8 +110,9 @@ def _multi_array(names: list[str], values: list) -> dict:
 
 
 def in_payload(m: Mapping, msg: dict) -> dict[str, Any]:
-    """The twin input (a JSON object) for an inbound dashboard message; :class:`BadInput` if
-    the message does not carry what the mapping expects or a value is not finite."""
+    """The twin input or command (a JSON object) for an inbound dashboard message, with the
+    mapping's constant ``payload`` fields; :class:`BadInput` if the message does not carry
+    what the mapping expects or a value is not finite."""
     if m.fields:
         data = list(msg.get("data", []))
         if len(data) != len(m.fields):
@@ -123,7 +124,7 @@ def in_payload(m: Mapping, msg: dict) -> dict[str, Any]:
             raise BadInput(f"{m.type} on {m.topic}: no data field")
         assert m.field is not None  # a one-value mapping names its field (parse_mapping checks)
         pairs = [(m.field, msg["data"])]
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = dict(m.payload)  # the fields every write of the mapping carries
     for name, value in pairs:
         if isinstance(value, bool):
             out[name] = value

@@ -14,8 +14,11 @@ start-up; with a problem the service prints every one and exits with status 2. T
   ``faults/active/<service>``, replayed from its cache when the bridge joins late) and each
   component's telemetry (STALE when it stops), published on every change of the active
   faults and every ``diagnostics_period_s``;
-- an inbound topic (any flavour) becomes a twin input; a message that cannot be decoded or
-  carries a bad value is refused with a rejection event, like any bad input.
+- an inbound topic (any flavour) becomes a twin input or command, written by the crew (its
+  events say ``actor: crew``); a message that cannot be decoded or carries a bad value is
+  refused with a rejection event, like any bad input;
+- a service (``kind: service``, the crew's controls) is served in every flavour and answered
+  with the twin's answer (:mod:`services.bridge.controls`).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from common.messages import ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
 from services.bridge.bindings import Binding, expand, open_keyexpr, rover_names, zenoh_key
 from services.bridge.cdr import decode_cdr, encode_cdr, restamp
+from services.bridge.controls import Controls
 from services.bridge.convert import (
     battery_state_message,
     components,
@@ -101,12 +105,15 @@ class Bridge:
     """The bridge of some rovers of a fleet: one node, its ports declared in :meth:`start`.
 
     Inputs: the twin's telemetry (:meth:`on_twin`, one subscription per key family), the
-    faults in effect (:meth:`on_faults`) and the dashboard's inbound topics in every enabled
-    flavour (:meth:`on_inbound`). Outputs: the outbound topics (an :class:`Outlet` each), the
-    DiagnosticArray of each rover, the twin inputs the inbound topics carry and rejection
-    events. Timers: :meth:`flush` after each batch of samples, :meth:`flush_due` for the
-    topics with a rate, :meth:`periodic_diagnostics`. Everything runs on the runtime's
-    worker thread but the Zenoh and rclpy callbacks, which hand their samples to it."""
+    faults in effect (:meth:`on_faults`), the dashboard's inbound topics in every enabled
+    flavour (:meth:`on_inbound`) and its service calls (:attr:`controls`, which hears the
+    twin's answers on the services' event keys). Outputs: the outbound topics (an
+    :class:`Outlet` each), the DiagnosticArray of each rover, the crew's writes (the inputs
+    and commands the inbound topics and the services carry) and rejection events. Timers:
+    :meth:`flush` after each batch of samples, :meth:`flush_due` for the topics with a rate,
+    :meth:`periodic_diagnostics`. Everything runs on the runtime's worker thread but the
+    Zenoh and rclpy callbacks, which hand their samples to it, and a service call, which is
+    sent and answered from the thread that has it (no wait behind a fleet's telemetry)."""
 
     def __init__(self, rt: Runtime, rovers: list[Rover], mf: MappingFile, bindings: list[Binding],
                  fleet_size: int, graph: Ros2Graph | None):
@@ -114,6 +121,7 @@ class Bridge:
         self.rovers = {r.id: r for r in rovers}
         self.whole_fleet = len(rovers) == fleet_size  # else a shard: its own rovers only
         self.shared = Shared(rt, self.opts, str(rt.zenoh_session.info.zid()), graph)
+        self.controls = Controls(rt, self.shared, sorted(self.rovers), self.whole_fleet)
         self.feeds: dict[str, Feed] = {}  # twin key -> its feed
         self.diagnostics: dict[str, RoverDiagnostics] = {}  # rover -> its /diagnostics
         self.dirty: set[str] = set()  # twin keys whose newest sample some outlet sends now
@@ -137,10 +145,13 @@ class Bridge:
                     node_token(domain, self.shared.zid, 0, rmw.namespace, rmw.node)))
         # rmw_zenoh entity ids: the node is 0, each binding its position in the list from 1
         for entity_id, b in enumerate(self.bindings, start=1):
-            if b.mapping.direction == "in":
+            if b.mapping.kind == "service":
+                self.controls.declare(entity_id, b)
+            elif b.mapping.direction == "in":
                 self._declare_inbound(entity_id, b)
             else:
                 self._declare_outlet(entity_id, b)
+        self.controls.start()
         for (flavour, _, _), by_key in self.heard.items():
             shared_key = open_keyexpr(list(by_key))
             for keyexpr in [shared_key] if shared_key is not None else list(by_key):
@@ -346,8 +357,8 @@ class Bridge:
     # -- inbound ------------------------------------------------------------------------------
 
     def on_inbound(self, b: Binding, flavour: str, key: str, payload: bytes) -> None:
-        """A dashboard's message on an inbound topic: the twin input it carries, or a
-        rejection event naming the key and what is wrong."""
+        """A dashboard's message on an inbound topic: the twin input or command it carries,
+        or a rejection event naming the key and what is wrong."""
         try:
             if flavour == "json":
                 try:
@@ -362,7 +373,8 @@ class Bridge:
         except BadInput as exc:
             self.rt.reject(b.rover, key, str(exc))
             return
-        write(self.rt.zenoh_session, b.key, msgspec.json.encode(value))
+        # the crew's dashboard wrote it: its owner's events say so (actor crew)
+        write(self.rt.zenoh_session, b.key, msgspec.json.encode(value), actor="crew")
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,

@@ -44,6 +44,11 @@ RAILS = [r.name for r in MAPP.rails] + [MAPP.solar.rail.name]
 LOADS = [ld.name for ld in MAPP.loads]
 # Published: the REP-2016 type hash of std_msgs/msg/Bool.
 BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9"
+# Published (share/std_srvs/srv/*.json of ros-std-srvs): the hashes of the service types, which
+# rmw_zenoh puts in a service's key and token; the QoS of rclpy's services (keep-last 10).
+SET_BOOL_HASH = "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
+TRIGGER_HASH = "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f"
+SERVICE_QOS = "::,10:,:,:,,"
 RMW_KEY = re.compile(
     r"^0/(?P<topic>.+)/(?P<pkg>\w+)::msg::dds_::(?P<name>\w+)_/(?P<hash>RIHS01_[0-9a-f]{64})$")
 
@@ -336,7 +341,16 @@ def test_rmw_zenoh_keys_attachments_and_liveliness(dashboard, probe):
     subs = sorted((p[9], p[10]) for p in (t.split("/") for t in tokens if "/MS/" in t))
     assert subs == sorted([("%curr_to_receiving_radio_m", "std_msgs::msg::dds_::Float64MultiArray_")]
                           + [(f"%solar_{p.name}_{what}", "std_msgs::msg::dds_::Float64_")
-                             for p in MAPP.solar.panels for what in ("dust", "sun_angle_deg")])
+                             for p in MAPP.solar.panels for what in ("dust", "sun_angle_deg")]
+                          + [(f"%pdm%rail_{r.name}%enable", "std_msgs::msg::dds_::Bool_")
+                             for r in MAPP.rails])  # the rails that can be switched
+    # the crew's controls: a service server token each, with the service type's hash
+    servers = sorted((p[9], p[10], p[11], p[12]) for p in (t.split("/") for t in tokens if "/SS/" in t))
+    assert servers == sorted(
+        [(f"%pdm%rail_{r.name}%set_enabled", "std_srvs::srv::dds_::SetBool_", SET_BOOL_HASH, SERVICE_QOS)
+         for r in MAPP.rails]
+        + [(f"%pdm%rail_{r.name}%reset", "std_srvs::srv::dds_::Trigger_", TRIGGER_HASH, SERVICE_QOS)
+           for r in MAPP.rails])  # the static MAPP does not drive: no /drive/stop
     # each GID is XXH3-128 of its publisher's token, low then high 64 bits (rmw_zenoh's)
     for t in tokens:
         parts = t.split("/")
