@@ -13,7 +13,10 @@ start-up; with a problem the service prints every one and exits with status 2. T
 - the DiagnosticArray follows the faults in effect (each owning service's
   ``faults/active/<service>``, replayed from its cache when the bridge joins late) and each
   component's telemetry (STALE when it stops), published on every change of the active
-  faults and every ``diagnostics_period_s``;
+  faults, of what the telemetry shows, and every ``diagnostics_period_s``; in the crew's view
+  (``crew_view: symptoms``, the default) only the twin's own alarms and what its telemetry
+  shows (:mod:`services.bridge.crew`), never an instructor's fault; a pack whose telemetry
+  stopped is republished with the health UNKNOWN;
 - an inbound topic (any flavour) becomes a twin input or command, written by the crew (its
   events say ``actor: crew``); a message that cannot be decoded or carries a bad value is
   refused with a rejection event, like any bad input;
@@ -43,15 +46,14 @@ from services.bridge.bindings import Binding, expand, open_keyexpr, rover_names,
 from services.bridge.cdr import decode_cdr, encode_cdr, restamp
 from services.bridge.controls import Controls
 from services.bridge.convert import (
-    battery_state_message,
     components,
     data_key,
     diagnostic_array_message,
     diagnostic_statuses,
     in_payload,
-    odometry_message,
-    out_message,
+    topic_message,
 )
+from services.bridge.crew import READS, crew_statuses, seen
 from services.bridge.mapping import MappingFile, load_mapping, resolve_mapping
 from services.bridge.outlets import Feed, Outlet, Shared
 from services.bridge.rmw_zenoh import entity_token, node_token, qos_keyexpr
@@ -95,6 +97,8 @@ class RoverDiagnostics:
     data_keys: list[tuple[str, str]]  # (component, the telemetry key that shows it alive)
     outlets: list[Outlet] = field(default_factory=list)
     in_effect: dict[str, list[ActiveFault]] = field(default_factory=dict)
+    telemetry: dict[str, Any] = field(default_factory=dict)  # component -> what the crew's view reads
+    battery_stale: bool = False  # the pack's telemetry stopped: its BatteryState says UNKNOWN
 
     def active(self) -> list[ActiveFault]:
         return sorted((f for fs in self.in_effect.values() for f in fs),
@@ -129,6 +133,8 @@ class Bridge:
         self.started = time.monotonic()
         self.last_seen: dict[str, float] = {}  # component data key -> monotonic time
         self.alive_of: dict[str, str] = {}  # component data key -> its rover
+        # the data keys whose payload the crew's view reads -> (rover, component, payload type)
+        self.watched: dict[str, tuple[str, str, type[msgspec.Struct]]] = {}
         self._diag_next = 0  # the next rover of the periodic diagnostics
         self._per_slot = 1
         # inbound: (flavour, mapping, component) -> {key: binding}, one subscription each
@@ -193,8 +199,11 @@ class Bridge:
                 comps = components(self.rovers[b.rover])
                 d = self.diagnostics[b.rover] = RoverDiagnostics(
                     b.rover, comps, [(c, data_key(b.rover, c)) for c in comps])
-                for _, key in d.data_keys:
+                for comp, key in d.data_keys:
                     self.alive_of[key] = b.rover
+                    typ = _family(data_key("{rover}", comp)).payload
+                    if self.opts.crew_view == "symptoms" and typ in READS:
+                        self.watched[key] = (b.rover, comp, typ)
             d.outlets.append(Outlet(self.shared, b, entity_id, None))
             return
         feed = self.feeds.get(b.key)
@@ -252,14 +261,11 @@ class Bridge:
 
     def message(self, outlet: Outlet, payload: Any) -> dict | None:
         """The message an outlet publishes for a twin payload."""
-        m = outlet.binding.mapping
-        if m.convert == "battery_state":
-            return battery_state_message(payload, self.rovers[outlet.binding.rover].battery,
-                                         self.stamp_ns(payload.t_s), m.frame_id, m.options,
-                                         self.opts.ros_distro)
-        if m.convert == "odometry":
-            return odometry_message(payload, self.stamp_ns(payload.t_s), m.frame_id, m.options)
-        return out_message(m, payload, self.stamp_ns(payload.t_s))
+        b = outlet.binding
+        d = self.diagnostics.get(b.rover)
+        return topic_message(b.mapping, payload, self.rovers[b.rover].battery,
+                             self.stamp_ns(payload.t_s), self.opts.ros_distro,
+                             stale=d is not None and d.battery_stale)
 
     def on_twin(self, s: Sample) -> None:
         rover = self.alive_of.get(s.key)
@@ -268,12 +274,25 @@ class Bridge:
             if now - self.last_seen.get(s.key, self.started) > self.opts.stale_after_s:
                 self.diag_dirty.add(rover)  # back from STALE
             self.last_seen[s.key] = now
+            if s.key == keys.battery_state(rover):
+                self.diagnostics[rover].battery_stale = False
+        if s.deleted:
+            return
         feed = self.feeds.get(s.key)
-        if feed is not None and not s.deleted:
+        payload = None
+        if feed is not None:
             feed.payload = payload = decode(s.payload, feed.type)
             feed.seq += 1
             if feed.unrated or feed.idle or feed.discrete_of(payload) != feed.discrete:
                 self.dirty.add(s.key)
+        watched = self.watched.get(s.key)
+        if watched is not None:  # what the crew's view reads: a change is news at once
+            rover, comp, typ = watched
+            payload = payload if payload is not None else decode(s.payload, typ)
+            d = self.diagnostics[rover]
+            if seen(comp, d.telemetry.get(comp)) != seen(comp, payload):
+                self.diag_dirty.add(rover)
+            d.telemetry[comp] = payload
 
     def flush(self) -> None:
         """The samples some outlet sends at once: every one for an outlet without a rate, the
@@ -318,11 +337,18 @@ class Bridge:
         return {c: now - self.last_seen.get(key, self.started) for c, key in d.data_keys}
 
     def publish_diagnostics(self, rover: str) -> None:
-        """The rover's DiagnosticArray; statuses unchanged since the last one (the periodic
-        republishing of a quiet rover) are not encoded again, only stamped anew."""
+        """The rover's DiagnosticArray, in the mapping's view (the crew's symptoms, or every
+        fault in effect); statuses unchanged since the last one (the periodic republishing of
+        a quiet rover) are not encoded again, only stamped anew."""
         d = self.diagnostics[rover]
-        statuses = diagnostic_statuses(rover, d.components, d.active(), self.ages(d),
-                                       self.opts.stale_after_s)
+        ages = self.ages(d)
+        if self.opts.crew_view == "full":
+            statuses = diagnostic_statuses(rover, d.components, d.active(), ages,
+                                           self.opts.stale_after_s)
+        else:
+            statuses = crew_statuses(rover, d.components, d.active(), d.telemetry, ages,
+                                     self.opts.stale_after_s)
+        self._battery_silence(d, ages.get("battery"))
         t_ns = self.stamp_ns(self.rt.t_s.get(rover, 0.0))
         for outlet in d.outlets:
             msg = diagnostic_array_message(statuses, t_ns, outlet.binding.mapping.frame_id)
@@ -334,6 +360,18 @@ class Bridge:
                     cdr = encode_cdr(outlet.type, msg, self.opts.ros_distro)
                     outlet.last = (statuses, cdr)
             outlet.publish(msg, cdr)
+
+    def _battery_silence(self, d: RoverDiagnostics, age_s: float | None) -> None:
+        """A pack whose telemetry stopped: its last BatteryState once more, health UNKNOWN
+        (the next sample, when it comes, is published as it is)."""
+        if d.battery_stale or age_s is None or age_s <= self.opts.stale_after_s:
+            return
+        d.battery_stale = True
+        feed = self.feeds.get(keys.battery_state(d.rover))
+        if feed is not None and feed.payload is not None:
+            for outlet in feed.outlets:
+                if outlet.binding.mapping.convert == "battery_state":
+                    outlet.send(self.message)
 
     def on_faults(self, s: Sample) -> None:
         d = self.diagnostics.get(s.rover)

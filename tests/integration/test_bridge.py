@@ -59,9 +59,14 @@ FLOAT64, JOINTS = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 DEFAULT_MAPPING = ROOT / "config" / "bridge" / "default.yaml"
 
 
-def every_flavour_mapping(folder: Path) -> Path:
-    """The default mapping with the json flavour on too (the shipped one leaves it off)."""
-    return Path(json_bridge_extra(folder)["bridge"][1])
+def every_flavour_mapping(folder: Path, crew_view: str = "symptoms") -> Path:
+    """The default mapping with the json flavour on too (the shipped one leaves it off), in
+    the crew's view (the default, symptoms) or the full one."""
+    path = Path(json_bridge_extra(folder)["bridge"][1])
+    text = path.read_text()
+    assert "crew_view: symptoms" in text
+    path.write_text(text.replace("crew_view: symptoms", f"crew_view: {crew_view}"))
+    return path
 
 
 def expected_topics() -> dict[str, str]:
@@ -177,13 +182,14 @@ def close(a: float | None, b: float, rel: float = 2e-6, abs_: float = 1e-5) -> b
 
 
 @pytest.fixture
-def dashboard(probe, twin_factory, mapp_file, tmp_path):
+def dashboard(request, probe, twin_factory, mapp_file, tmp_path):
     """The twin and the bridge in every flavour, with a tap that was listening before the
-    bridge started."""
+    bridge started; the crew's view unless the test asks for ``full`` (indirect param)."""
     tap = Tap(probe.session)
     probe.watch(f"lunaris/{R}/**")
-    twin = twin_factory([mapp_file], services=SERVICES,
-                        extra={"bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path))]})
+    view = getattr(request, "param", "symptoms")
+    twin = twin_factory([mapp_file], services=SERVICES, extra={
+        "bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path, view))]})
     probe.wait_services(R, SERVICES)
     return twin, tap
 
@@ -435,14 +441,21 @@ def _first(tap: Tap, flavour: str, topic: str, since: float, predicate,
     return None
 
 
-def test_an_injected_fault_reaches_the_dashboard(dashboard, probe):
+@pytest.mark.parametrize("dashboard", ["symptoms", "full"], indirect=True)
+def test_an_injected_fault_reaches_the_dashboard(dashboard, probe, request):
+    """In the crew's view a dead converter is a rail with no output (ERROR), in the full view
+    the fault itself (WARN, its KeyValue)."""
     twin, tap = dashboard
+    full = request.node.callspec.params["dashboard"] == "full"
     settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
     fault = keys.fault(R, "rail/5V_CH2", "fail")
 
     def failed_rail(msg: dict) -> bool:
         st = next(s for s in msg["status"] if s["name"] == f"{R}/rail/5V_CH2")
-        return st["level"] == 1 and [v["key"] for v in st["values"]] == ["fail"]
+        if full:
+            return st["level"] == 1 and [v["key"] for v in st["values"]] == ["fail"]
+        return (st["level"] == 2 and st["message"].startswith("no output")
+                and "fail" not in json.dumps(st))
 
     t0 = time.monotonic()
     probe.put(fault)
@@ -468,20 +481,35 @@ def test_an_injected_fault_reaches_the_dashboard(dashboard, probe):
            and m["data"] == 5000 else ["5000 mV"], what="the rail back at 5000 mV")
 
 
-def test_a_short_trips_the_rail_to_error(dashboard, probe):
+@pytest.mark.parametrize("dashboard", ["symptoms", "full"], indirect=True)
+def test_a_short_trips_the_rail_to_error(dashboard, probe, request):
+    """The crew sees an over-current trip and no word of the short; the full view names it."""
     twin, tap = dashboard
+    full = request.node.callspec.params["dashboard"] == "full"
     current = "/pdm/rail_5V_CH2_current_ma"
     # the faults reach the bridge apart from the telemetry: both flowing before the short
     settle(lambda: [] if tap.message("ros2dds", "/diagnostics") and tap.message("ros2dds", current)
            else ["diag and PDM"])
+    t0 = time.monotonic()
     probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
     settle(lambda: [] if (st := _status(tap, "rmw_zenoh", "rail/5V_CH2")) is not None and st["level"] == 2
            and "tripped" in [v["key"] for v in st["values"]] else ["ERROR"],
            what="the tripped rail as ERROR")
-    cam = _status(tap, "rmw_zenoh", "load/nav_camera")
-    assert cam["level"] == 1 and cam["message"] == "short"
     settle(lambda: [] if tap.message("ros2dds", current)["data"] == 0 else ["0 mA"],
            what="the tripped rail at 0 mA")
+    if full:
+        cam = _status(tap, "rmw_zenoh", "load/nav_camera")
+        assert cam["level"] == 1 and cam["message"] == "short"
+        return
+    rail = _status(tap, "rmw_zenoh", "rail/5V_CH2")
+    assert rail["message"].startswith("over-current trip"), rail
+    # the rail's own reading once its state has arrived: the trip's current, over the limit
+    settle(lambda: [] if any(v["key"] == "reading" and "A >" in v["value"]
+                             for v in _status(tap, "json", "rail/5V_CH2")["values"]) else ["reading"],
+           what="the trip's current on the rail's status")
+    seen = [raw.payload for flavour in FLAVOURS
+            for raw in tap.history(tap.key(flavour, "/diagnostics") or "") if raw.t_mono >= t0]
+    assert seen and not [p for p in seen if b"short" in p or b"injected" in p or b"0.05" in p]
 
 
 def test_a_silent_component_goes_stale(dashboard, probe):
