@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import struct
 import subprocess
 import threading
 import time
@@ -523,6 +524,94 @@ def test_a_silent_component_goes_stale(dashboard, probe):
     twin.start("loads")
     settle(lambda: [] if (st := _status(tap, "ros2dds", "load/imu")) is not None and st["level"] == 0
            else ["OK"], what="the loads back to OK")
+
+
+# -- the crew's controls (SPEC §12a) ----------------------------------------------------------------
+
+
+def _call(probe, flavour: str, service: str, srv: str, fields: dict[str, Any],
+          timeout_s: float = 8.0) -> dict[str, Any]:
+    """Call a crew service as that flavour's client does (zenoh-bridge-ros2dds's querier, an
+    rmw_zenoh client, a JSON caller), encoded and decoded independently; the response's fields."""
+    name = service.strip("/")
+    att = None
+    if flavour == "json":
+        key, payload = f"json/{name}", json.dumps(fields).encode()
+    else:
+        payload = rosmsg.encode_service(srv, "Request",
+                                        fields or {"structure_needs_at_least_one_member": 0})
+        key = name
+        if flavour == "rmw_zenoh":
+            pkg, _, typ = srv.split("/")
+            srv_hash = SET_BOOL_HASH if typ == "SetBool" else TRIGGER_HASH
+            key = f"0/{name}/{pkg}::srv::dds_::{typ}_/{srv_hash}"
+            att = struct.pack("<qqB", 7, time.time_ns(), 16) + bytes(range(16))
+    target = zenoh.QueryTarget.ALL_COMPLETE if flavour == "rmw_zenoh" else zenoh.QueryTarget.BEST_MATCHING
+    replies = [r for r in probe.session.get(key, payload=payload, attachment=att, target=target,
+                                            timeout=timeout_s)]
+    assert len(replies) == 1 and replies[0].ok is not None, f"{flavour} {service}: {replies!r}"
+    reply = replies[0].ok
+    raw = reply.payload.to_bytes()
+    if flavour == "json":
+        return json.loads(raw)
+    if flavour == "rmw_zenoh":  # the client matches its request by the sequence number and GID
+        echoed = rosmsg.parse_attachment(reply.attachment.to_bytes())
+        assert (echoed.sequence, echoed.gid) == (7, bytes(range(16)))
+    r = rosmsg.decode_service(srv, "Response", raw)
+    return {"success": r.success, "message": r.message}
+
+
+def _crew_event(probe, since: int, state: str) -> dict:
+    """The power service's answer to a crew's rail command (after the first ``since`` events)."""
+    return probe.wait_event(R, lambda e: e in probe.events(R)[since:] and e["kind"] == "command"
+                            and e["key"] == keys.cmd_rail(R, "5V_CH2") and e.get("actor") == "crew"
+                            and (e.get("params") or {}).get("state") == state)
+
+
+@pytest.mark.parametrize("flavour", FLAVOURS)
+def test_the_crew_switches_and_resets_a_rail_from_its_dashboard(dashboard, probe, flavour):
+    """set_enabled false/true and reset, each answered with the twin's answer (success and its
+    reason), the rail following and the events saying the crew acted; a reset while the short is
+    still there trips the rail again and the answer says so."""
+    twin, tap = dashboard
+    rail = keys.rail_state(R, "5V_CH2")
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+    set_enabled, reset = "/pdm/rail_5V_CH2/set_enabled", "/pdm/rail_5V_CH2/reset"
+    setbool, trigger = "std_srvs/srv/SetBool", "std_srvs/srv/Trigger"
+
+    n = len(probe.events(R))
+    off = _call(probe, flavour, set_enabled, setbool, {"data": False})
+    assert off["success"] is True and "the rail is now off" in off["message"], off
+    probe.wait_value(rail, lambda v: v["state"] == "off")
+    _crew_event(probe, n, "off")
+    on = _call(probe, flavour, set_enabled, setbool, {"data": True})
+    assert on["success"] is True and "the rail is now on" in on["message"], on
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+
+    probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
+    probe.wait_value(rail, lambda v: v["state"] == "tripped")
+    again = _call(probe, flavour, reset, trigger, {})
+    assert again["success"] is True and "tripped again" in again["message"], again
+    assert "short" not in again["message"] and "injected" not in again["message"]
+    probe.delete(keys.fault(R, "load/nav_camera", "short"))
+    n = len(probe.events(R))
+    back = _call(probe, flavour, reset, trigger, {})
+    assert back["success"] is True and "the rail is now on" in back["message"], back
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+    _crew_event(probe, n, "on")
+
+
+def test_a_crew_call_the_twin_refuses_is_answered_with_its_reason(dashboard, probe):
+    """A request the twin cannot take is answered success false with the reason, never left
+    hanging, and nothing changes."""
+    twin, tap = dashboard
+    rail = keys.rail_state(R, "5V_CH2")
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+    bad = _call(probe, "json", "/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {"data": "no"})
+    assert bad["success"] is False and bad["message"].startswith("refused: data: expected true or false"), bad
+    missing = _call(probe, "json", "/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {})
+    assert missing["success"] is False and "no field 'data'" in missing["message"], missing
+    assert probe.value(rail)["state"] == "on"
 
 
 # -- start-up and the PDM view ----------------------------------------------------------------------
