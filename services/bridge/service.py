@@ -29,6 +29,7 @@ from __future__ import annotations
 import heapq
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -120,11 +121,12 @@ class Bridge:
     sent and answered from the thread that has it (no wait behind a fleet's telemetry)."""
 
     def __init__(self, rt: Runtime, rovers: list[Rover], mf: MappingFile, bindings: list[Binding],
-                 fleet_size: int, graph: Ros2Graph | None):
+                 fleet_size: int, graph: Ros2Graph | None,
+                 clock: Callable[[], float] = time.monotonic):
         self.rt, self.opts, self.bindings, self.graph = rt, mf.bridge, bindings, graph
         self.rovers = {r.id: r for r in rovers}
         self.whole_fleet = len(rovers) == fleet_size  # else a shard: its own rovers only
-        self.shared = Shared(rt, self.opts, str(rt.zenoh_session.info.zid()), graph)
+        self.shared = Shared(rt, self.opts, str(rt.zenoh_session.info.zid()), graph, clock)
         self.controls = Controls(rt, self.shared, sorted(self.rovers), self.whole_fleet)
         self.feeds: dict[str, Feed] = {}  # twin key -> its feed
         self.diagnostics: dict[str, RoverDiagnostics] = {}  # rover -> its /diagnostics
@@ -297,7 +299,7 @@ class Bridge:
     def flush(self) -> None:
         """The samples some outlet sends at once: every one for an outlet without a rate, the
         first after an outlet's idle spell, and a change of a discrete field for all."""
-        now = time.monotonic()
+        now = self.shared.clock()
         for key in sorted(self.dirty):
             self.rt.urgent_first()  # a fleet's tick is thousands of samples
             feed = self.feeds[key]
@@ -317,7 +319,7 @@ class Bridge:
 
     def flush_due(self) -> None:
         """The outlets whose rate allows the newest sample: sent, or idle when none came."""
-        now = time.monotonic()
+        now = self.shared.clock()
         due = self.shared.due
         while due and due[0][0] <= now:
             self.rt.urgent_first()
@@ -416,9 +418,10 @@ class Bridge:
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
-          mapping_file: str | None = None, fleet: list[str] | None = None) -> None:
+          mapping_file: str | None = None, fleet: list[str] | None = None,
+          clock: Callable[[], float] = time.monotonic) -> None:
     """Serve ``rovers``, members of ``fleet`` (the ids of every rover of the deployment, in
-    order, whichever bridge serves each; default: these rovers)."""
+    order, whichever bridge serves each; default: these rovers). ``clock`` times the rates."""
     path = resolve_mapping(mapping_file)
     try:
         mf = load_mapping(path)
@@ -436,4 +439,5 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             print(f"{path}: bridge.outputs.ros2: {exc}", file=sys.stderr, flush=True)
             raise SystemExit(2) from None
         rt.on_exit(graph.close)
-    Bridge(rt, rovers, mf, bindings, len(fleet) if fleet is not None else len(rovers), graph).start()
+    Bridge(rt, rovers, mf, bindings, len(fleet) if fleet is not None else len(rovers), graph,
+           clock).start()
