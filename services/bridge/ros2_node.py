@@ -122,7 +122,10 @@ class Ros2Graph:
         ``respond(fields)`` once with the response's. The rclpy callback is a coroutine that
         awaits an rclpy Future completed on the executor's own thread (``create_task``: a
         Future completed from another thread does not wake the executor), in a reentrant
-        callback group, so that calls overlap instead of waiting for each other."""
+        callback group, so that calls overlap instead of waiting for each other. The executor
+        resumes a waiting coroutine only when something wakes it: the Future's result is set
+        and the executor woken in the same task (else the answer waits for the next message
+        or timer, forever on a quiet node)."""
         node = self.node(domain)
         executor = self._nodes[domain][2]
         group = self._service_groups.setdefault(domain, self._groups_mod.ReentrantCallbackGroup())
@@ -134,8 +137,13 @@ class Ros2Graph:
         async def callback(request: Any, response: Any) -> Any:
             fut = future_type(executor=executor)
 
+            def settle(values: dict[str, Any]) -> None:
+                if not fut.done():
+                    fut.set_result(values)
+                executor.wake()  # the service's coroutine is resumed on the next turn
+
             def respond(values: dict[str, Any]) -> None:
-                executor.create_task(lambda: fut.done() or fut.set_result(values))
+                executor.create_task(settle, values)
             call({f: getattr(request, f) for f in asked}, respond)
             for field, value in (await fut).items():
                 setattr(response, field, value)
