@@ -23,9 +23,12 @@ The flavours (keys as :func:`~services.bridge.bindings.zenoh_key` makes them):
   response's as one;
 - ``ros2``: an rclpy service (:meth:`~services.bridge.ros2_node.Ros2Graph.serve`).
 
-One queryable per service and flavour for all the rovers served, open in the chunk where
-their keys differ (their namespace or domain), told apart by the exact key, as the inbound
-topics are heard.
+One queryable per service mapping and flavour for every rover and component served (a
+fleet's 100 rovers and their rails: still one), open in the chunks where their keys differ
+(the namespace or domain, the rail), told apart by the exact key; a call of a key no service
+here has (another shard's rover) is dropped unanswered, for the bridge that has it to answer.
+The answers and the owners' liveliness are heard on one subscription each for the whole
+fleet, whatever the rovers served: a bridge's threads do not grow with its rovers.
 """
 
 from __future__ import annotations
@@ -73,7 +76,7 @@ class Controls:
         self.rovers, self.whole_fleet = rovers, whole_fleet
         self.declared = False
         self.awaiting = Awaiting()
-        self.by_key: dict[tuple[str, int, str | None], dict[str, Binding]] = {}
+        self.by_key: dict[tuple[str, int], dict[str, Binding]] = {}  # (flavour, mapping) -> keys
         self.live: dict[str, set[str]] = {}  # rover -> its live services (liveliness tokens)
         self.gone: dict[tuple[str, str], float] = {}  # (rover, service) -> wall time it went
         self._lock = threading.Lock()
@@ -105,25 +108,25 @@ class Controls:
             graph.serve(self.shared.ros2_domain(b), b.topic, b.mapping.type, ros2_call)
 
     def _group(self, flavour: str, b: Binding) -> dict[str, Binding]:
-        return self.by_key.setdefault((flavour, b.position, b.item), {})
+        return self.by_key.setdefault((flavour, b.position), {})
 
     def start(self) -> None:
         """The queryables, the answers' subscription, the services' liveliness, the timer."""
         if not self.declared:
             return
         session = self.rt.zenoh_session
-        for (flavour, _, _), by_key in self.by_key.items():
+        for (flavour, _), by_key in self.by_key.items():
             shared_key = open_keyexpr(list(by_key))
             for keyexpr in [shared_key] if shared_key is not None else list(by_key):
                 def on_query(q: zenoh.Query, f: str = flavour, bk: dict[str, Binding] = by_key) -> None:
                     self._on_query(f, bk, q)
                 self.rt.keep(session.declare_queryable(keyexpr, on_query,
                                                        complete=flavour == "rmw_zenoh"))
-        for rover in ["*"] if self.whole_fleet else sorted(self.rovers):
-            # live events only: an answer is news, not a cache replayed
-            self.rt.keep(session.declare_subscriber(keys.under(rover, "event/*"), self._on_event))
-            self.rt.keep(session.liveliness().declare_subscriber(
-                keys.service(rover, "*"), self._on_token, history=True))
+        # live events only: an answer is news, not a cache replayed; another shard's rovers'
+        # are heard too, and match no call waiting here
+        self.rt.keep(session.declare_subscriber(keys.under("*", "event/*"), self._on_event))
+        self.rt.keep(session.liveliness().declare_subscriber(
+            keys.service("*", "*"), self._on_token, history=True))
         self.rt.every(EXPIRE_S, self.expire)
 
     # -- a call -----------------------------------------------------------------------------------
