@@ -509,6 +509,51 @@ def test_a_short_trips_the_rail_to_error(dashboard, probe, request):
     assert seen and not [p for p in seen if b"short" in p or b"injected" in p or b"0.05" in p]
 
 
+def test_the_crew_sees_symptoms_and_no_injected_fault(dashboard, probe):
+    """SPEC §12b, issue 25: with dust, battery heating below the alarm, a stuck load and a
+    radio degradation injected, no message of the crew's topics (every flavour) and no
+    telemetry payload the observer reads names an injected fault's kind or says "injected";
+    the symptoms are there (less power from the dusty panel, the stuck load's draw)."""
+    twin, tap = dashboard
+    panel = MAPP.solar.panels[0].name
+    settle(lambda: [] if tap.message("json", "/diagnostics") else ["diagnostics"])
+    clean_w = probe.wait_value(keys.solar_power(R, panel))["power_w"]
+    t0 = time.monotonic()
+    faults = {keys.fault(R, f"solar/{panel}", "dust"): {"fraction": 0.4},
+              keys.fault(R, "battery", "heating"): {"heat_w": 0.5},
+              keys.fault(R, "load/imu", "stuck"): {"power_w": 7.25},
+              keys.fault(R, "radio/lander", "degraded"): {"range_scale": 0.5}}
+    for key, params in faults.items():
+        probe.put(key, params)
+    for key in faults:
+        probe.wait_event(R, lambda e, k=key: e["kind"] == "fault_injected" and e["key"] == k)
+    # the symptoms, on the crew's own topics
+    settle(lambda: [] if (m := tap.message("json", "/load_imu_power_w", after=t0)) is not None
+           and math.isclose(m["data"], 7.25, rel_tol=1e-6) else ["imu 7.25 W"], what="the stuck load's draw")
+    dusty = probe.wait_value(keys.solar_power(R, panel), lambda v: v["power_w"] < 0.7 * clean_w)
+    assert dusty["dust"] == 0.0  # the environment's dust, the input: never the fault's
+    t1 = time.monotonic()
+    settle(lambda: [] if tap.message("json", "/diagnostics", after=t1 + 1.0) else ["diagnostics"],
+           what="a /diagnostics after the faults")  # republished every second at the latest
+    words = [b"dust", b"heating", b"stuck", b"degraded", b"injected", b"range_scale", b"heat_w"]
+    crew = {k: [r.payload for r in tap.history(k) if r.t_mono >= t0] for k in tap.keys()
+            if not k.startswith("lunaris/")}
+    assert sum(len(v) for v in crew.values()) > 50, "the crew's topics flowed"
+    named = sorted({(k, w.decode()) for k, ps in crew.items() for p in ps for w in words if w in p})
+    assert named == [], named
+    telemetry = ("battery/state", "load/", "solar/", "radio/", "rail/", "power/summary")
+    seen = {k: [r.payload for r in tap.history(k) if r.t_mono >= t0] for k in tap.keys()
+            if k.startswith(f"lunaris/{R}/") and k.split("/", 2)[2].startswith(telemetry)}
+    assert seen, "telemetry flowed"
+    # (battery/state has a heat_w field, and solar/<panel>/power a dust field: the pack's heat
+    # and the environment's dust, the names of fields and not of faults)
+    named = sorted({(k, w.decode()) for k, ps in seen.items() for p in ps
+                    for w in words if w not in (b"dust", b"heat_w") and w in p})
+    assert named == [], named
+    for key in faults:
+        probe.delete(key)
+
+
 def test_a_silent_component_goes_stale(dashboard, probe):
     twin, tap = dashboard
     settle(lambda: [] if (st := _status(tap, "ros2dds", "load/imu")) is not None and st["level"] == 0
