@@ -27,6 +27,7 @@ __all__ = [
     "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION",
     "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY",
     "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE",
+    "DELETABLE",
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
@@ -396,6 +397,11 @@ FAMILIES: tuple[Family, ...] = (
     PREDICTION,
     SCENARIO_PROGRESS,
 )
+
+
+# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
+# gone, the rover stopped (by family name).
+DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
 
 
 def families(direction: Direction | None = None) -> tuple[Family, ...]:
