@@ -36,7 +36,7 @@
  * @property {number} fault_code
  * @property {Array<string>} faults
  * @property {number | null} time_to_empty_s
- * @property {number} [heat_w]
+ * @property {number} [heat_w] - the heat of the pack's own electrical losses (I^2 R) [W]; an injected heating fault is not in it: it shows only as the temperature it raises
  * @property {Array<number>} [polarisation_v]
  * @property {number} [depleted_soc] - the state of charge at which the pack counts as empty and goes off line (0..1, the rover file's depleted_soc): time_to_empty_s is the time to reach it at the present draw
  * @property {number | null} [cutoff_v] - the BMS cut-off [V] (cells_series * cutoff_cell_v): when the terminal voltage under load falls below it the pack stops supplying, which a heavy draw can bring before depleted_soc; null when the rover file sets none
