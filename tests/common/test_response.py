@@ -10,7 +10,8 @@ import random
 import pytest
 
 from common.messages import Event
-from common.response import SYMPTOMS, Response
+from common.response import Response
+from common.symptoms import SYMPTOMS
 
 pytestmark = pytest.mark.timeout(60)
 
