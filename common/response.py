@@ -240,6 +240,7 @@ class _Session:
     active: dict[str, _Fault] = field(default_factory=dict)  # fault key -> the fault in effect
     raised: dict[str, float] = field(default_factory=dict)  # derived alarm key -> raised at
     recent_raises: deque[tuple[float, str, str]] = field(default_factory=lambda: deque(maxlen=64))
+    recent_actions: deque[CrewAction] = field(default_factory=lambda: deque(maxlen=64))
     scored: dict[tuple, Expectation] = field(default_factory=dict)  # from the journal
     pending: dict[str, list[tuple[tuple, Expectation]]] = field(default_factory=dict)  # progress
     start_t: float | None = None
@@ -251,6 +252,7 @@ class _Session:
     # epoch is the next one above).
     by_epoch: bool = False
     awaits: int | None = None
+    ended: set[str] = field(default_factory=set)  # the faults in effect when it ended
 
     def empty(self) -> bool:
         return not (self.faults or self.scored or self.pending)
@@ -297,6 +299,7 @@ class Response:
             return old
         for f in old.active.values():
             f.ended = True
+        old.ended = set(old.active)
         old.active.clear()
         s = _Session(sid, len(self._sessions) + 1, start_t=t)
         self._sessions.append(s)
@@ -461,6 +464,11 @@ class Response:
                 elif s.ticks or not s.empty():
                     s = self._begin(None, None)
                     s.awaits = self._epoch if self._epoch is not None else -1
+            if kind == "fault_cleared" and key not in s.active:
+                before = self._previous(s)
+                if before is not None and key in before.ended:
+                    before.ended.discard(key)
+                    return self._name(before)  # the clearing that ended it with its session
         params = _get(ev, "params") or {}
         if kind == "session" and isinstance(params, Mapping) and params.get("trainee"):
             s.trainee = str(params["trainee"])
@@ -477,6 +485,10 @@ class Response:
         if _get(ev, "actor", "") == "crew" and kind in ("command", "input", "rejected", "clock"):
             self._crew(s, self._action(ev, kind, key, t, params))
         return self._name(s)
+
+    def _previous(self, s: _Session) -> _Session | None:
+        i = s.number - 2
+        return self._sessions[i] if i >= 0 else None
 
     # -- faults --------------------------------------------------------------------------------------
 
@@ -515,6 +527,8 @@ class Response:
         for raised_t, alarm, message in s.recent_raises:  # heard before the injection
             if raised_t >= t and alarm in s.raised and alarm.startswith(f.scopes):
                 self._caused(f, alarm, raised_t, message)
+        # actions heard before it, at its tick or after (each service's events come their own way)
+        f.actions.extend(sorted((a for a in s.recent_actions if a.t_s >= t), key=lambda a: a.t_s))
         self.version += 1
 
     def _watch(self, f: _Fault, tail: str, spec: SymptomSpec) -> None:
@@ -620,6 +634,7 @@ class Response:
 
     def _crew(self, s: _Session, action: CrewAction) -> None:
         t = action.t_s
+        s.recent_actions.append(action)
         for f in s.faults:
             if t >= f.injected_t and (f.settled_t is None or t <= f.settled_t):
                 f.actions.append(action)

@@ -351,7 +351,7 @@ def test_resets_begin_sessions_and_neither_holds_anything_of_the_other():
     ev(r, 7.0, "session", "control/reset", message="session reset")
     assert clock(r, 7.1, epoch=0) == "2"  # a late tick of the old epoch: the new session already
     assert clock(r, 0.0, epoch=1) == "2"  # its epoch: the same session
-    assert clear(r, 0.0, "load/imu/open") == "2"
+    assert clear(r, 0.0, "load/imu/open") == "1"  # the reset's clearing: the end of the first
     for t in ticks(0.1, 5):
         _load(r, "imu", t, 1.0, "3V3_CH1")
     inject(r, 5.0, "battery/heating", {"heat_w": 30})
@@ -445,3 +445,17 @@ def test_live_says_since_when_each_fault_is_in_effect_and_whether_the_crew_acted
     clock(r, 15.0)
     (f,) = r.live().faults
     assert f.crew_acted and f.since_injection_s is None and not f.active
+
+
+def test_a_crew_action_heard_before_the_injection_at_its_tick_is_the_faults():
+    """Each service's events come their own way: the power service's answer to the crew can
+    arrive before the loads service's injection event of the same tick."""
+    r = Response(R)
+    for t in ticks(0, 3):
+        _pdm(r, t, 3.5, "on")
+    ev(r, 3.0, "fault_raised", "rail/5V_CH2/tripped", actor="twin")
+    crew(r, 3.0, "cmd/rail/5V_CH2", params={"on": False})
+    crew(r, 2.0, "cmd/rail/12V", params={"on": False})  # before the fault: not its
+    inject(r, 3.0, "load/nav_camera/short")
+    f = fault_of(r, "load/nav_camera/short")
+    assert f.first_symptom_t_s == 3.0 and [a.target for a in f.crew_actions] == ["5V_CH2"]

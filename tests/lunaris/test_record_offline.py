@@ -25,7 +25,7 @@ from common.messages import (
     encode,
 )
 from lunaris.record import ENVELOPE, KeyWrite, Recorder, json_schema, schema_for
-from lunaris.report import add_thresholds, draw, load_session, place_labels
+from lunaris.report import add_thresholds, draw, load_recording, load_session, place_labels
 
 R = "mapp-1"
 
@@ -153,7 +153,9 @@ def test_the_report_draws_a_recording(tmp_path: Path):
     assert s.battery["soc"][1][0] == pytest.approx(0.95) and sorted(s.loads) == ["imu", "nav_camera"]
     assert [e["kind"] for e in s.events] == ["fault_injected"] and s.span_s == (0.0, 4.0)
     fig = draw(s, "test")
-    assert len(fig.axes) == 8  # the timeline, five plots, the radio links and the current's twin axis
+    # the timeline, the score sheet, five plots, the radio links and the current's twin axis
+    assert len(fig.axes) == 9
+    assert fig.axes[1].get_title(loc="left") == "score sheet: 1 fault(s); 0 of 0 expectation(s) met"
     fig.savefig(tmp_path / "out.png")
     assert (tmp_path / "out.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -167,8 +169,9 @@ def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
     s = load_session(path)[R]
     assert s.path == ([5.0] * 5, [0.0, 2.0, 4.0, 6.0, 8.0], [9.5, 10.5, 11.5, 12.5, 13.5])
     fig = draw(s, "test")
-    assert len(fig.axes) == 10  # the timeline, 5 plots, radios, the twin axis, the path and its colour bar
-    path_ax = fig.axes[7]
+    # the timeline, the score sheet, 5 plots, radios, the twin axis, the path and its colour bar
+    assert len(fig.axes) == 11
+    path_ax = fig.axes[8]
     assert path_ax.get_xlabel() == "x, east [m]" and "drive's power" in path_ax.get_title()
     assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last
 
@@ -204,19 +207,24 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
         assert rec.write(*sample)
     rec.finish()
     path.write_bytes(buf.getvalue())
-    s = load_session(path)[R]
-    assert s.span_s == (0.0, 8.0)  # the reset goes on from where the recording was
-    assert [(e["kind"], e["at_s"]) for e in s.events] == [
-        ("fault_injected", None), ("command", 1.0), ("input", 2.0), ("scenario", 3.0), ("session", 4.0)]
-    assert "from" in add_thresholds(s, None)
-    assert (60.0, "alarm 60 C") in s.thresholds["temperature"]
-    assert (15.0, "5V_CH2 shed") in s.thresholds["soc"]
-    fig = draw(s, "test")
+    one, two = load_recording(path)[R].sessions.values()  # the reset began a second session
+    assert (one.id, two.id) == ("1", "2") and one.span_s == two.span_s == (0.0, 4.0)
+    assert [(e["kind"], e["at_s"]) for e in one.events] == [
+        ("fault_injected", None), ("command", 1.0), ("input", 2.0), ("scenario", 3.0)]
+    assert [(e["kind"], e["at_s"]) for e in two.events] == [("session", 0.0)]  # nothing of the first
+    assert load_session(path)[R].id == "2" and load_session(path, "1")[R].id == "1"  # default: the last
+    assert load_session(path, "7") == {}
+    assert "from" in add_thresholds(one, None)
+    assert (60.0, "alarm 60 C") in one.thresholds["temperature"]
+    assert (15.0, "5V_CH2 shed") in one.thresholds["soc"]
+    fig = draw(one, "test")
     assert "1 event(s) from before the recording" in fig._suptitle.get_text()
     timeline = fig.axes[0]
     texts = [t.get_text() for t in timeline.texts]
     assert "rail 12V: on=false; the rail is now off" in texts and "step 1/2 dust" in texts
     assert "replayed" not in " ".join(texts)
+    texts = [t.get_text() for t in draw(two, "test").axes[0].texts]
+    assert texts == ["session reset"]
 
 
 def test_labels_never_overlap_and_the_rest_are_counted():
