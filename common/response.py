@@ -80,10 +80,12 @@ __all__ = [
 
 BOUNDARY_KEYS = ("control/reset", "control/restore/", "control/session")
 
-# The series kept for bands: key chunks after lunaris/<rover>/ -> the fields.
-_NUMERIC = {"battery": ("capacity_j", "voltage_v", "temperature_c"), "load": ("power_w",),
-            "solar": ("power_w",), "umbilical": ("power_w",)}
 _TWIN_RAIL_STATES = ("tripped", "shed", "failed")  # a rail state the twin puts it in, not the crew
+_BATTERY_CAPACITY = ("battery/state", "capacity_j")
+_BATTERY_VOLTAGE = ("battery/state", "voltage_v")
+_BATTERY_TEMPERATURE = ("battery/state", "temperature_c")
+_BATTERY_OPERATIONAL = ("battery/state", "operational")
+_UMBILICAL = ("umbilical/state", "power_w")
 
 
 # -- results ------------------------------------------------------------------------------------
@@ -170,7 +172,7 @@ class LiveResponse(msgspec.Struct, omit_defaults=False):
 
 
 def _get(payload: Any, name: str, default: Any = None) -> Any:
-    if isinstance(payload, Mapping):
+    if isinstance(payload, dict | Mapping):
         return payload.get(name, default)
     return getattr(payload, name, default)
 
@@ -272,6 +274,7 @@ class Response:
         self._sessions: list[_Session] = [_Session(None, 1)]
         self._by_id: dict[str, _Session] = {}
         self._current = self._sessions[0]
+        self._cur_name = "1"
         self._ids = False  # events carry session ids
         self._epoch: int | None = None
         self._t: float | None = None
@@ -285,7 +288,10 @@ class Response:
 
     @property
     def session_id(self) -> str:
-        return self._name(self._current)
+        return self._cur_name
+
+    def _switch(self, s: _Session) -> None:
+        self._current, self._cur_name = s, self._name(s)
 
     def _name(self, s: _Session) -> str:
         return s.id if s.id is not None else str(s.number)
@@ -296,6 +302,7 @@ class Response:
         if sid is not None and old.id is None and old.empty() and not self._by_id:
             old.id = sid  # the session the recording began in, named by its first id
             self._by_id[sid] = old
+            self._switch(old)
             return old
         for f in old.active.values():
             f.ended = True
@@ -305,11 +312,10 @@ class Response:
         self._sessions.append(s)
         if sid is not None:
             self._by_id[sid] = s
-        self._current = s
+        self._switch(s)
         self._watchers.clear()
         self._rail_faults.clear()
-        for series in self._series.values():
-            series.clear()
+        self._forget_values()
         self.version += 1
         return s
 
@@ -322,53 +328,55 @@ class Response:
     def value(self, parts: Sequence[str], payload: Any) -> str:
         """A telemetry sample of this rover (``parts``: its key's chunks after
         ``lunaris/<rover>/``; ``payload``: its JSON object or its Struct). Returns the session
-        it belongs to."""
-        head = parts[0] if parts else ""
-        if head == "clock" and len(parts) == 1:
-            self._clock(payload)
-            return self.session_id
-        if head == "scenario" and len(parts) == 2 and parts[1] == "progress":
-            self._progress(payload)
-            return self.session_id
-        t = _get(payload, "t_s")
+        it belongs to. (Called for every sample of an hour's recording: written for speed.)"""
+        if isinstance(payload, dict):
+            get = payload.get
+        else:
+            def get(name: str, default: Any = None) -> Any:
+                return getattr(payload, name, default)
+        n = len(parts)
+        head = parts[0] if n else ""
+        t = get("t_s")
         if t is None:
-            return self.session_id
-        s = self._current
-        if s.start_t is None:
-            s.start_t = t
-        if s.last_t is None or t > s.last_t:
-            s.last_t = t
-        if head == "load" and len(parts) == 3:
+            return self._cur_name
+        if n == 3:
             name = parts[1]
-            rail = _get(payload, "rail")
-            if rail:
-                self._load_rail[name] = rail
-            self._number(f"load/{name}/power", "power_w", t, _get(payload, "power_w"))
-        elif head == "battery" and len(parts) == 2:
-            tail = "battery/state"
-            for fld in _NUMERIC["battery"]:
-                self._number(tail, fld, t, _get(payload, fld))
-            self._number(tail, "operational", t, _get(payload, "operational"))
-        elif head == "rail" and len(parts) == 3:
-            self._rail(parts[1], t, _get(payload, "state"))
-        elif head == "solar" and len(parts) == 3:
-            self._number(f"solar/{parts[1]}/power", "power_w", t, _get(payload, "power_w"))
-        elif head == "umbilical" and len(parts) == 2:
-            self._number("umbilical/state", "power_w", t, _get(payload, "power_w"))
-        elif head == "radio" and len(parts) == 3:
-            self._number(f"radio/{parts[1]}/link", "in_range", t, _get(payload, "in_range"))
-        return self.session_id
+            if head == "load":
+                rail = get("rail")
+                if rail:
+                    self._load_rail[name] = rail
+                self._number(("load/" + name + "/power", "power_w"), t, get("power_w"))
+            elif head == "rail":
+                self._rail(name, t, get("state"))
+            elif head == "solar":
+                self._number(("solar/" + name + "/power", "power_w"), t, get("power_w"))
+            elif head == "radio":
+                self._state(("radio/" + name + "/link", "in_range"), t, get("in_range"))
+        elif head == "clock" and n == 1:
+            self._clock(t, get)
+        elif head == "battery" and n == 2:
+            self._number(_BATTERY_CAPACITY, t, get("capacity_j"))
+            self._number(_BATTERY_VOLTAGE, t, get("voltage_v"))
+            self._number(_BATTERY_TEMPERATURE, t, get("temperature_c"))
+            self._state(_BATTERY_OPERATIONAL, t, get("operational"))
+        elif head == "umbilical" and n == 2:
+            self._number(_UMBILICAL, t, get("power_w"))
+        elif head == "scenario" and n == 2 and parts[1] == "progress":
+            self._progress(payload)
+        if self._current.start_t is None:
+            self._current.start_t = t
+        return self._cur_name
 
-    def _clock(self, payload: Any) -> None:
-        t, epoch, sid = _get(payload, "t_s"), _get(payload, "epoch", 0), _get(payload, "session", "")
+    def _clock(self, t: float, get: Any) -> None:
+        epoch, sid = get("epoch", 0) or 0, get("session", "") or ""
         if sid:
             self._ids = True
-            if sid != self._name(self._current):
+            if sid != self._cur_name:
                 s = self._by_id.get(sid)
                 if s is None:
                     self._begin(sid, t)
                 elif s is not self._current:
-                    self._current = s
+                    self._switch(s)
         elif not self._ids and self._epoch is not None and epoch > self._epoch:
             cur = self._current
             if cur.awaits is not None and epoch > cur.awaits:
@@ -378,23 +386,32 @@ class Response:
         if self._epoch is None and self._current.awaits == -1:
             self._current.awaits = None  # begun by its event before any tick: this is its epoch
         if self._epoch is not None and epoch != self._epoch:
-            for series in self._series.values():
-                series.clear()
+            self._forget_values()
         if self._epoch is None or epoch >= self._epoch:
             self._epoch = epoch
         s = self._current
         s.ticks += 1
-        if t is not None:
-            self._t = t
-            if s.start_t is None:
-                s.start_t = t
-            if s.last_t is None or t > s.last_t:
-                s.last_t = t
+        self._t = t
+        if s.start_t is None:
+            s.start_t = t
+        if s.last_t is None or t > s.last_t:
+            s.last_t = t
 
-    def _number(self, tail: str, fld: str, t: float, v: Any) -> None:
-        if v is None:
+    def _forget_values(self) -> None:
+        """A new epoch or session: the values before it are no band of anything after it."""
+        for series in self._series.values():
+            series.clear()
+        self._states.clear()
+
+    def _series_of(self, key: tuple[str, str]) -> Series:
+        series = self._series.get(key)
+        if series is None:
+            series = self._series[key] = Series()
+        return series
+
+    def _number(self, key: tuple[str, str], t: float, v: Any) -> None:
+        if v is None or isinstance(v, bool):
             return
-        key = (tail, fld)
         series = self._series.get(key)
         if series is None:
             series = self._series[key] = Series()
@@ -404,12 +421,24 @@ class Response:
             for f in list(faults):
                 self._look(f, t, v)
 
+    def _state(self, key: tuple[str, str], t: float, v: Any) -> None:
+        if v is None:
+            return
+        series = self._series.get(key)
+        if series is None:
+            series = self._series[key] = Series()
+        series.add_state(t, v)
+        faults = self._watchers.get(key)
+        if faults:
+            for f in list(faults):
+                self._look(f, t, v)
+
     def _rail(self, rail: str, t: float, state: Any) -> None:
         if state is None:
             return
-        self._number(f"rail/{rail}/state", "state", t, state)
         if self._states.get(rail) == state:
-            return
+            return  # (its series keeps the changes only)
+        self._state(("rail/" + rail + "/state", "state"), t, state)
         self._states[rail] = state
         for f in self._rail_faults.get(rail, ()):
             if f.active and state in _TWIN_RAIL_STATES:
@@ -534,9 +563,7 @@ class Response:
     def _watch(self, f: _Fault, tail: str, spec: SymptomSpec) -> None:
         key = (tail, spec.field)
         f.watch, f.direction = key, spec.direction
-        series = self._series.get(key)
-        if series is None:
-            series = self._series[key] = Series()
+        series = self._series_of(key)
         if spec.direction in ("change", "lost"):
             f.before = series.last_before(f.injected_t)
             if f.before is None and spec.direction == "change":

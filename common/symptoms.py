@@ -95,26 +95,37 @@ class Series:
         self.buckets: deque[list[float]] = deque()  # [start_t, lo, hi, sum, n]
         self.recent: deque[tuple[float, Any]] = deque(maxlen=RECENT)
 
-    def add(self, t: float, v: Any) -> None:
+    def add(self, t: float, v: float) -> None:
+        """A number at ``t``."""
         recent = self.recent
         if recent and t < recent[-1][0]:  # time went back (a reset, a straggler): start again
             self.clear()
         recent.append((t, v))
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            return  # a state (on, in range): its latest samples only
         b = self.buckets
-        if b and t < b[-1][0] + BUCKET_S:
+        if b:
             last = b[-1]
-            if v < last[1]:
-                last[1] = v
-            elif v > last[2]:
-                last[2] = v
-            last[3] += v
-            last[4] += 1
-            return
+            if t < last[0] + BUCKET_S:
+                if v < last[1]:
+                    last[1] = v
+                elif v > last[2]:
+                    last[2] = v
+                last[3] += v
+                last[4] += 1
+                return
         b.append([t, v, v, v, 1])
-        while b and b[0][0] < t - WINDOW_S - BUCKET_S:
+        while b[0][0] < t - WINDOW_S - BUCKET_S:
             b.popleft()
+
+    def add_state(self, t: float, v: Any) -> None:
+        """A state (on, in range ...) at ``t``: kept when it changes."""
+        recent = self.recent
+        if recent:
+            last_t, last_v = recent[-1]
+            if t < last_t:
+                self.clear()
+            elif v == last_v:
+                return
+        recent.append((t, v))
 
     def clear(self) -> None:
         self.buckets.clear()

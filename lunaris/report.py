@@ -209,8 +209,17 @@ _FAST = {"clock": _Clock, "battery/state": _Battery, "load/*/power": _Load, "rai
          "scenario/progress": dict, "event": dict}
 
 
-def _reader(topic: str, plots: bool) -> tuple[str, list[str], str, Any] | None:
-    """How to read a channel: its rover, key chunks, family and decoder; None to skip it."""
+class _Channel:
+    """How one channel is read: its rover's record, its key's chunks, its family, its decoder."""
+
+    __slots__ = ("decode", "family", "parts", "rec")
+
+    def __init__(self, rec: Recording, parts: list[str], family: str, decode: Any):
+        self.rec, self.parts, self.family, self.decode = rec, parts, family, decode
+
+
+def _channel(topic: str, plots: bool, out: dict[str, Recording]) -> _Channel | None:
+    """How to read a channel; None to skip it."""
     try:
         rover, parts = keys.split(topic)
     except ValueError:
@@ -220,8 +229,11 @@ def _reader(topic: str, plots: bool) -> tuple[str, list[str], str, Any] | None:
         fam.name if fam is not None else None)  # events: the journal's key and each service's
     if family is None or (not plots and family not in _FAST):
         return None
+    rec = out.get(rover)
+    if rec is None:
+        rec = out[rover] = Recording(rover, Response(rover))
     typ = dict if plots else _FAST[family]
-    return rover, parts, family, msgspec.json.Decoder(typ).decode
+    return _Channel(rec, parts, family, msgspec.json.Decoder(typ).decode)
 
 
 def load_recording(path: Path, plots: bool = True) -> dict[str, Recording]:
@@ -229,38 +241,34 @@ def load_recording(path: Path, plots: bool = True) -> dict[str, Recording]:
     series. Raises ValueError if the file is not a readable MCAP file."""
     out: dict[str, Recording] = {}
     seen_events = EventWindow()
-    readers: dict[str, tuple[str, list[str], str, Any] | None] = {}
+    channels: dict[str, _Channel | None] = {}
+    errors = (msgspec.DecodeError, msgspec.ValidationError)
     try:
-        messages = read_messages(path)
-        for topic, data in messages:
-            if topic in readers:
-                reader = readers[topic]
+        for topic, data in read_messages(path):
+            if topic in channels:
+                ch = channels[topic]
             else:
-                reader = readers[topic] = _reader(topic, plots)
-            if reader is None:
+                ch = channels[topic] = _channel(topic, plots, out)
+            if ch is None:
                 continue
-            rover, parts, family, decode = reader
             try:
-                v = decode(data)
-            except (msgspec.DecodeError, msgspec.ValidationError):
+                v = ch.decode(data)
+            except errors:
                 continue
-            rec = out.get(rover)
-            if rec is None:
-                rec = out[rover] = Recording(rover, Response(rover))
-            if family == "event":
+            rec = ch.rec
+            if ch.family == "event":
                 if isinstance(v, dict) and v.get("op") == "put" and isinstance(v.get("value"), dict):
                     v = v["value"]  # an event/<service> key recorded as a write (before it was known)
-                if not isinstance(v, dict) or not seen_events.first(event_identity(rover, v)):
+                if not isinstance(v, dict) or not seen_events.first(event_identity(rec.rover, v)):
                     continue  # once: the journal's key, the service's, replays
                 sid = rec.response.event(v)
                 if plots:
                     _session(rec, sid).add_event(v)
-                continue
-            if plots and not isinstance(v, dict):
-                continue
-            sid = rec.response.value(parts, v)
-            if plots:
-                _session(rec, sid).add_value(family, parts, v)
+            elif plots:
+                if isinstance(v, dict):
+                    _session(rec, rec.response.value(ch.parts, v)).add_value(ch.family, ch.parts, v)
+            else:
+                rec.response.value(ch.parts, v)
     except (ValueError, EOFError) as exc:
         raise ValueError(f"{path} is not a readable MCAP file: {exc}") from None
     for rec in out.values():
