@@ -14,7 +14,6 @@ conditions, the gatekeeper that refuses keys nobody owns.
 
 from __future__ import annotations
 
-import re
 from typing import Literal, NamedTuple
 
 import msgspec
@@ -32,9 +31,11 @@ __all__ = [
     "clock",
     "clock_control",
     "cmd_rail",
+    "control_mark",
     "control_reset",
     "control_restore",
     "control_scenario",
+    "control_session",
     "control_snapshot",
     "drive_route",
     "drive_state",
@@ -66,6 +67,7 @@ __all__ = [
     "service_claim",
     "service_claims",
     "service_owner",
+    "sessions",
     "snapshots",
     "snapshots_of",
     "solar_power",
@@ -76,7 +78,7 @@ __all__ = [
 ]
 
 ROOT = "lunaris"
-SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")  # a snapshot's name: one key chunk
+SNAPSHOT_NAME = m.SNAPSHOT_NAME  # a snapshot's name: one key chunk
 PLACEHOLDERS = ("load", "rail", "radio", "panel")  # the component kinds a key can name
 
 
@@ -202,6 +204,22 @@ def control_snapshot(rover: str, name: str) -> str:
 
 def control_restore(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/control/restore/{name}"
+
+
+def control_session(rover: str) -> str:
+    """``{"trainee", "from_snapshot"?}``: end the running session, begin a trainee's (the clock
+    answers)."""
+    return f"{ROOT}/{rover}/control/session"
+
+
+def control_mark(rover: str) -> str:
+    """``{"text"}``: an instructor's mark on the timeline (a ``mark`` event of the faults service)."""
+    return f"{ROOT}/{rover}/control/mark"
+
+
+def sessions(rover: str) -> str:
+    """``get`` lists the rover's trainee sessions (from the journal, by the faults service)."""
+    return f"{ROOT}/{rover}/sessions"
 
 
 def control_scenario(rover: str) -> str:

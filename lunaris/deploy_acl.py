@@ -49,12 +49,13 @@ _WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
 _PROGRESS = [keys.under("*", "scenario/progress"), keys.under("*", "scenario/progress/@adv/**")]
 # What the crew must discover from effects, not read: the instructor's puts, the journal,
 # the faults in effect, the events that name them (the journal's stream and each
-# service's own), the session's snapshots, and a scenario's progress (what the drill does
-# next).
+# service's own), the session's snapshots, the trainee sessions (the journal's segments,
+# with the trainees' names), and a scenario's progress (what the drill does next).
 _CREW_HIDDEN = ["lunaris/*/fault/**", "lunaris/*/event", "lunaris/*/event/**",
                 "lunaris/*/event/@adv/**", "lunaris/*/event/*/@adv/**",
                 "lunaris/*/faults", "lunaris/*/faults/**", "lunaris/*/control/**",
-                "lunaris/*/snapshots", "lunaris/*/snapshots/**", *_PROGRESS]
+                "lunaris/*/snapshots", "lunaris/*/snapshots/**", "lunaris/*/sessions",
+                *_PROGRESS]
 
 
 def _pattern(chunks: tuple[str, ...]) -> str:
@@ -75,7 +76,8 @@ def _answered(service: str) -> list[str]:
     """The queries one service kind answers."""
     out = [f"lunaris/*/faults/active/{service}", f"lunaris/*/snapshots/{service}"]
     if service == "faults":
-        out += ["lunaris/*/faults", "lunaris/*/faults/journal", "lunaris/*/snapshots"]
+        out += ["lunaris/*/faults", "lunaris/*/faults/journal", "lunaris/*/snapshots",
+                "lunaris/*/sessions"]
     if service == "battery":
         out += ["lunaris/*/prediction"]
     return out

@@ -27,7 +27,7 @@ from common.conditions import SOURCES
 from common.config import Rover
 from common.datafile import struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RETIRED_CODES, NoParams
-from common.messages import Prediction, PredictionRequest
+from common.messages import Prediction, PredictionRequest, SessionInfo, SessionStart, TimelineMark
 from common.scenario import Scenario
 from common.symptoms import SYMPTOMS, TOLERANCE
 from common.traverse import TraverseFile
@@ -203,7 +203,23 @@ def keys_page() -> str:
                  "file implies that did not answer (its faults are not listed)"),
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
-                ("`faults/journal` (query)", "the session's events, oldest first"),
+                ("`faults/journal` (query)", "the journal's events, oldest first: those of the "
+                 "running trainee session; `?session=<id>` another session's, `?session=all` "
+                 "every session's, `?last=N` the latest N of them"),
+                ("`sessions` (query)", "the rover's trainee sessions, oldest first (the last is "
+                 "the running one), from the journal: a list of `SessionInfo`: "
+                 + _payload_fields(SessionInfo)),
+                ("`control/session`", "`put` " + _payload_fields(SessionStart) + ": ends the "
+                 "running session and begins a trainee's (the twin reset to its rover file, or "
+                 "the snapshot restored, all or nothing); the clock's ticks carry the new "
+                 "session's id and every event from there its `session`; answered by the clock "
+                 "with a `session` event (`params`: `session, trainee, from_snapshot, "
+                 "started_wall, start_t_s`), or refused in words"),
+                ("`control/mark`", "`put` " + _payload_fields(TimelineMark) + ": a `mark` event "
+                 "of the faults service on the session's timeline"),
+                ("`control/reset`, `control/snapshot/<name>`, `control/restore/<name>`",
+                 "`put` (empty): within the running session, the twin back to its rover file, "
+                 "a snapshot saved, restored (all or nothing); `get snapshots` lists them"),
                 ("`event/<service>`", "each service's own events (`Event`), which the faults "
                  "service journals and relays unchanged on `event`; an event whose `source` is "
                  "not the service its key names is refused and said in a `critical` event"),

@@ -6,7 +6,8 @@ caches replay recent ones to a late joiner or after a reconnection. A reader of 
 of these hears an event several times: :func:`event_identity` names it, ``(source_id, seq)``
 (the publishing session and its count), and :class:`EventWindow` remembers the identities of
 the latest events, a bounded number of them, so each is taken once. The offline reader of a
-recording (:mod:`lunaris.report`) uses the same identity.
+recording (:mod:`lunaris.report`) uses the same identity. :func:`in_session` and
+:func:`session_opened` read an event's trainee session (SPEC §12c).
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ from typing import Any
 
 from common.messages import Event
 
-__all__ = ["EVENT_WINDOW", "EventWindow", "event_identity", "source_mismatch"]
+__all__ = ["EVENT_WINDOW", "EventWindow", "event_identity", "in_session", "session_opened",
+           "source_mismatch"]
 
 EVENT_WINDOW = 4096  # identities remembered: far more than the publishers' caches replay (256 each)
 
@@ -66,3 +68,20 @@ class EventWindow:
 
     def __len__(self) -> int:
         return len(self._order)
+
+
+def in_session(ev: Event, session: str) -> bool:
+    """Whether ``ev`` is read as the running session's: of it, of no session (a service that
+    had heard no tick), or any while no session is known."""
+    return not session or not ev.session or ev.session == session
+
+
+def session_opened(ev: Event) -> tuple[str, str] | None:
+    """(session, trainee) of the clock's event that opens a session, or None."""
+    p = ev.params
+    if ev.kind != "session" or ev.source != "clock" or not isinstance(p, dict):
+        return None
+    session, trainee = p.get("session"), p.get("trainee")
+    if "started_wall" not in p or not isinstance(session, str) or not isinstance(trainee, str):
+        return None
+    return session, trainee

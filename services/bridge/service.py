@@ -22,6 +22,7 @@ from __future__ import annotations
 import heapq
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import msgspec
@@ -80,9 +81,10 @@ def _discrete_fields(payload: type[msgspec.Struct]) -> tuple[str, ...]:
 
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
-          mapping_file: str | None = None, fleet: list[str] | None = None) -> None:
+          mapping_file: str | None = None, fleet: list[str] | None = None,
+          clock: Callable[[], float] = time.monotonic) -> None:
     """Serve ``rovers``, members of ``fleet`` (the ids of every rover of the deployment, in
-    order, whichever bridge serves each; default: these rovers)."""
+    order, whichever bridge serves each; default: these rovers). ``clock`` times the rates."""
     path = resolve_mapping(mapping_file)
     try:
         mf = load_mapping(path)
@@ -102,7 +104,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             raise SystemExit(2) from None
         rt.on_exit(graph.close)
     rover_cfg = {r.id: r for r in rovers}
-    shared = Shared(rt, opts, str(rt.zenoh_session.info.zid()), graph)
+    shared = Shared(rt, opts, str(rt.zenoh_session.info.zid()), graph, clock)
     rmw = opts.outputs.rmw_zenoh
     if rmw.enabled:
         for domain in sorted({shared.rmw_domain(b) for b in bindings}):
@@ -205,7 +207,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
     def flush() -> None:
         """The samples some outlet sends at once: every one for an outlet without a rate, the
         first after an outlet's idle spell, and a change of a discrete field for all."""
-        now = time.monotonic()
+        now = shared.clock()
         for key in sorted(dirty):
             rt.urgent_first()  # a fleet's tick is thousands of samples
             feed = feeds[key]
@@ -225,7 +227,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
 
     def flush_due() -> None:
         """The outlets whose rate allows the newest sample: sent, or idle when none came."""
-        now = time.monotonic()
+        now = shared.clock()
         due = shared.due
         while due and due[0][0] <= now:
             rt.urgent_first()

@@ -533,35 +533,28 @@ def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, route
     assert list(table)[i:i + 4] == ["12V voltage", "12V current", "12V power", "12V current limit"]
 
 
-def test_rates_hold_continuous_values_and_let_discrete_changes_through(dashboard, probe):
+def test_rated_topics_flow_and_a_discrete_change_arrives(dashboard, probe):
+    """The topics with a rate (the PDM's at 2 Hz, /battery_state at 5 Hz) keep flowing, and the
+    failed rail's 0 mV reaches the dashboard. How a rate holds a stream, sends the first sample
+    after a silence and lets a discrete change through at once, to the timer's step, is tested
+    on a clock of the test's own (tests/services/test_bridge_rates.py)."""
     twin, tap = dashboard
     settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
-    t0 = time.monotonic()
-    time.sleep(3.0)  # the twin ticks at 10 Hz: the battery's key ~10/s, the PDM's topics 2/s
-    t1 = time.monotonic()
-
-    def per_s(key: str) -> float:
-        return sum(1 for r in tap.history(key) if t0 <= r.t_mono < t1) / (t1 - t0)
-    assert per_s(keys.battery_state(R)) >= 8.0
-    pdm = per_s("pdm/battery_voltage_mv")
-    assert 1.0 <= pdm <= 2.7, f"{pdm:.2f} PDM samples per second at rate_hz 2"
-    assert 3.0 <= per_s("battery_state") <= 5.7  # rate_hz 5
-    # a discrete change (the rail's state) is not held back by the rate
+    for topic in ("pdm/battery_voltage_mv", "battery_state"):
+        n = len(tap.history(topic))
+        wait_for(lambda t=topic, n=n: len(tap.history(t)) >= n + 3, 10, f"3 more samples on {topic}")
     t2 = time.monotonic()
     probe.put(keys.fault(R, "rail/5V_CH2", "fail"))
     settle(lambda: [] if _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2,
                                 lambda m: m["data"] == 0) else ["0 mV"], what="0 mV")
-    latency = _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2, lambda m: m["data"] == 0) - t2
-    assert latency < 0.25, f"the failed rail took {latency * 1e3:.0f} ms at rate_hz 2"
     probe.delete(keys.fault(R, "rail/5V_CH2", "fail"))
 
 
-def test_a_rate_sends_the_first_sample_after_a_silence_at_once_and_holds_the_rest(
+def test_a_rated_topic_of_a_mapping_of_ones_own_sends_what_is_put_by_hand(
         probe, twin_factory, mapp_file, tmp_path):
-    """A topic at ``rate_hz`` 0.5 (a slot every 2 s) fed by hand: the first sample goes at once;
-    one right behind it waits for the next slot; after a silence (no sample at a slot) the
-    next one goes at once again, wherever the grid of slots is; a change of a discrete field
-    (the pack's ``operational``) goes at once."""
+    """A topic at ``rate_hz`` 0.5 of a mapping given to the bridge alone, fed battery states by
+    the test: the first goes out, the one right behind it too (held for its slot), and a
+    change of a discrete field (the pack's ``operational``)."""
     mapping = tmp_path / "slow.yaml"
     mapping.write_text(
         "bridge: {outputs: {ros2dds: {enabled: true}, rmw_zenoh: {enabled: false}}}\n"
@@ -581,20 +574,12 @@ def test_a_rate_sends_the_first_sample_after_a_silence_at_once_and_holds_the_res
         probe.put(keys.battery_state(R), state)
         return t
 
-    def arrival(mv: int, since: float, timeout_s: float = 5.0) -> float:
-        return wait_for(lambda: first(since, lambda m: m["data"] == mv), timeout_s, f"{mv} mV") - since
+    def first(since: float, mv: int) -> float | None:
+        return _first(tap, "ros2dds", "/slow_voltage_mv", since, lambda m: m["data"] == mv, INT32)
 
-    def first(since: float, predicate) -> float | None:
-        return _first(tap, "ros2dds", "/slow_voltage_mv", since, predicate, INT32)
-
-    # the bridge's subscription is in place once a sample gets through: the first goes at once
-    wait_for(lambda: put(15.0) and first(0.0, lambda m: m["data"] == 15000), 10, "the first sample")
-    slot = first(0.0, lambda m: m["data"] == 15000)
-    assert slot is not None
-    held = arrival(15100, put(15.1))  # right behind it: the next slot, 2 s after the first
-    assert 1.5 < held < 2.6, f"the held sample came {held:.2f} s after it was written"
-    # no sample at the slot after that (the outlet goes idle); the next one, 0.5 s after that
-    # silent slot, is sent at once, not at the slot 1.5 s later
-    time.sleep(max(0.0, slot + 4.5 - time.monotonic()))
-    assert arrival(15200, put(15.2)) < 0.5
-    assert arrival(15300, put(15.3, operational=False)) < 0.5  # a discrete change
+    # the bridge's subscription is in place once a sample gets through
+    wait_for(lambda: put(15.0) and first(0.0, 15000), 10, "the first sample")
+    since = put(15.1)
+    wait_for(lambda: first(since, 15100), 10, "the held sample")
+    since = put(15.3, operational=False)
+    wait_for(lambda: first(since, 15300), 10, "the discrete change")

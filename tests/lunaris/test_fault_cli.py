@@ -119,7 +119,8 @@ def test_with_credentials_on_the_deployment_router(tmp_path):
     identity lists it."""
     secrets = make_test_secrets(tmp_path / "secrets")
     with running_router(secrets) as router:
-        services = ("clock", "solar", "faults")
+        # every owner of the rover's faults: `fault list` says which did not answer (exit 2)
+        services = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
         extra = {s: ["--config", str(secrets / f"client-lunaris-{s}.json5")] for s in services}
         with Twin(router.endpoint, [MAPP], tmp_path / "state", services=services, extra=extra):
             def as_(who: str) -> list[str]:
@@ -129,7 +130,7 @@ def test_with_credentials_on_the_deployment_router(tmp_path):
             def services_up() -> bool:
                 done = run_tool("fault", "list", R, "--timeout", "1", *debrief)
                 return done.returncode == 0
-            wait_for(services_up, 30, "the services to log in and answer the debrief")
+            wait_for(services_up, 60, "the services to log in and answer the debrief")
 
             done = run_tool("fault", "inject", R, "solar/right", "disconnect", *instructor)
             assert done.returncode == 0, done.stdout + done.stderr

@@ -19,6 +19,7 @@
  * @property {string} service
  * @property {Array<ActiveFault>} faults
  * @property {number} [epoch]
+ * @property {string} [session]
  */
 /**
  * @typedef {Object} BatteryState
@@ -49,6 +50,7 @@
  * @property {boolean} paused
  * @property {number} [epoch]
  * @property {string} [cause]
+ * @property {string} [session]
  */
 /**
  * ``drive/route``: the traverse the rover follows, for a map. Published when it changes
@@ -91,13 +93,14 @@
  * @property {number} t_s
  * @property {"critical" | "info" | "warning"} severity
  * @property {string} source
- * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "journal_gap" | "rejected" | "scenario" | "session" | "state_damaged"} kind
+ * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "journal_gap" | "mark" | "rejected" | "scenario" | "session" | "state_damaged"} kind
  * @property {string} key
  * @property {string} message
  * @property {Record<string, unknown> | null} [params]
  * @property {string} [source_id]
  * @property {number} [seq]
  * @property {string} [actor]
+ * @property {string} [session]
  */
 /**
  * An expect step's score as it stands: met (true), missed (false), or not yet (null).
