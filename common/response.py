@@ -45,11 +45,17 @@ while the fault is in effect (a rail reset onto a short that trips again is not 
 failing that, when the fault was cleared. A fault still in effect at the session's end, or
 cleared only by the session's end, is not resolved (``null``).
 
-**Sessions** (SPEC §12c): an event's ``session`` names its session; a clock tick's ``session``
-(when the clock carries one) names the session of the telemetry after it. Where events carry
-no session id (a twin older than sessions), a reset or a restore starts one (the clock's new
-epoch, or the ``session`` event that marks it, whichever comes first), numbered ``1``, ``2``,
-... in the order they were seen.
+**Sessions** are the clock's (SPEC §12c, :mod:`services.faults.sessions` places the journal's
+lines the same way): an event's ``session`` names its session, a clock tick's ``session`` the
+session of the telemetry after it. A session id not seen before that is later than the running
+one (ids are the UTC time each began, growing) begins a new session, which ends the running one
+(its faults in effect end with it); a late event of an ended session goes to that session and
+never makes it run again. An event without a session (a service that had heard no tick yet)
+belongs to the running session; what comes before any session id is known belongs to the first
+session named. A session's trainee is the one the clock's ``session`` event that opened it
+names (``null`` when that event was not heard). A reset or a restore within a session (a new
+epoch) begins no session: the values' bands start again from it. A recording of a twin older
+than sessions is one session, named ``""``.
 
 **Expectations** come from the journal (``scenario`` events whose params hold an
 ``expectation``, :class:`common.messages.ExpectationMark`) and, while they are not yet scored,
@@ -77,8 +83,6 @@ __all__ = [
     "Response",
     "SessionResponse",
 ]
-
-BOUNDARY_KEYS = ("control/reset", "control/restore/", "control/session")
 
 _TWIN_RAIL_STATES = ("tripped", "shed", "failed")  # a rail state the twin puts it in, not the crew
 _BATTERY_CAPACITY = ("battery/state", "capacity_j")
@@ -235,9 +239,8 @@ class _Fault:
 
 @dataclass
 class _Session:
-    id: str | None  # None: not named yet (a twin without session ids: numbered when read)
-    number: int
-    trainee: str | None = None
+    id: str  # the clock's session id; "" until one is known
+    trainee: str | None = None  # from the clock's event that opened it
     faults: list[_Fault] = field(default_factory=list)
     active: dict[str, _Fault] = field(default_factory=dict)  # fault key -> the fault in effect
     raised: dict[str, float] = field(default_factory=dict)  # derived alarm key -> raised at
@@ -248,13 +251,6 @@ class _Session:
     start_t: float | None = None
     last_t: float | None = None
     ticks: int = 0  # clock samples seen in it: a session only replayed has none
-    # Without session ids a reset or a restore begins a session, heard twice: the clock's new
-    # epoch and the event that marks it, in either order. by_epoch: begun by the new epoch,
-    # its event not heard yet; awaits: begun by the event, the clock's epoch then (its new
-    # epoch is the next one above).
-    by_epoch: bool = False
-    awaits: int | None = None
-    ended: set[str] = field(default_factory=set)  # the faults in effect when it ended
 
     def empty(self) -> bool:
         return not (self.faults or self.scored or self.pending)
@@ -271,11 +267,9 @@ class Response:
         self.rover = rover
         self.prefix = f"lunaris/{rover}/"
         self.version = 0
-        self._sessions: list[_Session] = [_Session(None, 1)]
+        self._sessions: list[_Session] = [_Session("")]
         self._by_id: dict[str, _Session] = {}
         self._current = self._sessions[0]
-        self._cur_name = "1"
-        self._ids = False  # events carry session ids
         self._epoch: int | None = None
         self._t: float | None = None
         self._series: dict[tuple[str, str], Series] = {}
@@ -288,40 +282,36 @@ class Response:
 
     @property
     def session_id(self) -> str:
-        return self._cur_name
+        """The running session's id ("" before any is known)."""
+        return self._current.id
 
-    def _switch(self, s: _Session) -> None:
-        self._current, self._cur_name = s, self._name(s)
-
-    def _name(self, s: _Session) -> str:
-        return s.id if s.id is not None else str(s.number)
-
-    def _begin(self, sid: str | None, t: float | None) -> _Session:
-        """A new session (the running one ends: what it holds in effect is ended with it)."""
-        old = self._current
-        if sid is not None and old.id is None and old.empty() and not self._by_id:
-            old.id = sid  # the session the recording began in, named by its first id
-            self._by_id[sid] = old
-            self._switch(old)
-            return old
-        for f in old.active.values():
-            f.ended = True
-        old.ended = set(old.active)
-        old.active.clear()
-        s = _Session(sid, len(self._sessions) + 1, start_t=t)
+    def _session_of(self, sid: str, t: float | None) -> _Session:
+        """The session ``sid`` names: known, the first named (what came before it is its own),
+        or new: running from now when later than the running one (which ends: what it holds
+        in effect ends with it), else an ended one heard late."""
+        s = self._by_id.get(sid)
+        if s is not None:
+            return s
+        cur = self._current
+        if not cur.id:
+            cur.id = sid
+            self._by_id[sid] = cur
+            self.version += 1
+            return cur
+        s = self._by_id[sid] = _Session(sid, start_t=t if sid > cur.id else None)
         self._sessions.append(s)
-        if sid is not None:
-            self._by_id[sid] = s
-        self._switch(s)
+        self._sessions.sort(key=lambda x: x.id)
+        if sid < cur.id:
+            return s
+        for f in cur.active.values():
+            f.ended = True
+        cur.active.clear()
+        self._current = s
         self._watchers.clear()
         self._rail_faults.clear()
         self._forget_values()
         self.version += 1
         return s
-
-    def _session_of(self, sid: str) -> _Session:
-        s = self._by_id.get(sid)
-        return s if s is not None else self._begin(sid, self._t)
 
     # -- telemetry ---------------------------------------------------------------------------------
 
@@ -338,7 +328,7 @@ class Response:
         head = parts[0] if n else ""
         t = get("t_s")
         if t is None:
-            return self._cur_name
+            return self._current.id
         if n == 3:
             name = parts[1]
             if head == "load":
@@ -365,26 +355,12 @@ class Response:
             self._progress(payload)
         if self._current.start_t is None:
             self._current.start_t = t
-        return self._cur_name
+        return self._current.id
 
     def _clock(self, t: float, get: Any) -> None:
         epoch, sid = get("epoch", 0) or 0, get("session", "") or ""
-        if sid:
-            self._ids = True
-            if sid != self._cur_name:
-                s = self._by_id.get(sid)
-                if s is None:
-                    self._begin(sid, t)
-                elif s is not self._current:
-                    self._switch(s)
-        elif not self._ids and self._epoch is not None and epoch > self._epoch:
-            cur = self._current
-            if cur.awaits is not None and epoch > cur.awaits:
-                cur.awaits = None  # the reset's event came first: this is its epoch
-            else:
-                self._begin(None, t).by_epoch = True
-        if self._epoch is None and self._current.awaits == -1:
-            self._current.awaits = None  # begun by its event before any tick: this is its epoch
+        if sid and sid != self._current.id:
+            self._session_of(sid, t)
         if self._epoch is not None and epoch != self._epoch:
             self._forget_values()
         if self._epoch is None or epoch >= self._epoch:
@@ -481,26 +457,12 @@ class Response:
         kind, key = _get(ev, "kind", ""), _get(ev, "key", "") or ""
         t = _get(ev, "t_s") or 0.0
         sid = _get(ev, "session", "") or ""
-        if sid:
-            self._ids = True
-            s = self._session_of(sid)
-        else:
-            s = self._current
-            if (kind == "session" and not self._ids and _get(ev, "severity") == "info"
-                    and any(key.startswith(self.prefix + b) for b in BOUNDARY_KEYS)):
-                if s.by_epoch:
-                    s.by_epoch = False  # its epoch came first: the same session
-                elif s.ticks or not s.empty():
-                    s = self._begin(None, None)
-                    s.awaits = self._epoch if self._epoch is not None else -1
-            if kind == "fault_cleared" and key not in s.active:
-                before = self._previous(s)
-                if before is not None and key in before.ended:
-                    before.ended.discard(key)
-                    return self._name(before)  # the clearing that ended it with its session
+        s = self._session_of(sid, self._t) if sid else self._current
         params = _get(ev, "params") or {}
-        if kind == "session" and isinstance(params, Mapping) and params.get("trainee"):
-            s.trainee = str(params["trainee"])
+        if (kind == "session" and isinstance(params, Mapping) and "started_wall" in params
+                and params.get("session") == s.id):  # the clock's word that it opened
+            s.trainee = str(params.get("trainee") or "")
+            self.version += 1
         if kind == "fault_injected":
             self._inject(s, key, t, params if isinstance(params, Mapping) else {}, _get(ev, "actor", ""))
         elif kind == "fault_cleared":
@@ -513,11 +475,7 @@ class Response:
             self._scored(s, params)
         if _get(ev, "actor", "") == "crew" and kind in ("command", "input", "rejected", "clock"):
             self._crew(s, self._action(ev, kind, key, t, params))
-        return self._name(s)
-
-    def _previous(self, s: _Session) -> _Session | None:
-        i = s.number - 2
-        return self._sessions[i] if i >= 0 else None
+        return s.id
 
     # -- faults --------------------------------------------------------------------------------------
 
@@ -546,6 +504,9 @@ class Response:
             scopes += [self.prefix + f"load/{ld}/" for ld, r in self._load_rail.items() if r == name]
         f = _Fault(key, path, component, name, kind, dict(params), actor or "", t, tuple(scopes), rails)
         s.faults.append(f)
+        if s is not self._current:  # of a session that ended, heard late: the twin moved on
+            f.ended = True
+            return
         s.active[key] = f
         for rail in rails:
             self._rail_faults.setdefault(rail, []).append(f)
@@ -726,7 +687,7 @@ class Response:
 
     def _result(self, s: _Session) -> SessionResponse:
         return SessionResponse(
-            session=self._name(s), trainee=s.trainee, faults=[f.result() for f in s.faults],
+            session=s.id, trainee=s.trainee, faults=[f.result() for f in s.faults],
             expectations=self._expectations(s), rover=self.rover, start_t_s=s.start_t,
             end_t_s=s.last_t)
 
@@ -737,7 +698,7 @@ class Response:
                 if not (recorded_only and s.ticks == 0) and not (s.empty() and s.ticks == 0)]
 
     def session(self, sid: str) -> SessionResponse | None:
-        s = next((s for s in self._sessions if self._name(s) == sid), None)
+        s = next((s for s in self._sessions if s.id == sid), None)
         return None if s is None else self._result(s)
 
     def live(self) -> LiveResponse:
@@ -747,7 +708,7 @@ class Response:
         faults = [f.result(LiveFault, since_injection_s=(
             None if now is None or not f.active else max(0.0, now - f.injected_t)),
             crew_acted=bool(f.actions)) for f in s.faults]
-        return LiveResponse(self.rover, self._name(s), s.trainee, now, faults,
+        return LiveResponse(self.rover, s.id, s.trainee, now, faults,
                             self._expectations(s), self.version)
 
 

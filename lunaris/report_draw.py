@@ -20,13 +20,10 @@ from __future__ import annotations
 
 import base64
 import html
-from typing import TYPE_CHECKING
 
 from common import keys
 from common.response import SessionResponse
-
-if TYPE_CHECKING:
-    from lunaris.report import Session
+from lunaris.report_session import Session
 
 __all__ = ["draw", "html_page", "place_labels", "score_rows"]
 

@@ -97,7 +97,7 @@ def test_a_short_trips_its_rail_and_the_crews_actions_are_listed_in_order_until_
     crew(r, 60.0, "input/drive/traverse", kind="input", message="traverse stopped at (5.0, 0.0, 0.0) m")
 
     s = only(r)
-    assert (s.session, s.trainee, s.rover) == ("1", None, R)
+    assert (s.session, s.trainee, s.rover) == ("", None, R)  # no session id: one session
     (f,) = s.faults
     assert f.key == P + "fault/load/nav_camera/short" and f.kind == "short" and f.injected_by == "scenario"
     assert f.injected_t_s == 30.0 and f.first_symptom_t_s == 30.1
@@ -340,59 +340,70 @@ def test_a_fault_injected_again_keeps_its_first_injection_and_takes_the_new_para
 # -- sessions -----------------------------------------------------------------------------------------
 
 
-def test_resets_begin_sessions_and_neither_holds_anything_of_the_other():
+A, B = "20261125-090000", "20261125-100000"  # session ids as the clock makes them (UTC, growing)
+
+
+def _opened(r: Response, t: float, sid: str, trainee: str) -> str:
+    """The clock's event that opens a session (SPEC 12c)."""
+    return ev(r, t, "session", "control/session", session=sid, params={
+        "session": sid, "trainee": trainee, "from_snapshot": None, "started_wall": 1.7e9, "start_t_s": t})
+
+
+def test_the_clocks_sessions_never_mix_and_a_reset_within_one_begins_none():
     r = Response(R)
     for t in ticks(0, 5):
+        clock(r, t, session=A)
         _load(r, "imu", t, 1.0, "3V3_CH1")
-    inject(r, 5.0, "load/imu/open")
+    assert _opened(r, 0.0, A, "Ada") == A
+    inject(r, 5.0, "load/imu/open", session=A)
     _load(r, "imu", 5.1, 0.0, "3V3_CH1")
-    crew(r, 6.0, "cmd/rail/3V3_CH1", params={"on": False})
-    # the reset: its event first, then the clock's new epoch, then the clearing of the old fault
-    ev(r, 7.0, "session", "control/reset", message="session reset")
-    assert clock(r, 7.1, epoch=0) == "2"  # a late tick of the old epoch: the new session already
-    assert clock(r, 0.0, epoch=1) == "2"  # its epoch: the same session
-    assert clear(r, 0.0, "load/imu/open") == "1"  # the reset's clearing: the end of the first
+    crew(r, 6.0, "cmd/rail/3V3_CH1", params={"on": False})  # no id: the running session
+    # a reset within the session: a new epoch, the same session
+    ev(r, 6.5, "session", "control/reset", message="session reset", session=A)
+    assert clock(r, 0.0, epoch=1, session=A) == A
+    # the next trainee: the closing event of A, the first tick of B, the opening of B
+    ev(r, 0.5, "session", "sessions", session=A, params={"session": A, "trainee": "Ada", "end_t_s": 0.5})
+    assert clock(r, 0.0, epoch=2, session=B) == B
+    assert _opened(r, 0.0, B, "Bob") == B
+    assert clear(r, 0.1, "load/imu/open", session=A) == A  # the end's clearing: A's, heard late
+    assert clock(r, 7.1, epoch=1, session=A) == B  # a late tick of A: B runs on
     for t in ticks(0.1, 5):
+        clock(r, t, epoch=2, session=B)
         _load(r, "imu", t, 1.0, "3V3_CH1")
-    inject(r, 5.0, "battery/heating", {"heat_w": 30})
+    inject(r, 5.0, "battery/heating", {"heat_w": 30}, session=B)
     crew(r, 6.0, "cmd/rail/12V", params={"on": False})
-    # a second reset: this time the epoch first, then the event
-    assert clock(r, 0.0, epoch=2) == "3"
-    assert ev(r, 6.5, "session", "control/reset") == "3"
-    clock(r, 0.1, epoch=2)
-    one, two, three = r.sessions()
-    assert [s.session for s in (one, two, three)] == ["1", "2", "3"]
+    one, two = r.sessions()
+    assert [(s.session, s.trainee) for s in (one, two)] == [(A, "Ada"), (B, "Bob")]
     assert [f.fault for f in one.faults] == ["load/imu/open"]
-    assert [f.fault for f in two.faults] == ["battery/heating"] and three.faults == []
+    assert [f.fault for f in two.faults] == ["battery/heating"]
     (f1,) = one.faults
     assert f1.resolved_t_s is None and not f1.active and f1.cleared_t_s is None  # ended with it
     assert [a.target for a in f1.crew_actions] == ["3V3_CH1"]
     assert [a.target for a in two.faults[0].crew_actions] == ["12V"]
-    assert r.session("2") == two and r.session("9") is None
+    assert r.session(B) == two and r.session("nope") is None and r.session_id == B
 
 
-def test_session_ids_carried_by_events_name_the_sessions_and_late_events_go_to_their_own():
+def test_what_comes_before_the_first_session_id_is_that_sessions_and_a_late_session_never_runs():
     r = Response(R)
-    clock(r, 10.0)
-    assert inject(r, 10.0, "load/imu/stuck", {"power_w": 1.3}, session="s-1") == "s-1"
-    ev(r, 11.0, "session", "control/session", params={"trainee": "Ada"}, session="s-2")
-    assert clock(r, 0.0, epoch=1) == "s-2"
-    assert clear(r, 0.0, "load/imu/stuck", session="s-1") == "s-1"  # heard late: its own session
-    inject(r, 3.0, "battery/heating", {"heat_w": 10}, session="s-2")
-    crew(r, 4.0, "cmd/rail/12V", params={"on": False})  # no id: the running session
+    clock(r, 10.0)  # a tick without a session (heard before the clock named one)
+    assert inject(r, 10.0, "load/imu/stuck", {"power_w": 1.3}) == ""
+    assert clock(r, 10.1, session=B) == B  # the first id names what came before
+    assert _opened(r, 0.0, A, "Ada") == A and r.session_id == B  # heard late, older: B runs on
+    assert inject(r, 3.0, "battery/heating", {"heat_w": 10}, session=A) == A
+    clock(r, 10.2, session=B)
     a, b = r.sessions()
-    assert (a.session, a.trainee, [f.fault for f in a.faults]) == ("s-1", None, ["load/imu/stuck"])
-    assert (b.session, b.trainee, [f.fault for f in b.faults]) == ("s-2", "Ada", ["battery/heating"])
-    assert a.faults[0].resolved_t_s is None and a.faults[0].crew_actions == []
-    assert [x.target for x in b.faults[0].crew_actions] == ["12V"]
+    assert (a.session, a.trainee, [f.fault for f in a.faults]) == (A, "Ada", ["battery/heating"])
+    assert (b.session, b.trainee, [f.fault for f in b.faults]) == (B, None, ["load/imu/stuck"])
+    assert not a.faults[0].active and b.faults[0].active and r.session_id == B
+    assert [f.fault for f in r.live().faults] == ["load/imu/stuck"]
 
 
 def test_a_clock_that_names_its_session_moves_the_telemetry_to_it():
     r = Response(R)
-    clock(r, 1.0, session="a")
-    clock(r, 0.0, epoch=1, session="b")
-    assert r.session_id == "b"
-    assert [s.session for s in r.sessions()] == ["a", "b"]
+    clock(r, 1.0, session=A)
+    clock(r, 0.0, epoch=1, session=B)
+    assert r.session_id == B
+    assert [s.session for s in r.sessions()] == [A, B]
 
 
 # -- expectations -------------------------------------------------------------------------------------
@@ -439,7 +450,7 @@ def test_live_says_since_when_each_fault_is_in_effect_and_whether_the_crew_acted
     clock(r, 12.5)
     live = r.live()
     (f,) = live.faults
-    assert (live.session, live.t_s, f.since_injection_s, f.crew_acted) == ("1", 12.5, 10.5, False)
+    assert (live.session, live.t_s, f.since_injection_s, f.crew_acted) == ("", 12.5, 10.5, False)
     crew(r, 13.0, "cmd/rail/3V3_CH1", params={"on": False})
     clear(r, 14.0, "load/imu/stuck")
     clock(r, 15.0)

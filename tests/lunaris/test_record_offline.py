@@ -176,19 +176,20 @@ def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
     assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last
 
 
-def _event(t: float, kind: str, key: str, message: str, wall: int, params=None):
+def _event(t: float, kind: str, key: str, message: str, wall: int, params=None, session: str = ""):
     ev = Event(t_s=t, severity="info", source="x", kind=kind, key=f"lunaris/{R}/{key}", message=message,
-               params=params, source_id="s", seq=int(t * 10) + len(message))
+               params=params, source_id="s", seq=int(t * 10) + len(message), session=session)
     return (f"lunaris/{R}/event", encode(ev), False, wall)
 
 
 def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: Path):
     wall = 1_700_000_000_000_000_000
     samples = [_event(2.0, "fault_injected", "fault/battery/heating", "replayed", wall)]  # before
-    for i in range(10):  # t 10..19, then a reset: t 0..9 of the next epoch goes on at 10 s
+    one_id, two_id = "20261125-090000", "20261125-100000"
+    for i in range(10):  # t 10..14 of session one, then the next trainee's: t 0..4 of a new epoch
         epoch, t = (0, 10.0 + i) if i < 5 else (1, float(i - 5))
-        cause = "reset" if epoch else ""
-        samples += [(f"lunaris/{R}/clock", encode(Clock(t, 0.1, i, 1.0, False, epoch, cause)), False,
+        cause, sid = ("reset", two_id) if epoch else ("", one_id)
+        samples += [(f"lunaris/{R}/clock", encode(Clock(t, 0.1, i, 1.0, False, epoch, cause, sid)), False,
                      wall + 10 * i),
                     (f"lunaris/{R}/battery/state", encode(BatteryState(
                         t, 5e5, 5.3e5, 0.9, 16.6, 16.5, 2.0, 33.0, 20.0, True, 0, [], 3600.0)), False,
@@ -199,7 +200,9 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
                 _event(12.0, "input", "input/sun_angle", "sun angle 75 deg", wall + 25),
                 _event(13.0, "scenario", "control/scenario", "scenario 'd': step 1/2 dust", wall + 35,
                        {"what": "step"}),
-                _event(0.0, "session", "control/reset", "session reset", wall + 51)]
+                _event(0.0, "session", "control/session", "session of 'Bob' begins", wall + 51, {
+                    "session": two_id, "trainee": "Bob", "from_snapshot": None, "started_wall": 1.7e9,
+                    "start_t_s": 0.0}, session=two_id)]
     path = tmp_path / "s.mcap"
     buf = io.BytesIO()
     rec = Recorder(buf, "test")
@@ -207,12 +210,12 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
         assert rec.write(*sample)
     rec.finish()
     path.write_bytes(buf.getvalue())
-    one, two = load_recording(path)[R].sessions.values()  # the reset began a second session
-    assert (one.id, two.id) == ("1", "2") and one.span_s == two.span_s == (0.0, 4.0)
+    one, two = load_recording(path)[R].sessions.values()  # the clock began a second session
+    assert (one.id, two.id) == (one_id, two_id) and one.span_s == two.span_s == (0.0, 4.0)
     assert [(e["kind"], e["at_s"]) for e in one.events] == [
         ("fault_injected", None), ("command", 1.0), ("input", 2.0), ("scenario", 3.0)]
     assert [(e["kind"], e["at_s"]) for e in two.events] == [("session", 0.0)]  # nothing of the first
-    assert load_session(path)[R].id == "2" and load_session(path, "1")[R].id == "1"  # default: the last
+    assert load_session(path)[R].id == two_id and load_session(path, one_id)[R].id == one_id  # the last
     assert load_session(path, "7") == {}
     assert "from" in add_thresholds(one, None)
     assert (60.0, "alarm 60 C") in one.thresholds["temperature"]
@@ -224,7 +227,7 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
     assert "rail 12V: on=false; the rail is now off" in texts and "step 1/2 dust" in texts
     assert "replayed" not in " ".join(texts)
     texts = [t.get_text() for t in draw(two, "test").axes[0].texts]
-    assert texts == ["session reset"]
+    assert texts == ["session of 'Bob' begins"]
 
 
 def test_labels_never_overlap_and_the_rest_are_counted():

@@ -36,7 +36,8 @@ class Tape:
 
     def tick(self, t: float, epoch: int, *, camera_w: float = 3.5, rail: str = "on",
              temperature_c: float = 20.0) -> None:
-        self.put("clock", encode(Clock(t, 0.1, 0, 1.0, False, epoch, "reset" if epoch else "")))
+        session = S2 if epoch else S1
+        self.put("clock", encode(Clock(t, 0.1, 0, 1.0, False, epoch, "reset" if epoch else "", session)))
         self.put("battery/state", encode(BatteryState(t, 5e5, 5.3e5, 0.9, 16.6, 16.5, 2.0, 33.0,
                                                       temperature_c, True, 0, [], 3600.0)))
         self.put("load/nav_camera/power", encode(LoadPower(t, camera_w, "5V_CH2", rail == "on", [])))
@@ -62,12 +63,22 @@ class Tape:
         return path
 
 
-def two_trainees(tape: Tape, ids: bool) -> None:
+S1, S2 = "20261125-090000", "20261125-100000"  # the clock's session ids (UTC, growing)
+
+
+def _opened(sid: str, trainee: str, t: float) -> dict:
+    """The params of the clock's event that opens a session (SPEC 12c)."""
+    return {"session": sid, "trainee": trainee, "from_snapshot": None, "started_wall": 1.7e9,
+            "start_t_s": t}
+
+
+def two_trainees(tape: Tape) -> None:
     """Trainee 1: a short on the navigation camera (0.05 ohm), the crew safes 5V_CH2.
-    Trainee 2 (after a reset, or a new session): the pack heating, a scenario's expectation met."""
-    s1, s2 = ("s-ada", "s-bob") if ids else ("", "")
-    if ids:
-        tape.event(0.0, "session", "control/session", params={"trainee": "Ada"}, session=s1)
+    Trainee 2 (a new session, begun by the clock): the pack heating, a scenario's expectation
+    met. The crew's and some of the twin's events carry no session (a service that had heard no
+    tick yet): the running session's."""
+    s1, s2 = S1, S2
+    tape.event(0.0, "session", "control/session", params=_opened(s1, "Ada", 0.0), session=s1)
     for i in range(300):
         tape.tick(round(i * 0.1, 3), 0)
     tape.event(30.0, "fault_injected", "fault/load/nav_camera/short", params={"resistance_ohm": 0.05},
@@ -84,13 +95,13 @@ def two_trainees(tape: Tape, ids: bool) -> None:
                message="rail 5V_CH2: reset; the rail is now off")
     tape.event(42.0, "fault_resolved", "rail/5V_CH2/tripped", actor="twin", session=s1)
     tape.tick(42.1, 0, camera_w=0.0, rail="off")
-    # the next trainee: a reset (without session ids), or a new session (with)
-    if ids:
-        tape.event(42.5, "session", "control/session", params={"trainee": "Bob"}, session=s2)
-    else:
-        tape.event(42.5, "session", "control/reset", message="session reset")
-    tape.event(42.6, "fault_cleared", "fault/load/nav_camera/short", session=s1)  # the reset's
-    for i in range(200):
+    # the next trainee: the clock closes the session, its first tick, the event that opens it
+    tape.event(42.5, "session", "sessions", params={"session": s1, "trainee": "Ada", "end_t_s": 42.5},
+               session=s1)
+    tape.tick(0.0, 1)
+    tape.event(0.0, "session", "control/session", params=_opened(s2, "Bob", 0.0), session=s2)
+    tape.event(0.0, "fault_cleared", "fault/load/nav_camera/short", session=s1)  # the end's, late
+    for i in range(1, 200):
         tape.tick(round(i * 0.1, 3), 1)
     tape.event(20.0, "fault_injected", "fault/battery/heating", actor="scenario", params={"heat_w": 45},
                session=s2)
@@ -112,14 +123,13 @@ def _report(path: Path, *args: str) -> list[dict]:
     return json.loads(done.stdout)
 
 
-@pytest.mark.parametrize("ids", [False, True], ids=["sessions-from-resets", "session-ids"])
-def test_two_trainees_in_one_recording_each_reported_with_nothing_of_the_other(tmp_path, ids):
+def test_two_trainees_in_one_recording_each_reported_with_nothing_of_the_other(tmp_path):
     tape = Tape()
-    two_trainees(tape, ids)
+    two_trainees(tape)
     path = tape.write(tmp_path / "day.mcap")
     first, second = _report(path)
-    assert [first["session"], second["session"]] == (["s-ada", "s-bob"] if ids else ["1", "2"])
-    assert (first["trainee"], second["trainee"]) == (("Ada", "Bob") if ids else (None, None))
+    assert [first["session"], second["session"]] == [S1, S2]
+    assert (first["trainee"], second["trainee"]) == ("Ada", "Bob")
 
     (short,) = first["faults"]
     assert short["key"] == P + "fault/load/nav_camera/short"
@@ -151,7 +161,7 @@ def test_two_trainees_in_one_recording_each_reported_with_nothing_of_the_other(t
 
 def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_path):
     tape = Tape()
-    two_trainees(tape, ids=False)
+    two_trainees(tape)
     path = tape.write(tmp_path / "day.mcap")
     recs = load_recording(path)
     one, two = recs[R].sessions.values()
@@ -162,13 +172,13 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     page = tmp_path / "second.html"
     done = run_tool("report", str(path), "-o", str(page))
     assert done.returncode == 0, done.stderr
-    assert "session 2 (1 other session(s) in the recording)" in done.stdout
+    assert f"session {S2} (1 other session(s) in the recording)" in done.stdout
     assert "1 fault(s), 1 of 1 expectation(s) met" in done.stdout
     html = page.read_text()
-    assert "Score sheet: session 2" in html and "battery/heating" in html and "isolate the heater" in html
+    assert f"Score sheet: session {S2}" in html and "battery/heating" in html and "isolate the heater" in html
     assert "met at 30.1" in html and "nav_camera" not in html
     png = tmp_path / "first.png"
-    done = run_tool("report", str(path), "--session", "1", "-o", str(png))
+    done = run_tool("report", str(path), "--session", S1, "-o", str(png))
     assert done.returncode == 0 and png.read_bytes()[:4] == b"\x89PNG"
     assert "1 fault(s), 0 of 0 expectation(s) met" in done.stdout
 
@@ -182,7 +192,7 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
 
 def test_a_recording_is_read_fast_and_whole_and_a_cut_one_as_far_as_it_goes(tmp_path):
     tape = Tape()
-    two_trainees(tape, ids=False)
+    two_trainees(tape)
     path = tape.write(tmp_path / "day.mcap")
     from mcap.reader import make_reader
     with open(path, "rb") as f:

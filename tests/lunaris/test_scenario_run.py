@@ -176,6 +176,9 @@ def test_the_shipped_shorted_camera_drill_played_with_a_scripted_crew_is_scored(
     met (SPEC 12d)."""
     p, ep = live.probe, live.endpoint
     p.clear_history()
+    # the trainee's session (SPEC 12c): what the twin did before is none of this crew's score
+    done = run_tool("session", "start", R, "--trainee", "crew 1", "--connect", ep)
+    assert done.returncode == 0, done.stdout + done.stderr
     scenario = ROOT / "config" / "scenarios" / "shorted-camera.yaml"
     summary_path, recording = tmp_path / "summary.json", tmp_path / "drill.mcap"
     env = env_without_zenoh_config()
@@ -208,8 +211,9 @@ def test_the_shipped_shorted_camera_drill_played_with_a_scripted_crew_is_scored(
 
     done = run_tool("report", str(recording), "--json")
     assert done.returncode == 0, done.stderr
-    drill = json.loads(done.stdout)[-1]  # the last session: the drill's, begun by its reset
-    short = next(f for f in drill["faults"] if f["key"] == keys.fault(R, "load/nav_camera", "short"))
+    drill = json.loads(done.stdout)[-1]  # the last session: the trainee's, the drill in it
+    assert drill["trainee"] == "crew 1"
+    (short,) = [f for f in drill["faults"] if f["key"] == keys.fault(R, "load/nav_camera", "short")]
     assert short["injected_by"] == "scenario"
     inj, symptom, acted = short["injected_t_s"], short["first_symptom_t_s"], short["first_crew_action_t_s"]
     assert 29.0 <= inj <= 40.0  # at_s 30, on the first tick after it (2 s ticks at x20)
