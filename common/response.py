@@ -360,7 +360,8 @@ class Response:
     def _clock(self, t: float, get: Any) -> None:
         epoch, sid = get("epoch", 0) or 0, get("session", "") or ""
         if sid and sid != self._current.id:
-            self._session_of(sid, t)
+            if self._session_of(sid, t) is not self._current:
+                return  # a late tick of an ended session: none of the running one's time
         if self._epoch is not None and epoch != self._epoch:
             self._forget_values()
         if self._epoch is None or epoch >= self._epoch:
