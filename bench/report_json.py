@@ -3,9 +3,10 @@
 Makes the recording first, as ``lunaris record`` would have written it from a live MAPP twin
 at 10 Hz: the composed models (services/composed.py) stepped for an hour of simulated time,
 every key the twin publishes each tick (clock, battery, 10 loads, 6 rails, the summary, 2
-panels, the umbilical, the radio link, the drive: 24 keys, ~864,000 messages), with a session
-of a trainee in it: a short on the navigation camera that trips 5V_CH2 (the crew safes the
-rail, the short is cleared, the crew brings it back), then the pack heating under a scenario
+panels, the umbilical, the radio link, the drive: 24 keys, ~864,000 messages), with a trainee's
+session in it (the clock's session id on every tick and event, SPEC 12c): a short on the
+navigation camera that trips 5V_CH2 (the crew safes the rail, the short is cleared, the crew
+brings it back), then the pack heating under a scenario
 (the crew switches 12V off, an expectation met), each event heard twice (the service's key
 and the journal's). Then times the command as a user runs it (a new process, imports
 included), three times, and the reading alone in-process.
@@ -45,6 +46,7 @@ from services.composed import ComposedTwin
 
 R = "mapp-1"
 P = f"lunaris/{R}/"
+SESSION = "20261125-090000"  # the trainee's session, as the clock names it (SPEC 12c)
 
 
 class Session:
@@ -64,7 +66,7 @@ class Session:
         self.seq += 1
         data = encode(Event(t_s=t, severity="info", source=source, kind=kind, key=P + key,
                             message=message, params=params, source_id=f"bench-{source}",
-                            seq=self.seq, actor=actor))
+                            seq=self.seq, actor=actor, session=SESSION))
         self.put(f"event/{source}", data)
         self.put("event", data)
 
@@ -75,13 +77,15 @@ def record(path: Path, minutes: float) -> int:
     ticks = int(minutes * 60 * rover.tick_hz)
     with open(path, "wb") as out:
         s = Session(out)
-        s.event(0.0, "session", "faults/journal", "journal opened", source="faults")
+        s.event(0.0, "session", "control/session", f"session {SESSION} of 'Ada' begins", source="clock",
+                params={"session": SESSION, "trainee": "Ada", "from_snapshot": None,
+                        "started_wall": 1.7e9, "start_t_s": 0.0})
         states: dict[str, str] = {}
         for i in range(ticks):
             twin.step()
             t = round(twin.t_s, 3)
             script(s, twin, t)
-            s.put("clock", encode(Clock(t, twin.dt_s, i, 1.0, False)))
+            s.put("clock", encode(Clock(t, twin.dt_s, i, 1.0, False, 0, "", SESSION)))
             b = twin.reading()
             s.put("battery/state", encode(BatteryState(t, b.energy_j, b.capacity_j, b.soc, b.ocv_v,
                                                        b.voltage_v, b.current_a, b.power_w,
@@ -174,7 +178,8 @@ def main() -> None:
               f"measuring the response {time.perf_counter() - t0:.2f} s")
         for session in json.loads(out):
             for f in session["faults"]:
-                print(f"  session {session['session']}: {f['fault']} injected {f['injected_t_s']:.1f} s, "
+                print(f"  session {session['session']} ({session['trainee']}): {f['fault']} injected "
+                      f"{f['injected_t_s']:.1f} s, "
                       f"symptom {f['first_symptom_t_s']}, first crew action {f['first_crew_action_t_s']}, "
                       f"resolved {f['resolved_t_s']}, {len(f['crew_actions'])} action(s)")
             for e in session["expectations"]:

@@ -307,8 +307,10 @@ def scenario_page() -> str:
             + _table(("source", "key", "fields"), sources)
             + "\n## The crew's response\n\nEach expectation is journalled as it is scored (a "
             "`scenario` event whose params hold `expectation`: label, condition, within_s, met, "
-            "at_t_s, armed_t_s, start_t_s) and shown by `lunaris report FILE.mcap --json` and "
-            "the console beside each fault's response (`common.response`, `common.symptoms`): "
+            "at_t_s, armed_t_s, start_t_s) and shown, per trainee session, by `lunaris report "
+            "FILE.mcap --json` (and its score sheet) and the console's `GET "
+            "/api/rovers/<rover>/response` (the running session, live) beside each fault's "
+            "response (`common.response`, `common.symptoms`): "
             "when it was injected, when the crew could first see it, the crew's actions (events "
             "with `actor: crew`) and when it was resolved. A symptom is the first derived alarm "
             "raised on the fault's component or the rail it sits on, or this value leaving the "
