@@ -460,8 +460,9 @@ class Response:
         sid = _get(ev, "session", "") or ""
         s = self._session_of(sid, self._t) if sid else self._current
         params = _get(ev, "params") or {}
-        if (kind == "session" and isinstance(params, Mapping) and "started_wall" in params
-                and params.get("session") == s.id):  # the clock's word that it opened
+        if (kind == "session" and _get(ev, "source") == "clock" and isinstance(params, Mapping)
+                and "started_wall" in params and params.get("session") == s.id):
+            # the clock's word that it opened (the rule of lunaris.client.events.session_opened)
             s.trainee = str(params.get("trainee") or "")
             self.version += 1
         if kind == "fault_injected":

@@ -21,10 +21,10 @@ _seq = itertools.count(1)
 
 
 def ev(r: Response, t: float, kind: str, key: str, *, actor: str = "instructor", params=None,
-       message: str = "", session: str = "", severity: str = "info") -> str:
+       message: str = "", session: str = "", severity: str = "info", source: str = "x") -> str:
     """An event: as its JSON object (a recording's), or, every other one without a session id,
     as the Struct (the mirror's)."""
-    e = Event(t_s=t, severity=severity, source="x", kind=kind, key=P + key, message=message or kind,
+    e = Event(t_s=t, severity=severity, source=source, kind=kind, key=P + key, message=message or kind,
               params=params, source_id="s", seq=next(_seq), actor=actor)
     if session or e.seq % 2 == 0:
         return r.event({f: getattr(e, f) for f in e.__struct_fields__} | (
@@ -345,7 +345,7 @@ A, B = "20261125-090000", "20261125-100000"  # session ids as the clock makes th
 
 def _opened(r: Response, t: float, sid: str, trainee: str) -> str:
     """The clock's event that opens a session (SPEC 12c)."""
-    return ev(r, t, "session", "control/session", session=sid, params={
+    return ev(r, t, "session", "control/session", session=sid, source="clock", params={
         "session": sid, "trainee": trainee, "from_snapshot": None, "started_wall": 1.7e9, "start_t_s": t})
 
 

@@ -44,13 +44,13 @@ class Tape:
         self.put("rail/5V_CH2/state", encode(RailState(t, 5.0, 1.0, 5.0, 5.0, rail)))  # type: ignore[arg-type]
 
     def event(self, t: float, kind: str, key: str, *, actor: str = "instructor", params=None,
-              message: str = "", session: str = "") -> None:
-        ev = Event(t_s=t, severity="info", source="power", kind=kind, key=P + key,
+              message: str = "", session: str = "", source: str = "power") -> None:
+        ev = Event(t_s=t, severity="info", source=source, kind=kind, key=P + key,
                    message=message or kind, params=params, source_id="abc", seq=next(self.seq),
                    actor=actor)
         raw = msgspec.to_builtins(ev) | ({"session": session} if session else {})
         data = msgspec.json.encode(raw)
-        self.put("event/power", data)  # heard twice: the service's key and the journal's
+        self.put(f"event/{source}", data)  # heard twice: the service's key and the journal's
         self.put("event", data)
 
     def write(self, path: Path) -> Path:
@@ -78,7 +78,7 @@ def two_trainees(tape: Tape) -> None:
     met. The crew's and some of the twin's events carry no session (a service that had heard no
     tick yet): the running session's."""
     s1, s2 = S1, S2
-    tape.event(0.0, "session", "control/session", params=_opened(s1, "Ada", 0.0), session=s1)
+    tape.event(0.0, "session", "control/session", params=_opened(s1, "Ada", 0.0), session=s1, source="clock")
     for i in range(300):
         tape.tick(round(i * 0.1, 3), 0)
     tape.event(30.0, "fault_injected", "fault/load/nav_camera/short", params={"resistance_ohm": 0.05},
@@ -99,7 +99,7 @@ def two_trainees(tape: Tape) -> None:
     tape.event(42.5, "session", "sessions", params={"session": s1, "trainee": "Ada", "end_t_s": 42.5},
                session=s1)
     tape.tick(0.0, 1)
-    tape.event(0.0, "session", "control/session", params=_opened(s2, "Bob", 0.0), session=s2)
+    tape.event(0.0, "session", "control/session", params=_opened(s2, "Bob", 0.0), session=s2, source="clock")
     tape.event(0.0, "fault_cleared", "fault/load/nav_camera/short", session=s1)  # the end's, late
     for i in range(1, 200):
         tape.tick(round(i * 0.1, 3), 1)
