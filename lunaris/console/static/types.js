@@ -103,6 +103,16 @@
  * @property {string} [session]
  */
 /**
+ * An expect step's score as it stands: met (true), missed (false), or not yet (null).
+ * @typedef {Object} ExpectProgress
+ * @property {string} label
+ * @property {string} condition
+ * @property {number} within_s
+ * @property {boolean | null} [met]
+ * @property {number | null} [met_t_s]
+ * @property {number | null} [deadline_t_s]
+ */
+/**
  * @typedef {Object} LoadPower
  * @property {number} t_s
  * @property {number} power_w
@@ -233,6 +243,7 @@
  * @property {string} [detail]
  * @property {number | null} [armed_t_s]
  * @property {number | null} [fired_t_s]
+ * @property {ExpectProgress | null} [expect]
  */
 /**
  * ``umbilical/state``: whether the umbilical supplies the rover, and where its cable was
