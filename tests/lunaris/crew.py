@@ -26,6 +26,9 @@ from common.connection import make_config, write
 def main(argv: list[str]) -> int:
     endpoint, rover, rail = argv[:3]
     hold_s = float(argv[3]) if len(argv) > 3 else 10.0
+    # a crew takes a moment to read its dashboard: it acts this long (sim s) after seeing a
+    # trip (acting at once, it switched the rail off before a loaded runner saw the trip)
+    react_s = float(argv[4]) if len(argv) > 4 else 10.0
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -47,6 +50,7 @@ def main(argv: list[str]) -> int:
             print(f"crew: {what}", flush=True)
 
         off_since: float | None = None
+        tripped_at: float | None = None
         safing = False
         print("crew: watching", rail, flush=True)
         while not stop.is_set():
@@ -55,9 +59,11 @@ def main(argv: list[str]) -> int:
                 seen, states[:] = list(states), []
             for t, state in seen:
                 if state == "tripped" and not safing:
-                    call({"on": False}, "set_enabled false")
-                    call({"reset": True}, "reset")
-                    safing, off_since = True, None
+                    tripped_at = t if tripped_at is None else tripped_at
+                    if t - tripped_at >= react_s:
+                        call({"on": False}, "set_enabled false")
+                        call({"reset": True}, "reset")
+                        safing, off_since, tripped_at = True, None, None
                 elif state == "off":
                     safing = False
                     off_since = t if off_since is None else off_since
