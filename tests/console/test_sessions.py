@@ -216,3 +216,46 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
     assert any(e["kind"] == "mark" and e["params"]["text"] == "Ana cleaned the left panel" for e in hers)
     assert not [e for e in his if e["kind"] in ("fault_injected", "fault_cleared")], his
     assert site.console.get(f"/api/rovers/{R}/journal?session=yesterday")[0] == 422
+
+
+FOLD = """
+const messages = arguments[0], done = arguments[arguments.length - 1];
+Promise.all([import('/static/stream.js'), import('/static/state.js')]).then(([stream, state]) => {
+  for (const m of messages) stream.receive(m);
+  const rover = 'race-1';
+  const events = (state.store.events[rover] ?? []).map((e) => e.message);
+  done({t: state.store.history[rover]?.t ?? [], events});
+}, (e) => done({error: String(e)}));
+"""
+
+
+def test_a_value_of_the_last_session_heard_late_is_not_plotted(page):
+    """The race the console cannot see: the battery's last value of Ana's session (sim time
+    13 s) is heard after the tick that begins Ben's (from a snapshot at 500 s), before the
+    clock's event that says where it began. The page drops it, and Ana's event that comes
+    late, so Ben's plots begin at 500 s. Fed to the page's own stream folding, for a rover of
+    its own (the live rover's state is left alone)."""
+    r, ana, ben = "race-1", "20000101-000000", "20000101-000100"
+
+    def battery(t: float) -> dict:
+        return {f"lunaris/{r}/battery/state": {"t_s": t, "soc": 0.9, "temperature_c": 20.0}}
+
+    def event(session: str, kind: str, message: str, params: dict | None = None) -> dict:
+        return {"t_s": 0, "severity": "info", "source": "clock" if kind == "session" else "faults",
+                "kind": kind, "key": f"lunaris/{r}/control/x", "message": message, "params": params,
+                "session": session}
+
+    messages = [{"type": "batch", "sessions": {r: {"id": ana, "trainee": "Ana"}}, "values": battery(t)}
+                for t in (10.0, 11.0, 12.0)]
+    messages += [  # as the twin says it: the clock's first tick of Ben's session, then its event
+        {"type": "batch", "sessions": {r: {"id": ben, "trainee": None}},
+         "values": {f"lunaris/{r}/clock": {"t_s": 500.2, "session": ben}}},
+        {"type": "batch", "values": battery(13.0), "events": [event(ana, "mark", "mark: Ana, late")]},
+        {"type": "batch", "events": [
+            event(ben, "session", "Ben begins", {"session": ben, "trainee": "Ben", "start_t_s": 500.0})]},
+        {"type": "batch", "values": battery(500.1)},
+        {"type": "batch", "values": battery(502.0)},
+    ]
+    page.set_script_timeout(10)
+    got = page.execute_async_script(FOLD, messages)
+    assert got == {"t": [500.1, 502.0], "events": ["Ben begins"]}, got

@@ -6,7 +6,7 @@
 // them either: an event of another session is never kept, and a plot's point from before the
 // new session's beginning (a value published just before it, heard just after) is dropped.
 
-import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, powerSummary, rovers, store} from "./state.js";
+import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, clock, powerSummary, rovers, store} from "./state.js";
 
 /** @typedef {import("./state.js").BatteryState} BatteryState */
 
@@ -69,6 +69,10 @@ export function receive(msg) {
   for (const e of msg.events ?? []) {
     const rover = e.key.split("/")[1];
     if (!ofSession(e, rover)) continue;
+    const t0 = startOf(e, store.sessions[rover]?.id ?? "");
+    if (t0 !== null && store.sessionStart[rover] !== undefined) {  // the tick came first: now exact
+      store.sessionStart[rover] = Math.min(store.sessionStart[rover], t0);
+    }
     const kept = (store.events[rover] ||= []);
     kept.push(e);
     if (kept.length > EVENTS_KEPT) kept.shift();
@@ -105,22 +109,32 @@ function sessionsOf(msg) {
 const ofSession = (e, rover) => !e.session || !store.sessions[rover] || e.session === store.sessions[rover].id;
 
 /**
+ * The sim time session `id` began at, if `e` is the clock's event that opened it.
+ * @param {TwinEvent} e @param {string} id @returns {number | null}
+ */
+function startOf(e, id) {
+  const p = e.params;
+  return e.kind === "session" && e.source === "clock" && p?.session === id && typeof p.start_t_s === "number"
+    ? p.start_t_s : null;
+}
+
+/**
  * The page saw the rover's session change to `id`: nothing of the previous one stays (its
- * events; the plots' points from before the new session's beginning, which the clock's event
- * that opened it gives: `start_t_s`, the snapshot's time for a session begun from one).
+ * events; the plots' points from before the new session's beginning: `start_t_s` of the
+ * clock's event that opened it, the snapshot's time for a session begun from one; or, as the
+ * clock's first tick of a session goes out before that event, the sim time of that tick).
  * @param {string} rover @param {string} id @param {TwinEvent[]} events what came with the change
  */
 function begin(rover, id, events) {
   store.events[rover] = (store.events[rover] ?? []).filter((e) => e.session === id);
-  const opened = events.find((e) => e.kind === "session" && e.source === "clock" && e.params?.session === id
-    && typeof e.params.start_t_s === "number");
-  const h = store.history[rover];
-  if (!opened) {
+  const opened = events.map((e) => startOf(e, id)).find((t) => t !== null);
+  const c = clock(rover), h = store.history[rover];
+  const t0 = opened ?? (c?.session === id ? c.t_s : null);
+  if (t0 === null || t0 === undefined) {
     delete store.sessionStart[rover];
     if (h) store.history[rover] = since(h, -Infinity);
     return;
   }
-  const t0 = /** @type {number} */ (opened.params?.start_t_s);
   store.sessionStart[rover] = t0;
   if (h) {
     store.history[rover] = since(h, t0);
