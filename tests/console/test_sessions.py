@@ -12,7 +12,8 @@ instructor runs a training day from the Session view:
   nothing of Ana's session (every event is Ben's session's, none names her fault or her mark),
   and the plots nothing of her history (every point the page keeps and draws is at or after
   the sim time Ben's session began from, later than anything of Ana's); Ben's mark shows;
-- the sessions list shows the three sessions: Ben's running, Ana's ended, the first.
+- the sessions list shows the three sessions: Ben's running, Ana's ended, the first; the view
+  fits and speaks plainly (a session is named by when it began, never by a long number).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from selenium.webdriver.support.select import Select
 from common import keys
 from testbed.browser import open_browser
 from tests.console.conftest import MAPP, Live, shoot, start_console
+from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
 from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router, stop_process, wait_for
 
@@ -155,10 +157,13 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
 
     # Ana, from the rover file.
     said = new_trainee(page, "Ana")
-    assert re.search(r"session \d{8}-\d{6} of 'Ana' begins", said), said
+    assert re.search(r"session \d+ \w{3} [\d:]{8} of 'Ana' begins", said), said
     WebDriverWait(page, 10).until(lambda d: header(d)[0] == "Ana", "the header to name Ana")
     ana = header(page)[1]
-    assert ana != first and ana in page.find_element(By.ID, "trainee").text
+    assert ana != first
+    named = page.find_element(By.CSS_SELECTOR, "#trainee small")  # the session by when it began
+    assert ana in named.get_attribute("title")
+    assert re.fullmatch(r"session of \d+ \w{3} \d\d:\d\d:\d\d", named.text), named.text
     assert page.find_element(By.ID, "session-answer").get_attribute("data-verdict") == "accepted"
     p.put(keys.fault(R, "solar/left", "dust"), {"fraction": 0.4})
     WebDriverWait(page, 10).until(lambda d: "solar/left/dust" in log_text(d), "Ana's fault in the log")
@@ -174,7 +179,7 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
 
     # Ben, from the snapshot "late".
     said = new_trainee(page, "Ben", "late")
-    assert re.search(r"session \d{8}-\d{6} of 'Ben' begins: snapshot 'late' restored", said), said
+    assert re.search(r"session \d+ \w{3} [\d:]{8} of 'Ben' begins: snapshot 'late' restored", said), said
     WebDriverWait(page, 10).until(lambda d: header(d)[0] == "Ben", "the header to name Ben")
     ben = header(page)[1]
     assert ben not in (first, ana)
@@ -206,6 +211,9 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
     assert "running" in got[ben][1] and "running" not in got[ana][1] and "(no trainee named)" in got[first][1]
     assert "from snapshot late" in got[ben][1]
     shoot(page, artefacts, "sessions")
+    problems = [f"session view: {x}" for x in page.execute_script(LAYOUT)]
+    problems += [f"session view: {x}" for x in vocabulary(page.execute_script(TEXT), field_names())]
+    assert not problems, "\n".join(problems)
     wait_for(lambda: site.console.get(f"/api/rovers/{R}/sessions")[0] == 200, 10, "the sessions API")
     _, infos = site.console.get(f"/api/rovers/{R}/sessions")
     assert [s["trainee"] for s in infos] == ["", "Ana", "Ben"], infos

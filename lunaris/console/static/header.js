@@ -4,7 +4,7 @@
 
 import {html, nothing} from "./vendor/lit-html/lit-html.js";
 import {send} from "./api.js";
-import {clockText, fmt} from "./format.js";
+import {clockText, fmt, sessionName} from "./format.js";
 import {activeFaults, battery, clock, linkLost, pickRover, pickView, rovers, runningSession, store} from "./state.js";
 import {VIEWS} from "./views/index.js";
 import {actionButton, traineeWords} from "./widgets.js";
@@ -26,7 +26,8 @@ export function traineeBar() {
   const r = store.rover, s = r ? runningSession(r) : undefined;
   if (!r || !s) return nothing;
   return html`<span class="label">trainee</span> <b id="trainee-now" data-session=${s.id}
-    data-trainee=${s.trainee ?? nothing}>${traineeWords(s)}</b> <small title="the session's id, as lunaris report --session takes it">session ${s.id}</small>`;
+    data-trainee=${s.trainee ?? nothing}>${traineeWords(s)}</b> <small title=${`session ${s.id} (what lunaris report --session takes)`}
+    >session of ${sessionName(s.id)}</small>`;
 }
 
 /** The sim time, its speed, PAUSED, and Pause or Resume. */

@@ -5,7 +5,7 @@
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {WORDS, answer, query, send} from "../api.js";
-import {clockText, dur, emptyWords, fmt, nameProblem, plainMessage, wallTime} from "../format.js";
+import {clockText, dayTime, dur, emptyWords, fmt, nameProblem, plainMessage, sessionName, wallTime} from "../format.js";
 import {battery, changed, clock, runningSession} from "../state.js";
 import {actionButton, eventsCard, field, traineeWords} from "../widgets.js";
 
@@ -191,7 +191,8 @@ function traineeCard(r) {
   };
   return html`<section class="card" id="trainee-card"><h2>Trainee</h2>
     <p class="now" id="session-now" data-session=${s?.id ?? nothing}>${s
-    ? html`Now: <b>${traineeWords(s)}</b> <small>session ${s.id}</small>` : "The running session is not known yet."}</p>
+    ? html`Now: <b>${traineeWords(s)}</b> <small title=${`session ${s.id}`}>in the session begun ${sessionName(s.id)}</small>`
+    : "The running session is not known yet."}</p>
     <p class="help">A new trainee's session ends the running one: the twin starts again, every injected fault
       cleared, and the plots, the event log and the journal start empty. Each session is kept apart for the debrief.</p>
     <div class="row"><label>Trainee or crew <small>letters, digits, spaces, - _ . ' &amp;</small>
@@ -212,9 +213,9 @@ function sessionList(res, r) {
   return html`<table><tr><th>trainee</th><th>began on</th><th class="num">sim start</th><th class="num">sim end</th>
     <th class="num">events</th></tr>${[...res.data].reverse().map((x) => html`<tr data-session=${x.id}
       data-trainee=${x.trainee} class=${x.end_t_s === null ? "running" : ""}>
-    <td class="wrap">${x.trainee || "(no trainee named)"}<br><small>${x.id}${x.from_snapshot
-      ? ` · from snapshot ${x.from_snapshot}` : ""}</small></td>
-    <td>${x.started_wall === null ? "–" : wallTime(x.started_wall)}</td>
+    <td class="wrap" title=${`session ${x.id}`}>${x.trainee || "(no trainee named)"}${x.from_snapshot
+      ? html`<br><small>from snapshot ${x.from_snapshot}</small>` : nothing}</td>
+    <td>${x.started_wall === null ? sessionName(x.id) : dayTime(x.started_wall)}</td>
     <td class="num">${clockText(x.start_t_s)}</td>
     <td class="num">${x.end_t_s === null ? html`<b>${x.id === running ? "running" : "not ended"}</b>` : clockText(x.end_t_s)}</td>
     <td class="num">${x.events ?? 0}</td></tr>`)}</table>`;
