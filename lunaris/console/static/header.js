@@ -25,7 +25,7 @@ export function roverTabs() {
 export function traineeBar() {
   const r = store.rover, s = r ? runningSession(r) : undefined;
   if (!r || !s) return nothing;
-  return html`<span class="label">trainee</span> <b id="trainee-now" data-session=${s.id}
+  return html`${s.trainee ? html`<span class="label">trainee</span> ` : nothing}<b id="trainee-now" data-session=${s.id}
     data-trainee=${s.trainee ?? nothing}>${traineeWords(s)}</b> <small title=${`session ${s.id} (what lunaris report --session takes)`}
     >session of ${sessionName(s.id)}</small>`;
 }
