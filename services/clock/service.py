@@ -302,7 +302,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
     def going_on(rover: str) -> str:
         clock = clocks[rover]
-        return (f"the session {clock.session} of {_who(clock.trainee)} goes on" if clock.session
+        return (f"the session {clock.session} {_who(clock.trainee)} goes on" if clock.session
                 else "the running session goes on")
 
     def new_session(rover: str, key: str, trainee: str, snapshot: str | None, held: list[str],
@@ -313,7 +313,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         clock = clocks[rover]
         if clock.session:  # closed in its own words, in its own segment of the journal
             rt.event(rover, "info", "session", keys.sessions(rover),
-                     f"session {clock.session} of {_who(clock.trainee)} ends at t={clock.t_s:.1f} s: "
+                     f"session {clock.session} {_who(clock.trainee)} ends at t={clock.t_s:.1f} s: "
                      "the next trainee's session begins",
                      {"session": clock.session, "trainee": clock.trainee, "end_t_s": clock.t_s},
                      actor=actor)
@@ -345,7 +345,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             begin(rover)
         params: dict[str, Any] = {"session": sid, "trainee": trainee, "from_snapshot": snapshot,
                                   "started_wall": wall, "start_t_s": clock.t_s}
-        rt.event(rover, "info", "session", key, f"session {sid} of {_who(trainee)} begins: {how}",
+        rt.event(rover, "info", "session", key, f"session {sid} {_who(trainee)} begins: {how}",
                  params, actor=actor)
 
     def first_session(rover: str) -> None:
@@ -392,7 +392,8 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
 
 
 def _who(trainee: str) -> str:
-    return repr(trainee) if trainee else "no trainee named"
+    """``of 'Ana'``, or ``with no trainee named`` (the twin's first session)."""
+    return f"of {trainee!r}" if trainee else "with no trainee named"
 
 
 def _in(session: str) -> str:
