@@ -213,8 +213,8 @@ function sessionList(res, r) {
   return html`<table><tr><th>trainee</th><th>began on</th><th class="num">sim start</th><th class="num">sim end</th>
     <th class="num">events</th></tr>${[...res.data].reverse().map((x) => html`<tr data-session=${x.id}
       data-trainee=${x.trainee} class=${x.end_t_s === null ? "running" : ""}>
-    <td class="wrap" title=${`session ${x.id}`}>${x.trainee || "(no trainee named)"}${x.from_snapshot
-      ? html`<br><small>from snapshot ${x.from_snapshot}</small>` : nothing}</td>
+    <td class="wrap">${x.trainee || "(no trainee named)"}<br><small title="what lunaris report --session takes">${x.id}${
+      x.from_snapshot ? ` · from snapshot ${x.from_snapshot}` : ""}</small></td>
     <td>${x.started_wall === null ? sessionName(x.id) : dayTime(x.started_wall)}</td>
     <td class="num">${clockText(x.start_t_s)}</td>
     <td class="num">${x.end_t_s === null ? html`<b>${x.id === running ? "running" : "not ended"}</b>` : clockText(x.end_t_s)}</td>
