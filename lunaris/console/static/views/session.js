@@ -177,9 +177,9 @@ function traineeCard(r) {
       return;
     }
     const ending = s?.trainee ? `${s.trainee}'s session ends` : "The running session ends";
-    const from_words = from ? `restored to the snapshot "${from}"` : "back to its rover file";
-    if (!confirm(`Start ${name}'s session on ${r}? ${ending}; the twin goes ${from_words}, every injected fault `
-      + "cleared, and the plots and the event log start empty.")) return;
+    const how = from ? `the twin is restored to the snapshot "${from}"` : "the twin goes back to its rover file";
+    if (!confirm(`Start ${name}'s session on ${r}? ${ending}; ${how}, every injected fault cleared, and the plots `
+      + "and the event log start empty.")) return;
     const res = await send("PUT", "control/session", JSON.stringify(from ? {trainee: name, from_snapshot: from}
       : {trainee: name}), r);
     answers.started[r] = res;
