@@ -27,6 +27,7 @@ __all__ = [
     "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION",
     "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY",
     "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE",
+    "DELETABLE",
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
@@ -334,7 +335,8 @@ class Family(NamedTuple):
         if (name is None) != (self.placeholder is None):
             wants = f"a {self.placeholder}" if self.placeholder else "no"
             raise TypeError(f"the key of {self.name} takes {wants} name")
-        return "/".join([ROOT, rover, *((name or c) if c.startswith("{") else c for c in self.chunks)])
+        named = name or ""  # "" gives a prefix: faults_active(rover, "") -> .../faults/active/
+        return "/".join([ROOT, rover, *(named if c.startswith("{") else c for c in self.chunks)])
 
     def matches(self, parts: list[str] | tuple[str, ...]) -> bool:
         return len(parts) == len(self.chunks) and all(
@@ -395,6 +397,11 @@ FAMILIES: tuple[Family, ...] = (
     PREDICTION,
     SCENARIO_PROGRESS,
 )
+
+
+# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
+# gone, the rover stopped (by family name).
+DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
 
 
 def families(direction: Direction | None = None) -> tuple[Family, ...]:

@@ -116,7 +116,9 @@ class BatteryState(_Msg):
     fault_code: int
     faults: list[str]
     time_to_empty_s: float | None  # null while charging or idle
-    heat_w: float = 0.0
+    heat_w: Annotated[float, msgspec.Meta(description=(
+        "the heat of the pack's own electrical losses (I^2 R) [W]; an injected heating fault is "
+        "not in it: it shows only as the temperature it raises"))] = 0.0
     polarisation_v: list[float] = []  # the equivalent circuit's branch voltages (rc_pairs)
     depleted_soc: Annotated[float, msgspec.Meta(description=(
         "the state of charge at which the pack counts as empty and goes off line (0..1, the "

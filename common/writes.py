@@ -28,9 +28,7 @@ from common.session import parse_control
 __all__ = ["DELETABLE", "FAULT_OWNERS", "Write", "answer_of", "check_chunks", "plan_write",
            "snapshot_name_problem"]
 
-# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
-# gone, the rover stopped.
-DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
+DELETABLE = keys.DELETABLE  # the inputs that take a delete
 # The service that owns (and answers for) each component type of the fault catalogue.
 FAULT_OWNERS = {"battery": "battery", "load": "loads", "rail": "power", "solar": "solar",
                 "umbilical": "solar", "radio": "radio"}

@@ -280,7 +280,7 @@ def faults_page() -> str:
 
 
 def mapping_page() -> str:
-    converters = [(f"`{name}`", f"`{c.type}`", f"`lunaris/{{rover}}/{'/'.join(c.shape)}`",
+    converters = [(f"`{name}`", f"`{c.type}`", f"`{c.key}`",
                    ", ".join(sorted(c.options)) or "-") for name, c in CONVERTERS.items()]
     return (f"# The bridge mapping\n\n{GENERATED}"
             "A YAML file in `config/bridge/` maps twin keys onto the dashboard's ROS 2 topics, "

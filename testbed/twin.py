@@ -149,14 +149,16 @@ def free_endpoint() -> str:
     return f"tcp/127.0.0.1:{free_port()}"
 
 
-def json_bridge_extra(folder: Path) -> dict[str, list[str]]:
+def json_bridge_extra(folder: Path, crew_view: str = "symptoms") -> dict[str, list[str]]:
     """``Twin(extra=...)`` for a bridge with the shipped mapping and its json flavour on too
-    (the shipped mapping leaves it off), so a test can read the dashboard topics as JSON."""
+    (the shipped mapping leaves it off), so a test can read the dashboard topics as JSON; in
+    the crew's view (``symptoms``, the shipped default) or ``full`` (every fault in effect)."""
     text = (ROOT / "config" / "bridge" / "default.yaml").read_text()
-    assert "json: {enabled: false, prefix: json}" in text
+    assert "json: {enabled: false, prefix: json}" in text and "crew_view: symptoms" in text
     path = folder / "every-flavour.yaml"
     path.write_text(text.replace("json: {enabled: false, prefix: json}",
-                                 "json: {enabled: true, prefix: json}"))
+                                 "json: {enabled: true, prefix: json}")
+                    .replace("crew_view: symptoms", f"crew_view: {crew_view}"))
     return {"bridge": ["--bridge-config", str(path)]}
 
 
