@@ -47,7 +47,7 @@ from tests.harness import (
 pytestmark = pytest.mark.timeout(240)
 
 R = "mapp-1"
-VIEWS = ("live", "map", "faults", "inputs", "session", "scenarios", "recordings")
+VIEWS = ("live", "map", "faults", "crew", "inputs", "session", "scenarios", "recordings")
 SIZES = ((1280, 800, ""), (820, 1180, "-tablet"))
 SHIPPED = ROOT / "config" / "scenarios"
 
