@@ -39,6 +39,7 @@ __all__ = [
     "DustInput",
     "Event",
     "EventKind",
+    "ExpectationMark",
     "Severity",
     "SessionInfo",
     "SessionStart",
@@ -491,14 +492,31 @@ BARE_FIELD: dict[type[msgspec.Struct], str] = {
 }
 
 
+class ExpectationMark(_Input):
+    """An expectation of a scenario scored (SPEC §12d), as the journal keeps it: the params of
+    its ``scenario`` event hold it under ``expectation``. Times are the rover's sim time [s]."""
+
+    index: Annotated[int, msgspec.Meta(ge=0, le=10_000)]  # the step, from 0
+    label: Annotated[str, msgspec.Meta(max_length=200)]
+    condition: Annotated[str, msgspec.Meta(max_length=1000)]
+    within_s: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
+    met: bool
+    at_t_s: float | None = None  # when it was met; null when missed
+    armed_t_s: float | None = None  # when the crew's time began; null: never armed
+    start_t_s: float | None = None  # when the scenario started
+    detail: Annotated[str, msgspec.Meta(max_length=1000)] = ""
+
+
 class ScenarioMark(_Input):
     """``control/scenario``: a scenario's progress, put by the player so that the journal (and
-    the debrief) marks when it started, each step that fired and how it ended."""
+    the debrief) marks when it started, each step that fired, each expectation scored and how
+    it ended."""
 
     scenario: Annotated[str, msgspec.Meta(min_length=1, max_length=200)]
-    what: Literal["start", "step", "end"]
+    what: Literal["start", "step", "end", "expect"]
     message: Annotated[str, msgspec.Meta(max_length=1000)]
     step: Annotated[int, msgspec.Meta(ge=0, le=10_000)] | None = None
+    expectation: ExpectationMark | None = None  # with what: expect
 
 
 TRAINEE_MAX = 64  # characters of a trainee's name

@@ -29,6 +29,7 @@ from common.datafile import struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RETIRED_CODES, NoParams
 from common.messages import Prediction, PredictionRequest, SessionInfo, SessionStart, TimelineMark
 from common.scenario import Scenario
+from common.symptoms import SYMPTOMS, TOLERANCE
 from common.traverse import TraverseFile
 from services.bridge import CONVERTERS, MappingFile
 
@@ -291,6 +292,8 @@ def mapping_page() -> str:
 
 
 def scenario_page() -> str:
+    symptoms = [(f"`{c}/{k}`", f"`{spec.family}` `{spec.field}` ({spec.direction})", spec.words)
+                for (c, k), spec in SYMPTOMS.items()]
     sources = [(f"`{name}`" + (f".<{fam.placeholder}>" if fam.placeholder else ""),
                 f"`{fam.name}`", ", ".join(f"`{f.encode_name}`"
                                            for f in struct_fields(fam.payload)))
@@ -301,7 +304,22 @@ def scenario_page() -> str:
             + struct_table(Scenario)
             + "\n## Conditions\n\n`when:` is `<source>.<field> <op> <value>` joined by `and`, "
             "`op` one of `< <= > >= == !=`, `value` a number, `true`/`false` or a word:\n\n"
-            + _table(("source", "key", "fields"), sources))
+            + _table(("source", "key", "fields"), sources)
+            + "\n## The crew's response\n\nEach expectation is journalled as it is scored (a "
+            "`scenario` event whose params hold `expectation`: label, condition, within_s, met, "
+            "at_t_s, armed_t_s, start_t_s) and shown, per trainee session, by `lunaris report "
+            "FILE.mcap --json` (and its score sheet) and the console's `GET "
+            "/api/rovers/<rover>/response` (the running session, live) beside each fault's "
+            "response (`common.response`, `common.symptoms`): "
+            "when it was injected, when the crew could first see it, the crew's actions (events "
+            "with `actor: crew`) and when it was resolved. A symptom is the first derived alarm "
+            "raised on the fault's component or the rail it sits on, or this value leaving the "
+            "band it kept the minute before (widened by "
+            + ", ".join(f"`{name}` {a:g} {name.rsplit('_', 1)[-1].upper()}"
+                        + (f" or {rel * 100:g} %, the larger" if rel else "")
+                        for name, (a, rel, _) in TOLERANCE.items())
+            + "); none (null) when it stays in it:\n\n"
+            + _table(("fault", "value watched", "symptom"), symptoms))
 
 
 def traverse_page() -> str:

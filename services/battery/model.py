@@ -439,8 +439,7 @@ class BatteryModel:
             tte = usable_j / drain_w if usable_j > 0.0 else 0.0
             if not math.isfinite(tte):
                 tte = None  # a vanishing draw: as good as idle
-        # What the pack's own losses make (I^2 R in its resistances): an instructor's heating is
-        # not among them, so the crew learns of it only as a temperature that rises (SPEC 12b)
+        # the pack's own losses (I^2 R): an injected heating shows only as temperature (SPEC 12b)
         heat_w = point.current_a**2 * r0 + sum(
             v * v / r for v, r in zip(self.branch_v, rj, strict=True) if r > 0.0)
         return BatteryReading(

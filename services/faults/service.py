@@ -180,8 +180,11 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             if s.deleted:
                 raise BadInput("a scenario mark is a put")
             mark = decode_input(s.payload, ScenarioMark)
+            params = {"scenario": mark.scenario, "what": mark.what, "step": mark.step}
+            if mark.expectation is not None:  # an expectation scored (SPEC 12d)
+                params["expectation"] = msgspec.to_builtins(mark.expectation)
             rt.event(s.rover, "info", "scenario", s.key, f"scenario {mark.scenario!r}: {mark.message}",
-                     {"scenario": mark.scenario, "what": mark.what, "step": mark.step})
+                     params)
             return
         control = parse_control(s.parts)
         if control is None:

@@ -150,7 +150,9 @@ def test_inject_and_clear_a_fault_from_the_page(live, page, artefacts):
     click(page, f'#f-buttons [data-action="fault-inject"][data-rover="{R}"][data-component="battery"]'
                 '[data-kind="heating"]')
     assert "injected battery/heating" in last_answer(page, "accepted")
-    p.wait_value(keys.battery_state(R), lambda b: b["heat_w"] >= 400)  # on the twin's keys
+    heating = keys.fault(R, "battery", "heating")
+    p.wait_value(keys.faults_active(R, "battery"),  # on the twin's keys (telemetry shows no fault)
+                 lambda v: any(f["key"] == heating for f in v["faults"]))
     WebDriverWait(page, 10).until(lambda d: d.find_elements(
         By.CSS_SELECTOR, '#faults-list tr[data-fault="battery/heating"]'))  # on the page
     shoot(page, artefacts, "faults", doc=False)
@@ -158,7 +160,7 @@ def test_inject_and_clear_a_fault_from_the_page(live, page, artefacts):
     wait_text(page, "battery/state", "faults", "none")  # the crew's telemetry never names it
     click(page, '#faults-list [data-action="fault-clear"][data-component="battery"][data-kind="heating"]')
     assert "cleared battery/heating" in last_answer(page, "accepted")
-    p.wait_value(keys.battery_state(R), lambda b: b["heat_w"] < 5)
+    p.wait_value(keys.faults_active(R, "battery"), lambda v: all(f["key"] != heating for f in v["faults"]))
     WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#faults-list .none"))
     wait_text(page, "battery/state", "faults", "none")
 

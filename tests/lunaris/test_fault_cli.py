@@ -49,7 +49,8 @@ def test_an_injection_with_a_json_object_and_a_replacement(live):
         again = run_tool("fault", "inject", R, "battery", "heating", "7.5", "--connect", ep)
         assert (first.returncode, again.returncode) == (0, 0), first.stderr + again.stderr
         assert "injected battery/heating" in first.stdout and "replaced battery/heating" in again.stdout
-        live.probe.wait_value(keys.battery_state(R), lambda b: b["heat_w"] >= 7.5)
+        live.probe.wait_value(keys.faults_active(R, "battery"), lambda v: [
+            f["params"] for f in v["faults"] if f["key"].endswith("/battery/heating")] == [{"heat_w": 7.5}])
     finally:
         assert run_tool("fault", "clear", R, "battery", "heating", "--connect", ep).returncode == 0
 
