@@ -1,11 +1,13 @@
-"""What the crew sees, on the console's page (SPEC §12b, issue 25).
+"""What the crew sees and how it responds, on the console's page (SPEC §12b, §12d, issue 25).
 
 A twin of the MAPP rover (without its drive) and a console given its rover file; in a real
-browser at 1280x800 the instructor opens the "Crew sees" view: with nothing wrong every part
-reads OK; after a short is injected on the navigation camera, the crew's alarms show rail
-5V_CH2's over-current trip and its readings the rail's 0 mA, while nothing the crew sees names
-the short, its resistance or an injection; beside it the instructor's own active faults name
-the short. The crew's controls are listed with what they do. The view fits and speaks plainly.
+browser at 1280x800 the instructor opens the "Crew" view: with nothing wrong every part reads
+OK; after a short is injected on the navigation camera, the crew's alarms show rail 5V_CH2's
+over-current trip and its readings the rail's 0 mA, while nothing the crew sees names the
+short, its resistance or an injection; beside it the instructor's own active faults name the
+short. The crew's controls are listed with what they do. The crew's response (SPEC 12d) shows
+the fault with the crew not acted yet, then the crew's own command as its action. The view fits
+and speaks plainly.
 """
 
 from __future__ import annotations
@@ -92,6 +94,17 @@ def test_the_instructor_sees_what_the_crew_sees(site, page, artefacts):
         assert {"/pdm/rail_5V_CH2/set_enabled", "/pdm/rail_5V_CH2/reset"} <= services, services
         reset = page.find_element(By.CSS_SELECTOR, '#crew-controls tr[data-service="/pdm/rail_5V_CH2/reset"]')
         assert "resets rail 5V_CH2" in reset.text
+        # The crew's response, live: the fault seen, the crew not acted yet; then the crew's
+        # own command (actor crew, as its dashboard sends it) shows as its action.
+        fault_row = '#crew-response tr[data-fault="load/nav_camera/short"]'
+        row = WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, fault_row),
+                                            "the fault in the crew's response")[0]
+        assert row.get_attribute("data-acted") == "false" and "not yet" in row.text, row.text
+        p.session.put(keys.cmd_rail(R, "5V_CH2"), b'{"on": false}', attachment=b"actor=crew")
+        acted = f'{fault_row}[data-acted="true"]'
+        row = WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, acted),
+                                            "the crew's action in its response")[0]
+        assert "acted" in row.text and "5V_CH2" in row.text, row.text
         shoot(page, artefacts, "crew-short", doc=False)  # the docs take test_views.py's
         problems = [f"crew view: {x}" for x in page.execute_script(LAYOUT)]
         problems += [f"crew view: {x}" for x in vocabulary(page.execute_script(TEXT), field_names())]
@@ -99,5 +112,6 @@ def test_the_instructor_sees_what_the_crew_sees(site, page, artefacts):
     finally:
         p.delete(short)
         p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})  # the crew switched it off
         p.wait_value(rail, lambda v: v["state"] == "on")
     WebDriverWait(page, 10).until(lambda d: d.find_elements(By.ID, "crew-all-ok"), "every part OK again")

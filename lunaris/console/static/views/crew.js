@@ -1,12 +1,13 @@
-// What the crew sees (SPEC 12b): the crew's dashboard as the bridge renders it now
+// The crew: what it sees (SPEC 12b), the crew's dashboard as the bridge renders it now
 // (`GET /api/rovers/<rover>/crew`): its alarms (/diagnostics), its readings (every topic the
-// mapping publishes) and the controls it may call; beside them the faults the instructor put
-// in effect, so the instructor sees what the crew has to diagnose from. Asked again every
-// CREW_S seconds while the view shows.
+// mapping publishes) and the controls it may call; how it responds (SPEC 12d, `GET
+// /api/rovers/<rover>/response`): each fault of the session with its first symptom, the
+// crew's actions and its resolution, the drill's expectations met or missed; beside them the
+// faults the instructor put in effect. Asked again every CREW_S seconds while the view shows.
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {query} from "../api.js";
-import {clockText, fieldLabel, num, partName, plainMessage} from "../format.js";
+import {clockText, dur, faultName, fieldLabel, num, partName, plainMessage, words} from "../format.js";
 import {changed} from "../state.js";
 import {checkFaults, faultsCard} from "../widgets.js";
 import {clearFault} from "./live.js";
@@ -22,17 +23,80 @@ import {clearFault} from "./live.js";
  */
 /** @template T @typedef {{ok: true, data: T} | {ok: false, message: string}} Result */
 
-/** How often the crew's view is asked again, in seconds, while it shows. */
+/**
+ * What `GET /api/rovers/<rover>/response` answers (lunaris/console/response.py,
+ * common.response.LiveResponse): the crew's response in the running session (SPEC 12d).
+ * @typedef {{t_s: number, action: string, target: string, accepted: boolean, message?: string}} CrewAction
+ * @typedef {{key: string, fault: string, injected_t_s: number, first_symptom_t_s: number | null,
+ *   first_crew_action_t_s: number | null, resolved_t_s: number | null, crew_actions: CrewAction[],
+ *   symptom: string, active: boolean, since_injection_s: number | null, crew_acted: boolean,
+ *   response_s: number | null, resolved_by: string}} LiveFault
+ * @typedef {{label: string, met: boolean | null, at_t_s: number | null, within_s: number,
+ *   deadline_t_s: number | null, scenario: string, detail: string}} Expectation
+ * @typedef {{rover: string, session: string, trainee: string | null, t_s: number | null,
+ *   faults: LiveFault[], expectations: Expectation[]}} LiveResponse
+ */
+
+/** How often the crew's view and response are asked again, in seconds, while they show. */
 const CREW_S = 2;
-/** The last answer by rover, and when it was asked (ms). */
+/** The last answers by rover, and when they were asked (ms). */
 const seen = /** @type {Record<string, Result<CrewView>>} */ ({});
+const responses = /** @type {Record<string, Result<LiveResponse>>} */ ({});
 const asked = /** @type {Record<string, number>} */ ({});
 
 /** @param {string} rover */
 async function load(rover) {
   asked[rover] = Date.now();
-  seen[rover] = await query(`/api/rovers/${encodeURIComponent(rover)}/crew`);
+  const r = encodeURIComponent(rover);
+  [seen[rover], responses[rover]] = await Promise.all([query(`/api/rovers/${r}/crew`), query(`/api/rovers/${r}/response`)]);
   changed();
+}
+
+/** @param {CrewAction} a one action of the crew, in words */
+const actionWords = (a) => `${clockText(a.t_s)} ${words(a.action)} ${a.target}${a.accepted ? "" : " (refused)"}`;
+
+/** @param {LiveFault} f */
+function faultRow(f) {
+  const bits = f.fault.split("/"), kind = bits.pop() ?? "", component = bits.join("/");
+  const acted = f.first_crew_action_t_s !== null;
+  return html`<tr data-fault=${f.fault} data-acted=${String(acted)} data-resolved=${String(f.resolved_t_s !== null)}>
+    <td class="wrap">${partName(component)}: ${faultName(component, kind)}<br><small>injected ${clockText(f.injected_t_s)}${
+      f.active && f.since_injection_s !== null ? ` · ${dur(f.since_injection_s)} ago` : ""}</small></td>
+    <td class="wrap">${f.first_symptom_t_s === null ? html`<span class="muted">nothing yet</span>`
+      : html`${clockText(f.first_symptom_t_s)}<br><small>${plainMessage(f.symptom)}</small>`}</td>
+    <td class="wrap">${acted ? html`<b class="st-on">acted</b>${f.response_s === null ? "" : ` ${dur(f.response_s)} after the symptom`}
+      <br><small>${f.crew_actions.map(actionWords).join(" · ")}</small>`
+      : html`<span class=${f.first_symptom_t_s !== null && f.active ? "sev-warning" : "muted"}>not yet</span>`}</td>
+    <td class="wrap">${f.resolved_t_s === null ? (f.active ? "in effect" : "cleared")
+      : html`${clockText(f.resolved_t_s)}${f.resolved_by ? html`<br><small>${plainMessage(f.resolved_by)}</small>` : nothing}`}</td></tr>`;
+}
+
+/** @param {Expectation} e @param {number | null} now */
+function expectationRow(e, now) {
+  const state = e.met === true ? html`<b class="st-on">met</b> at ${e.at_t_s === null ? "–" : clockText(e.at_t_s)}`
+    : e.met === false ? html`<b class="sev-critical">missed</b>`
+      : e.deadline_t_s !== null && now !== null ? html`waiting: ${dur(Math.max(0, e.deadline_t_s - now))} left`
+        : html`not started`;
+  return html`<tr data-expectation=${e.label} data-met=${String(e.met)}><td class="wrap">${e.label}${e.detail
+    ? html`<br><small>${plainMessage(e.detail)}</small>` : nothing}</td><td class="num">${dur(e.within_s)}</td><td>${state}</td></tr>`;
+}
+
+/** @param {Result<LiveResponse> | undefined} res the crew's response in the running session */
+function responseCard(res) {
+  if (res === undefined) return nothing;
+  if (!res.ok) {
+    return html`<section class="card" id="crew-response"><h2>The crew's response</h2>
+      <p class="error">Not known: ${plainMessage(res.message)}</p></section>`;
+  }
+  const v = res.data;
+  return html`<section class="card" id="crew-response"><h2>The crew's response <small>${v.trainee ? `${v.trainee}'s session`
+    : "this session"}</small></h2>
+    <p class="help">Each fault injected in this session: when the crew could first see it, whether and when it acted,
+      when it was resolved; and the drill's expectations as they are met or missed.</p>
+    ${v.faults.length ? html`<table><tr><th>fault</th><th>first symptom</th><th>crew</th><th>resolved</th></tr>
+      ${v.faults.map((f) => faultRow(f))}</table>` : html`<p id="crew-no-fault">No fault injected in this session yet.</p>`}
+    ${v.expectations.length ? html`<table class="expect"><tr><th>expected of the crew</th><th class="num">within</th><th></th></tr>
+      ${v.expectations.map((e) => expectationRow(e, v.t_s))}</table>` : nothing}</section>`;
 }
 
 /** Each level of a status as the page says it, and its class. */
@@ -128,12 +192,12 @@ function alarmsCard(res) {
 
 export const crew = {
   name: "crew",
-  label: "Crew sees",
+  label: "Crew",
   /** @param {{rover: string}} ctx */
   render: ({rover}) => {
     const res = seen[rover];
     return html`<div class="grid two">
-      <div class="col">${alarmsCard(res)}${faultsCard(rover, clearFault)}</div>
+      <div class="col">${alarmsCard(res)}${responseCard(responses[rover])}${faultsCard(rover, clearFault)}</div>
       <div class="col"><section class="card" id="crew-readings"><h2>The crew's readings</h2>
         <p class="help">Every topic the crew's dashboard receives, as it reads now.</p>
         ${res?.ok ? readings(res.data.topics) : nothing}</section>
