@@ -52,6 +52,9 @@ async function load(rover) {
   changed();
 }
 
+/** @param {number} t a sim time, kept on one line */
+const at = (t) => html`<span class="t">${clockText(t)}</span>`;
+
 /** @param {CrewAction} a one action of the crew, in words */
 const actionWords = (a) => `${clockText(a.t_s)} ${words(a.action)} ${a.target}${a.accepted ? "" : " (refused)"}`;
 
@@ -63,17 +66,17 @@ function faultRow(f) {
     <td class="wrap">${partName(component)}: ${faultName(component, kind)}<br><small>injected ${clockText(f.injected_t_s)}${
       f.active && f.since_injection_s !== null ? ` · ${dur(f.since_injection_s)} ago` : ""}</small></td>
     <td class="wrap">${f.first_symptom_t_s === null ? html`<span class="muted">nothing yet</span>`
-      : html`${clockText(f.first_symptom_t_s)}<br><small>${plainMessage(f.symptom)}</small>`}</td>
+      : html`${at(f.first_symptom_t_s)}<br><small>${plainMessage(f.symptom)}</small>`}</td>
     <td class="wrap">${acted ? html`<b class="st-on">acted</b>${f.response_s === null ? "" : ` ${dur(f.response_s)} after the symptom`}
       <br><small>${f.crew_actions.map(actionWords).join(" · ")}</small>`
-      : html`<span class=${f.first_symptom_t_s !== null && f.active ? "sev-warning" : "muted"}>not yet</span>`}</td>
+      : html`<span class="t ${f.first_symptom_t_s !== null && f.active ? "sev-warning" : "muted"}">not yet</span>`}</td>
     <td class="wrap">${f.resolved_t_s === null ? (f.active ? "in effect" : "cleared")
-      : html`${clockText(f.resolved_t_s)}${f.resolved_by ? html`<br><small>${plainMessage(f.resolved_by)}</small>` : nothing}`}</td></tr>`;
+      : html`${at(f.resolved_t_s)}${f.resolved_by ? html`<br><small>${plainMessage(f.resolved_by)}</small>` : nothing}`}</td></tr>`;
 }
 
 /** @param {Expectation} e @param {number | null} now */
 function expectationRow(e, now) {
-  const state = e.met === true ? html`<b class="st-on">met</b> at ${e.at_t_s === null ? "–" : clockText(e.at_t_s)}`
+  const state = e.met === true ? html`<b class="st-on">met</b> at ${e.at_t_s === null ? "–" : at(e.at_t_s)}`
     : e.met === false ? html`<b class="sev-critical">missed</b>`
       : e.deadline_t_s !== null && now !== null ? html`waiting: ${dur(Math.max(0, e.deadline_t_s - now))} left`
         : html`not started`;
