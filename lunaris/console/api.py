@@ -11,9 +11,10 @@
   key is known to be out of reach (its liveliness gone, the rover's link lost), 504 "no answer
   within 3 s: not applied ..." when nothing answered. An observer gets 403 and nothing is sent.
   Every answer is ``{"verdict", "message", "event"}``; a bad request is always a 4xx in words.
-- ``GET /api/rovers/<rover>/snapshots``, ``/faults``, ``/journal``, ``/prediction``: the
-  twin's queries (``faults`` with an owner that did not answer: 502, the faults listed and
-  ``missing``, the owners' absence in words);
+- ``GET /api/rovers/<rover>/snapshots``, ``/faults``, ``/journal`` (``?last=N``,
+  ``?session=<id>|all``: the running session's by default), ``/sessions`` (the trainee
+  sessions, SPEC §12c), ``/prediction``: the twin's queries (``faults`` with an owner that did
+  not answer: 502, the faults listed and ``missing``, the owners' absence in words);
   ``GET /api/catalogue``: the fault catalogue the forms are built from; ``GET /api/me``: who
   is signed in and what they may do.
 - ``GET /api/rovers/<rover>/crew``: what the crew's dashboard shows of the rover now (SPEC
@@ -38,7 +39,7 @@ from starlette.routing import Route
 
 from common import keys
 from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, parameters
-from common.messages import MAX_INPUT_BYTES, BadInput
+from common.messages import MAX_INPUT_BYTES, SESSION_ID, BadInput
 from common.writes import Write, plan_write
 from lunaris.client import Accepted, NotApplied, Rejected, describe, humane
 from lunaris.console.auth import User
@@ -171,7 +172,14 @@ async def _query(request: Request) -> Response:
         if not last.isdigit() or len(last) > 6 or int(last) > LAST_MAX:
             return JSONResponse({"message": f"last: give a whole number up to {LAST_MAX}"},
                                 status_code=422)
-        selector, timeout = f"{keys.faults_journal(rover)}?last={int(last)}", 5.0
+        session = q.get("session")
+        if session is not None and session != "all" and not SESSION_ID.match(session):
+            return JSONResponse({"message": "session: give a session's id as the sessions list it "
+                                            "(e.g. 20250114-195312), or all"}, status_code=422)
+        which = "" if session is None else f";session={session}"
+        selector, timeout = f"{keys.faults_journal(rover)}?last={int(last)}{which}", 5.0
+    elif what == "sessions":
+        selector, timeout = keys.sessions(rover), 5.0
     elif what == "prediction":
         try:
             hours, samples = float(q.get("hours", "8")), int(q.get("samples", "1000"))

@@ -24,7 +24,7 @@ from typing import Any
 import msgspec
 
 from common import keys
-from common.messages import SnapshotInfo
+from common.messages import SessionInfo, SnapshotInfo
 
 __all__ = ["TARGET", "main", "payload_structs", "source"]
 
@@ -37,12 +37,13 @@ HEADER = """\
 
 
 def payload_structs() -> list[type[msgspec.Struct]]:
-    """What the page reads: every family the twin publishes or answers, and the snapshots."""
+    """What the page reads: every family the twin publishes or answers, the snapshots and the
+    trainee sessions."""
     out: list[type[msgspec.Struct]] = []
     for fam in keys.families("out") + keys.families("query"):
         if fam.payload not in out:
             out.append(fam.payload)
-    out.append(SnapshotInfo)
+    out += [SnapshotInfo, SessionInfo]
     return out
 
 

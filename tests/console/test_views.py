@@ -47,7 +47,7 @@ from tests.harness import (
 pytestmark = pytest.mark.timeout(240)
 
 R = "mapp-1"
-VIEWS = ("live", "map", "faults", "inputs", "session", "scenarios", "recordings")
+VIEWS = ("live", "map", "faults", "crew", "inputs", "session", "scenarios", "recordings")
 SIZES = ((1280, 800, ""), (820, 1180, "-tablet"))
 SHIPPED = ROOT / "config" / "scenarios"
 
@@ -198,6 +198,9 @@ def test_every_view_fits_a_laptop_and_a_tablet_and_speaks_plainly(site, page, ar
             view(page, name)
             if name == "live":
                 WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#charts .uplot"))
+            if name == "crew":  # the crew's view and response, asked of the console
+                WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#crew-alarms h2")
+                                              and d.find_elements(By.CSS_SELECTOR, "#crew-response h2"))
             # drills: shot playing; the map: shot driving (test_map.py); recordings: shot saved, below
             save_shot(page, artefacts, f"{name}{suffix}", doc=name not in ("scenarios", "map", "recordings"))
 

@@ -78,7 +78,8 @@ export async function query(url) {
   }
 }
 
-const WORDS = {accepted: "Accepted", rejected: "Refused by the twin", invalid: "Not sent",
+/** Each verdict as the page says it. */
+export const WORDS = {accepted: "Accepted", rejected: "Refused by the twin", invalid: "Not sent",
                forbidden: "Not allowed", "not applied": "Not applied", "no answer": "No answer"};
 
 /** How long an answer stays bright, then dimmed, on the answer line. */

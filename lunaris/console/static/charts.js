@@ -10,8 +10,9 @@ import uPlot from "./vendor/uplot/uPlot.esm.js";
 import {clockText} from "./format.js";
 import {store} from "./state.js";
 
-/** @type {{box: HTMLElement | null, rover: string | null, width: number, span: number, plots: uPlot[]}} */
-const drawn = {box: null, rover: null, width: 0, span: 0, plots: []};
+/** @type {{box: HTMLElement | null, rover: string | null, width: number, span: number, plots: uPlot[],
+ *   history: import("./state.js").History | undefined}} */
+const drawn = {box: null, rover: null, width: 0, span: 0, plots: [], history: undefined};
 
 /** What each axis shows now: its ticks' values and labels, by plot and axis (for tests and tools). */
 /** @type {Map<uPlot, Map<number, {splits: number[], labels: (string | null)[]}>>} */
@@ -129,10 +130,11 @@ export function syncCharts(box, rover) {
   }
   const h = store.history[rover];
   const width = Math.max(240, box.clientWidth - 2);
-  if (box === drawn.box && rover === drawn.rover && drawn.span === store.span
+  // made again for a new history too (a new session, a reset): nothing of the last one is drawn
+  if (box === drawn.box && rover === drawn.rover && drawn.span === store.span && h === drawn.history
       && (drawn.plots.length || (h?.t.length ?? 0) < 2) && Math.abs(width - drawn.width) < 8) return;
   destroy();
-  Object.assign(drawn, {box, rover, width, span: store.span});
+  Object.assign(drawn, {box, rover, width, span: store.span, history: h});
   box.replaceChildren();
   if (!h || h.t.length < 2) {
     const p = document.createElement("p");
@@ -161,7 +163,7 @@ export function syncCharts(box, rover) {
 /** New points (every second): drawn into the plots shown. */
 export function updateCharts() {
   const h = drawn.rover ? store.history[drawn.rover] : undefined;
-  if (!h || drawn.plots.length !== 2) return;
+  if (!h || drawn.plots.length !== 2 || h !== drawn.history) return;
   const w = recent(h, drawn.span);
   drawn.plots[0].setData([w.t, w.soc, w.temperature_c]);
   drawn.plots[1].setData([w.t, w.load_w, w.generation_w]);
@@ -187,3 +189,10 @@ export function axisTicks() {
   }
   return out;
 }
+
+/**
+ * The sim times the plots shown draw, by plot (for tests and tools): what the instructor sees
+ * plotted, not only what the page keeps.
+ * @returns {number[][]}
+ */
+export const plotted = () => drawn.plots.map((u) => [...(u.data[0] ?? [])]);

@@ -99,6 +99,23 @@ export function emptyWords(b) {
 /** @param {number} t seconds since the epoch, as the browser's local date and time */
 export const wallTime = (t) => new Date(t * 1000).toLocaleString();
 
+/** @param {number} t seconds since the epoch, as a short local day and time: "25 Nov 20:56:32" */
+export function dayTime(t) {
+  const d = new Date(t * 1000);
+  return `${d.toLocaleDateString("en-GB", {day: "numeric", month: "short"})} ${d.toLocaleTimeString("en-GB", {hour12: false})}`;
+}
+
+/** A session's id: the UTC time it began, YYYYMMDD-HHMMSS (SessionInfo.id). */
+const SESSION_ID = /\b(\d{4})(\d{2})(\d{2})-(\d{2})(\d{2})(\d{2})\b/g;
+
+/**
+ * A trainee session by when it began, as a person says it ("25 Nov 20:56:32", local time),
+ * rather than by its id (20261125-205632, UTC: what `lunaris report --session` takes).
+ * @param {string} id
+ */
+export const sessionName = (id) => id.replace(SESSION_ID, (_, y, mo, d, h, mi, s) =>
+  dayTime(Date.UTC(Number(y), Number(mo) - 1, Number(d), Number(h), Number(mi), Number(s)) / 1000));
+
 // -- the twin's fields in plain words -------------------------------------------------------
 
 /**
@@ -264,7 +281,7 @@ export function plainMessage(message, key = "") {
   /** @param {string} field */
   const label = (field) => (fault ? paramWords(component, kind, field)?.label.toLowerCase() : undefined)
     ?? fieldLabel(field);
-  let out = String(message);
+  let out = sessionName(String(message));  // a session's id: when it began
   // "Expected `float` <= 1.0 - at `$.fraction`": what msgspec says, as words.
   out = out.replace(/Expected `\w+` (<=|>=|<|>) (\S+) - at `\$\.(\w+)`/g,
                     (_, op, v, f) => `${label(f)} must be ${COMPARE[op]} ${v}`);

@@ -1,13 +1,13 @@
 // The top bar: the rovers of the session (state of charge, count of active faults, a lost
-// link), the sim time with Pause / Resume, the link to the twin, who is signed in; and the
+// link), the chosen rover's trainee and session, the sim time with Pause / Resume, the link to the twin, who is signed in; and the
 // views' tabs under it.
 
 import {html, nothing} from "./vendor/lit-html/lit-html.js";
 import {send} from "./api.js";
-import {clockText, fmt} from "./format.js";
-import {activeFaults, battery, clock, linkLost, pickRover, pickView, rovers, store} from "./state.js";
+import {clockText, fmt, sessionName} from "./format.js";
+import {activeFaults, battery, clock, linkLost, pickRover, pickView, rovers, runningSession, store} from "./state.js";
 import {VIEWS} from "./views/index.js";
-import {actionButton} from "./widgets.js";
+import {actionButton, traineeWords} from "./widgets.js";
 
 export function roverTabs() {
   const all = rovers();
@@ -19,6 +19,15 @@ export function roverTabs() {
         ? html`<span class="badge ${critical ? "critical" : ""}" title="active faults">${f.length}</span>` : nothing}${linkLost(r)
         ? html`<span class="badge lost" title=${store.links[r]?.reason ?? ""}>link lost</span>` : nothing}</button>`;
   });
+}
+
+/** Whose session runs on the chosen rover (SPEC 12c), and its id. */
+export function traineeBar() {
+  const r = store.rover, s = r ? runningSession(r) : undefined;
+  if (!r || !s) return nothing;
+  return html`${s.trainee ? html`<span class="label">trainee</span> ` : nothing}<b id="trainee-now" data-session=${s.id}
+    data-trainee=${s.trainee ?? nothing}>${traineeWords(s)}</b> <small title=${`session ${s.id} (what lunaris report --session takes)`}
+    >session of ${sessionName(s.id)}</small>`;
 }
 
 /** The sim time, its speed, PAUSED, and Pause or Resume. */

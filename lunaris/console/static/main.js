@@ -13,7 +13,7 @@
 import {html, render} from "./vendor/lit-html/lit-html.js";
 import {keyed} from "./vendor/lit-html/directives/keyed.js";
 import {syncCharts, updateCharts} from "./charts.js";
-import {clockBar, linkState, roverTabs, viewTabs, who} from "./header.js";
+import {clockBar, linkState, roverTabs, traineeBar, viewTabs, who} from "./header.js";
 import {changed, onChange, parts, store} from "./state.js";
 import {connect} from "./stream.js";
 import {VIEWS} from "./views/index.js";
@@ -37,6 +37,7 @@ function current() {
 
 function draw() {
   render(roverTabs(), byId("rovers"));
+  render(traineeBar(), byId("trainee"));
   render(clockBar(), byId("clock"));
   render(viewTabs(), byId("views"));
   render(who(), byId("who"));

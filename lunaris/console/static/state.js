@@ -47,6 +47,12 @@
  * @typedef {{state: "waiting" | "connected" | "lost", endpoint: string, message: string}} Router
  */
 
+/**
+ * A rover's running trainee session, as the console says it (SPEC 12c): its `id` (as the
+ * sessions list gives it) and its `trainee` ("" when none was named, null until known).
+ * @typedef {{id: string, trainee: string | null}} Session
+ */
+
 export const EVENTS_KEPT = 300;
 /** Points of a rover's plots kept; past it, the older half is thinned to every other point. */
 export const HISTORY_KEPT = 2400;
@@ -62,6 +68,10 @@ export const store = {
   services: {},
   /** @type {Record<string, History>} */
   history: {},
+  /** @type {Record<string, Session>} each rover's running trainee session */
+  sessions: {},
+  /** @type {Record<string, number>} the sim time each rover's session began, when the page saw it begin */
+  sessionStart: {},
   /** @type {Record<string, RoverLink>} each rover's link, where the console says it */
   links: {},
   /** @type {boolean | null} whether the console reaches the twin (null: not known yet) */
@@ -194,6 +204,9 @@ export function activeFaults(rover) {
   }
   return out.sort((a, b) => a.since_t_s - b.since_t_s || a.key.localeCompare(b.key));
 }
+
+/** @param {string} rover @returns {Session | undefined} its running trainee session */
+export const runningSession = (rover) => store.sessions[rover];
 
 /** @param {string} rover @returns {boolean} the console says the rover's link is lost */
 export const linkLost = (rover) => store.links[rover]?.state === "lost";

@@ -1,21 +1,28 @@
 // The live stream (`GET /api/live`, server-sent events): a snapshot of everything, then
 // batches of what changed. Folded into the state here; the views only read the state.
+//
+// Trainee sessions never mix (SPEC 12c): when a rover's session changes the console sends a
+// snapshot without the previous session's events and history, and the page keeps nothing of
+// them either: an event of another session is never kept, and a plot's point from before the
+// new session's beginning (a value published just before it, heard just after) is dropped.
 
-import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, powerSummary, rovers, store} from "./state.js";
+import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, clock, powerSummary, rovers, store} from "./state.js";
 
 /** @typedef {import("./state.js").BatteryState} BatteryState */
 
 /** @typedef {import("./state.js").TwinEvent} TwinEvent */
 /** @typedef {import("./state.js").History} History */
 /** @typedef {import("./state.js").RoverLink} RoverLink */
+/** @typedef {import("./state.js").Session} Session */
 
 /**
  * A message of the stream (lunaris/console/live.py): a `snapshot` of everything, `batch`es of
- * what changed (`links`: the rovers whose link changed), `link` when the router comes or goes.
+ * what changed (`links`: the rovers whose link changed; `sessions`: each rover's trainee
+ * session, in a batch those whose trainee became known), `link` when the router comes or goes.
  * @typedef {{type: "snapshot" | "batch" | "link", v?: number, connected?: boolean,
  *   router?: import("./state.js").Router, values?: Record<string, unknown>, events?: TwinEvent[],
  *   services?: Record<string, string[]>, history?: Record<string, History>,
- *   links?: Record<string, RoverLink>}} LiveMessage
+ *   links?: Record<string, RoverLink>, sessions?: Record<string, Session>}} LiveMessage
  */
 
 /** Open the stream; the browser reconnects by itself (and the console sends a snapshot again). */
@@ -37,16 +44,22 @@ export function receive(msg) {
     changed();
     return;
   }
+  const before = store.sessions;
   if (msg.type === "snapshot") {
     store.values = msg.values ?? {};
     store.services = msg.services ?? {};
     store.events = {};
     store.history = simHistory(msg.history ?? {});
     store.links = {};
+    store.sessions = {};
     store.connected = !!msg.connected;
   } else {
     Object.assign(store.values, msg.values ?? {});
     Object.assign(store.services, msg.services ?? {});
+  }
+  store.sessions = {...store.sessions, ...sessionsOf(msg)};
+  for (const [rover, s] of Object.entries(store.sessions)) {
+    if (before[rover] && before[rover].id !== s.id) begin(rover, s.id, msg.events ?? []);
   }
   links(msg);
   for (const k of Object.keys(msg.values ?? {})) {
@@ -55,6 +68,11 @@ export function receive(msg) {
   }
   for (const e of msg.events ?? []) {
     const rover = e.key.split("/")[1];
+    if (!ofSession(e, rover)) continue;
+    const t0 = startOf(e, store.sessions[rover]?.id ?? "");
+    if (t0 !== null && store.sessionStart[rover] !== undefined) {  // the tick came first: now exact
+      store.sessionStart[rover] = Math.min(store.sessionStart[rover], t0);
+    }
     const kept = (store.events[rover] ||= []);
     kept.push(e);
     if (kept.length > EVENTS_KEPT) kept.shift();
@@ -69,6 +87,75 @@ function links(msg) {
   for (const [rover, link] of Object.entries(msg.links ?? {})) {
     if (link && typeof link === "object" && typeof link.state === "string") store.links[rover] = link;
   }
+}
+
+/** @param {LiveMessage} msg @returns {Record<string, Session>} the well-formed sessions it says */
+function sessionsOf(msg) {
+  /** @type {Record<string, Session>} */
+  const out = {};
+  for (const [rover, s] of Object.entries(msg.sessions ?? {})) {
+    if (s && typeof s === "object" && typeof s.id === "string" && s.id) {
+      out[rover] = {id: s.id, trainee: typeof s.trainee === "string" ? s.trainee : null};
+    }
+  }
+  return out;
+}
+
+/**
+ * Is the event of the rover's running session? (One of no session, from a service older than
+ * sessions, is kept; so is every event while the session is not known yet.)
+ * @param {TwinEvent} e @param {string} rover
+ */
+const ofSession = (e, rover) => !e.session || !store.sessions[rover] || e.session === store.sessions[rover].id;
+
+/**
+ * The sim time session `id` began at, if `e` is the clock's event that opened it.
+ * @param {TwinEvent} e @param {string} id @returns {number | null}
+ */
+function startOf(e, id) {
+  const p = e.params;
+  return e.kind === "session" && e.source === "clock" && p?.session === id && typeof p.start_t_s === "number"
+    ? p.start_t_s : null;
+}
+
+/**
+ * The page saw the rover's session change to `id`: nothing of the previous one stays (its
+ * events; the plots' points from before the new session's beginning: `start_t_s` of the
+ * clock's event that opened it, the snapshot's time for a session begun from one; or, as the
+ * clock's first tick of a session goes out before that event, the sim time of that tick).
+ * @param {string} rover @param {string} id @param {TwinEvent[]} events what came with the change
+ */
+function begin(rover, id, events) {
+  store.events[rover] = (store.events[rover] ?? []).filter((e) => e.session === id);
+  const opened = events.map((e) => startOf(e, id)).find((t) => t !== null);
+  const c = clock(rover), h = store.history[rover];
+  const t0 = opened ?? (c?.session === id ? c.t_s : null);
+  if (t0 === null || t0 === undefined) {
+    delete store.sessionStart[rover];
+    if (h) store.history[rover] = since(h, -Infinity);
+    return;
+  }
+  store.sessionStart[rover] = t0;
+  if (h) {
+    store.history[rover] = since(h, t0);
+    if (store.history[rover].t.length) delete store.sessionStart[rover];
+  }
+}
+
+/**
+ * The points of a history in the running session: from `t0` on, and after the last time the
+ * sim time went back (a reset).
+ * @param {History} h @param {number} t0 @returns {History}
+ */
+function since(h, t0) {
+  let from = 0;
+  h.t.forEach((t, i) => {
+    if (t < t0 || (i > 0 && t < h.t[i - 1])) from = t < t0 ? i + 1 : i;
+  });
+  /** @template T @param {T[]} col @returns {T[]} */
+  const cut = (col) => col.slice(from);
+  return {t: cut(h.t), soc: cut(h.soc), temperature_c: cut(h.temperature_c), load_w: cut(h.load_w),
+          generation_w: cut(h.generation_w)};
 }
 
 /**
@@ -94,6 +181,11 @@ const STEP_S = 1;
 function point(rover) {
   const b = /** @type {BatteryState | undefined} */ (battery(rover)), p = powerSummary(rover);
   if (!b) return;
+  const t0 = store.sessionStart[rover];
+  if (t0 !== undefined) {  // a new session seen begin: its first point is at its beginning or later
+    if (b.t_s < t0) return;
+    delete store.sessionStart[rover];
+  }
   let h = store.history[rover];
   const last = h?.t.length ? h.t[h.t.length - 1] : null;
   if (!h || (last !== null && b.t_s < last)) {  // a reset or a restore: a new time line

@@ -203,6 +203,18 @@
  * @property {string} [actor]
  */
 /**
+ * One trainee session of a rover, as ``get lunaris/<rover>/sessions`` lists it (oldest
+ * first; the last is the running one).
+ * @typedef {Object} SessionInfo
+ * @property {string} id - the session's id: the UTC wall time it began, YYYYMMDD-HHMMSS (one second later than the previous session's when two begin within a second); what faults/journal?session=<id> and lunaris report --session take
+ * @property {string} trainee - the trainee (or crew) named by control/session; "" for a session no control/session began (the twin's first)
+ * @property {number} start_t_s - the rover's sim time when it began [s]
+ * @property {number | null} end_t_s - the rover's sim time when it ended [s]; null while it runs
+ * @property {number | null} started_wall - wall time when it began [s since the Unix epoch]; null when the journal lost the event that said
+ * @property {string | null} [from_snapshot] - the snapshot it began from; null when it began from the rover file
+ * @property {number} [events] - the events journalled in it
+ */
+/**
  * A point on the site's map [m]: x east, y north of the site origin.
  * @typedef {Object} SiteXY
  * @property {number} x_m

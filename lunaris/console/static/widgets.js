@@ -2,7 +2,7 @@
 // event log. Templates (lit-html): whatever a name or a message holds is written as text.
 
 import {html, nothing} from "./vendor/lit-html/lit-html.js";
-import {act, query} from "./api.js";
+import {act, answer, query, send} from "./api.js";
 import {clockText, faultName, fmt, paramsText, partName, plainMessage, words} from "./format.js";
 import {activeFaults, changed, linkLost, mayAct, store, val} from "./state.js";
 
@@ -133,19 +133,53 @@ export function faultsCard(rover, clear) {
 const KIND = /** @type {Record<string, string>} */ ({
   rejected: "refused", fault_injected: "fault injected", fault_cleared: "fault cleared", fault_raised: "alarm",
   fault_resolved: "alarm over", command: "command", input: "input", clock: "clock", session: "session",
-  scenario: "drill", internal_error: "twin error"});
+  scenario: "drill", internal_error: "twin error", mark: "mark"});
 
 /** @param {import("./state.js").TwinEvent} e its message, in plain words, without repeating its kind */
 const said = (e) => {
+  if (e.kind === "session") return plainMessage(e.message.replace(/^session (?=\d{8}-\d{6} )/, ""), e.key);
   const text = plainMessage(e.message, e.key);
+  if (e.kind === "mark") return text.replace(/^mark: /, "");
   return e.kind === "fault_injected" || e.kind === "fault_cleared" ? text.replace(/^(injected|cleared) /, "") : text;
 };
 
-/** @param {string} rover the newest 120 of its events, newest first; times are sim time */
+/** @param {import("./state.js").Session} s who the session is of, in words */
+export const traineeWords = (s) => (s.trainee ? s.trainee : s.trainee === "" ? "no trainee named" : "…");
+
+/** @param {string} rover a mark on its session's timeline (`control/mark`): a `mark` event */
+async function mark(rover) {
+  const box = /** @type {HTMLInputElement | null} */ (document.getElementById("mark-text"));
+  const text = box?.value.trim() ?? "";
+  box?.setAttribute("aria-invalid", String(!text));
+  if (!text) {
+    answer("invalid", "type what to note first (e.g. crew isolated the rail)");
+    return;
+  }
+  const res = await send("PUT", "control/mark", JSON.stringify({text}), rover);
+  if (res.verdict === "accepted" && box) box.value = "";
+  return res;
+}
+
+/** @param {string} rover the field and button that mark the timeline (not for observers) */
+function markRow(rover) {
+  if (!mayAct()) return nothing;
+  return html`<form class="row mark-row" @submit=${(/** @type {Event} */ e) => {
+    e.preventDefault();
+    /** @type {HTMLButtonElement | null} */ (document.querySelector(`[data-action="mark"][data-rover="${CSS.escape(rover)}"]`))?.click();
+  }}><label>Note on the timeline, for the debrief<input type="text" id="mark-text" maxlength="500"
+      placeholder="crew isolated the rail"></label>
+    ${actionButton({action: "mark", label: "Mark", rover, run: () => mark(rover)})}</form>`;
+}
+
+/**
+ * The newest 120 of its running session's events, newest first (times are sim time), and the
+ * instructor's mark.
+ * @param {string} rover
+ */
 export function eventsCard(rover) {
-  const evs = (store.events[rover] ?? []).slice(-120).reverse();
-  return html`<section class="card"><h2>Event log <small>newest first · sim time</small></h2>
-    <div id="events-list" class="events">${evs.length ? evs.map((e) => html`<div class="sev-${e.severity}" data-kind=${e.kind}>
+  const evs = (store.events[rover] ?? []).slice(-120).reverse(), s = store.sessions[rover];
+  return html`<section class="card"><h2>Event log <small>${s?.trainee ? `${s.trainee}'s session · ` : ""}newest first · sim time</small></h2>
+    ${markRow(rover)}<div id="events-list" class="events">${evs.length ? evs.map((e) => html`<div class="sev-${e.severity}" data-kind=${e.kind}>
       <span class="t">${clockText(e.t_s)}</span><b>${KIND[e.kind] ?? words(e.kind)}</b> ${said(e)}
       <small>[${e.source}]</small></div>`) : html`<p>No event yet.</p>`}</div></section>`;
 }

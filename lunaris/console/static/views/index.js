@@ -2,6 +2,7 @@
 // {name, label, render(ctx)} and optionally enter(ctx) (when it is opened or the rover
 // changes), after(ctx) (after each drawing) and tick(ctx) (every second while shown).
 
+import {crew} from "./crew.js";
 import {faults} from "./faults.js";
 import {inputs} from "./inputs.js";
 import {live} from "./live.js";
@@ -19,4 +20,4 @@ import {session} from "./session.js";
  */
 
 /** @type {View[]} */
-export const VIEWS = [live, map, faults, inputs, session, scenarios, recordings];
+export const VIEWS = [live, map, faults, crew, inputs, session, scenarios, recordings];

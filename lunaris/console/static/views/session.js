@@ -1,12 +1,16 @@
-// Session: pause, resume and speed the clock; reset the rover to its rover file; save and
+// Session: a new trainee's session (SPEC 12c: the running one ends, the twin starts again
+// from its rover file or a snapshot, the plots and event log start empty) and the sessions of
+// the day; pause, resume and speed the clock; reset the rover to its rover file; save and
 // restore snapshots; ask the battery prediction.
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
-import {answer, query, send} from "../api.js";
-import {clockText, dur, emptyWords, fmt, nameProblem, plainMessage, wallTime} from "../format.js";
-import {battery, changed, clock} from "../state.js";
-import {actionButton, eventsCard, field} from "../widgets.js";
+import {WORDS, answer, query, send} from "../api.js";
+import {clockText, dayTime, dur, emptyWords, fmt, nameProblem, plainMessage, sessionName, wallTime} from "../format.js";
+import {battery, changed, clock, runningSession} from "../state.js";
+import {actionButton, eventsCard, field, traineeWords} from "../widgets.js";
 
+/** @typedef {import("../api.js").Answer} Answer */
+/** @typedef {import("../types.js").SessionInfo} SessionInfo */
 /** @typedef {import("../types.js").SnapshotInfo} SnapshotInfo */
 /** @typedef {import("../types.js").Prediction} Prediction */
 /** @typedef {import("../types.js").Percentiles} Percentiles */
@@ -18,7 +22,23 @@ const answers = {
   snapshots: {},
   /** @type {Record<string, Result<Prediction> | "computing">} */
   prediction: {},
+  /** @type {Record<string, Result<SessionInfo[]>>} */
+  sessions: {},
+  /** @type {Record<string, Answer>} the twin's answer to the last new trainee */
+  started: {},
 };
+
+/** The running session whose list is shown, by rover, and when it was asked (ms). */
+const listed = /** @type {Record<string, {id: string, at: number}>} */ ({});
+/** How often the sessions list is asked again while the view shows it, in seconds. */
+const SESSIONS_S = 10;
+
+/** @param {string} rover */
+async function loadSessions(rover) {
+  listed[rover] = {id: runningSession(rover)?.id ?? "", at: Date.now()};
+  answers.sessions[rover] = await query(`/api/rovers/${encodeURIComponent(rover)}/sessions`);
+  changed();
+}
 
 /** @param {string} rover */
 async function loadSnapshots(rover) {
@@ -138,13 +158,89 @@ function snapshotsCard(r) {
     <div id="snapshots">${snapshotList(answers.snapshots[r], r)}</div></section>`;
 }
 
+/** @param {string} id @returns {HTMLInputElement | HTMLSelectElement | null} */
+const box = (id) => /** @type {HTMLInputElement | HTMLSelectElement | null} */ (document.getElementById(id));
+
+/** @param {Answer | undefined} a the twin's answer, kept in the card */
+const said = (a) => (a === undefined ? nothing : html`<p id="session-answer" class="said ${a.verdict.replace(" ", "")}"
+  data-verdict=${a.verdict}><b>${WORDS[/** @type {keyof typeof WORDS} */ (a.verdict)] ?? a.verdict}:</b>
+  ${plainMessage(a.message, "control/session")}</p>`);
+
+/** @param {string} r the running session, and a new trainee's */
+function traineeCard(r) {
+  const s = runningSession(r), snaps = answers.snapshots[r];
+  const start = async () => {
+    const name = box("trainee-name")?.value.trim() ?? "", from = box("trainee-from")?.value ?? "";
+    box("trainee-name")?.setAttribute("aria-invalid", String(!name));
+    if (!name) {
+      answer("invalid", "type the trainee's name (or the crew's) first");
+      return;
+    }
+    const ending = s?.trainee ? `${s.trainee}'s session ends` : "The running session ends";
+    const how = from ? `the twin is restored to the snapshot "${from}"` : "the twin goes back to its rover file";
+    if (!confirm(`Start ${name}'s session on ${r}? ${ending}; ${how}, every injected fault cleared, and the plots `
+      + "and the event log start empty.")) return;
+    const res = await send("PUT", "control/session", JSON.stringify(from ? {trainee: name, from_snapshot: from}
+      : {trainee: name}), r);
+    answers.started[r] = res;
+    box("trainee-name")?.setAttribute("aria-invalid", String(res.verdict === "invalid"));
+    const input = box("trainee-name");
+    if (res.verdict === "accepted" && input) input.value = "";
+    await loadSessions(r);
+    return res;
+  };
+  return html`<section class="card" id="trainee-card"><h2>Trainee</h2>
+    <p class="now" id="session-now" data-session=${s?.id ?? nothing}>${s
+    ? html`Now: <b>${traineeWords(s)}</b> <small title=${`session ${s.id}`}>in the session begun ${sessionName(s.id)}</small>`
+    : "The running session is not known yet."}</p>
+    <p class="help">A new trainee's session ends the running one: the twin starts again, every injected fault
+      cleared, and the plots, the event log and the journal start empty. Each session is kept apart for the debrief.</p>
+    <div class="row"><label>Trainee or crew <small>letters, digits, spaces, - _ . ' &amp;</small>
+        <input type="text" id="trainee-name" required maxlength="64" placeholder="Ana Silva"></label>
+      <label>Start from <select id="trainee-from"><option value="">the rover file (a fresh rover)</option>${snaps?.ok
+        ? snaps.data.map((x) => html`<option value=${x.name}>snapshot ${x.name} (sim time ${clockText(x.t_s)})</option>`)
+        : nothing}</select></label>
+      ${actionButton({action: "session-start", label: "New trainee", rover: r, cls: "primary", run: start})}</div>
+    ${said(answers.started[r])}</section>`;
+}
+
+/** @param {Result<SessionInfo[]> | undefined} res @param {string} r */
+function sessionList(res, r) {
+  if (res === undefined) return html`<p>Asking the journal…</p>`;
+  if (!res.ok) return html`<p class="error">No list: ${plainMessage(res.message)}</p>`;
+  if (!res.data.length) return html`<p>No session in the journal yet.</p>`;
+  const running = runningSession(r)?.id;
+  return html`<table><tr><th>trainee</th><th>began on</th><th class="num">sim start</th><th class="num">sim end</th>
+    <th class="num">events</th></tr>${[...res.data].reverse().map((x) => html`<tr data-session=${x.id}
+      data-trainee=${x.trainee} class=${x.end_t_s === null ? "running" : ""}>
+    <td class="wrap">${x.trainee || "(no trainee named)"}<br><small title="what lunaris report --session takes">${x.id}${
+      x.from_snapshot ? ` · from snapshot ${x.from_snapshot}` : ""}</small></td>
+    <td>${x.started_wall === null ? sessionName(x.id) : dayTime(x.started_wall)}</td>
+    <td class="num">${clockText(x.start_t_s)}</td>
+    <td class="num">${x.end_t_s === null ? html`<b>${x.id === running ? "running" : "not ended"}</b>` : clockText(x.end_t_s)}</td>
+    <td class="num">${x.events ?? 0}</td></tr>`)}</table>`;
+}
+
+/** @param {string} r */
+function sessionsCard(r) {
+  return html`<section class="card"><h2><span>Sessions <small>newest first</small></span> <button type="button" class="act"
+      id="sessions-refresh" @click=${() => loadSessions(r)}>Refresh</button></h2>
+    <div id="sessions">${sessionList(answers.sessions[r], r)}</div></section>`;
+}
+
 export const session = {
   name: "session",
   label: "Session",
   /** @param {{rover: string}} ctx */
   render: ({rover}) => html`<div class="grid two">
-    <div class="col">${clockCard(rover)}${resetCard(rover)}${predictionCard(rover)}</div>
+    <div class="col">${traineeCard(rover)}${sessionsCard(rover)}${clockCard(rover)}${resetCard(rover)}
+      ${predictionCard(rover)}</div>
     <div class="col">${snapshotsCard(rover)}${eventsCard(rover)}</div></div>`,
   /** @param {{rover: string}} ctx */
-  enter: ({rover}) => loadSnapshots(rover),
+  enter: ({rover}) => Promise.all([loadSnapshots(rover), loadSessions(rover)]),
+  /** @param {{rover: string}} ctx the list again when the session changes, and every SESSIONS_S */
+  tick: ({rover}) => {
+    const last = listed[rover];
+    if (!last || last.id !== (runningSession(rover)?.id ?? "") || Date.now() - last.at > SESSIONS_S * 1000) loadSessions(rover);
+  },
 };

@@ -1,0 +1,117 @@
+"""What the crew sees and how it responds, on the console's page (SPEC §12b, §12d, issue 25).
+
+A twin of the MAPP rover (without its drive) and a console given its rover file; in a real
+browser at 1280x800 the instructor opens the "Crew" view: with nothing wrong every part reads
+OK; after a short is injected on the navigation camera, the crew's alarms show rail 5V_CH2's
+over-current trip and its readings the rail's 0 mA, while nothing the crew sees names the
+short, its resistance or an injection; beside it the instructor's own active faults name the
+short. The crew's controls are listed with what they do. The crew's response (SPEC 12d) shows
+the fault with the crew not acted yet, then the crew's own command as its action. The view fits
+and speaks plainly.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+
+import pytest
+from selenium.webdriver.common.by import By
+
+from common import keys
+from testbed.browser import open_browser
+from tests.console.conftest import MAPP, Live, shoot, start_console
+from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
+from tests.console.pages import WebDriverWait, view
+from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router, stop_process
+
+pytestmark = pytest.mark.timeout(180)
+
+R = "mapp-1"
+CREW = ("#crew-alarms table", "#crew-ok", "#crew-readings table", "#crew-controls table")  # what it reads
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Iterator[Live]:
+    endpoint = free_endpoint()
+    router = open_router(endpoint)
+    folder = tmp_path_factory.mktemp("console-crew")
+    try:
+        with Twin(endpoint, [MAPP], folder / "state") as twin, Probe(endpoint) as p:
+            p.watch(f"{keys.ROOT}/{R}/**")
+            p.wait_services(R, ALL_SERVICES)
+            p.wait_value(keys.battery_state(R))
+            console = start_console(endpoint, folder, "--rover", str(MAPP))
+            try:
+                yield Live(endpoint, twin, p, console, folder)
+            finally:
+                stop_process(console.proc, 10)
+                print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
+    finally:
+        router.close()
+
+
+@pytest.fixture(scope="module")
+def page(site) -> Iterator:
+    driver = open_browser(1280, 800)
+    driver.set_page_load_timeout(30)
+    try:
+        driver.get(site.console.url + "/")
+        WebDriverWait(driver, 20).until(lambda d: re.search(r"\d+\.\d %", d.find_element(
+            By.CSS_SELECTOR, '#main [data-key="battery/state"][data-field="soc"]').text))
+        yield driver
+    finally:
+        driver.quit()
+
+
+def crew_text(driver) -> str:
+    """What the crew's cards show of the rover (not their help, nor the instructor's own faults)."""
+    return "\n".join(e.text for sel in CREW for e in driver.find_elements(By.CSS_SELECTOR, sel))
+
+
+def test_the_instructor_sees_what_the_crew_sees(site, page, artefacts):
+    p = site.probe
+    view(page, "crew")
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.ID, "crew-all-ok"), "every part OK")
+    short, rail = keys.fault(R, "load/nav_camera", "short"), keys.rail_state(R, "5V_CH2")
+    p.put(short, {"resistance_ohm": 0.05})
+    try:
+        p.wait_value(rail, lambda v: v["state"] == "tripped")
+        tripped = '#crew-alarms tr[data-component="rail/5V_CH2"][data-level="ERROR"]'
+        row = WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, tripped),
+                                            "the crew's alarm of rail 5V_CH2")[0]
+        assert "over-current trip" in row.text, row.text
+        current = '#crew-readings tr[data-topic="/pdm/rail_5V_CH2_current_ma"]'
+        reads = lambda d: d.find_element(By.CSS_SELECTOR, current).text  # noqa: E731
+        WebDriverWait(page, 10).until(lambda d: reads(d).endswith(" 0 mA"), "the rail at 0 mA")
+        WebDriverWait(page, 10).until(lambda d: "Short circuit" in d.find_element(By.ID, "faults-list").text,
+                                      "the instructor's own fault beside it")
+        said = crew_text(page)
+        for word in ("short", "Short", "injected", "0.05", "resistance", "Ω"):
+            assert word not in said, f"the crew's view says {word!r}:\n{said}"
+        services = {e.get_attribute("data-service") for e in page.find_elements(
+            By.CSS_SELECTOR, "#crew-controls tr[data-service]")}
+        assert {"/pdm/rail_5V_CH2/set_enabled", "/pdm/rail_5V_CH2/reset"} <= services, services
+        reset = page.find_element(By.CSS_SELECTOR, '#crew-controls tr[data-service="/pdm/rail_5V_CH2/reset"]')
+        assert "resets rail 5V_CH2" in reset.text
+        # The crew's response, live: the fault seen, the crew not acted yet; then the crew's
+        # own command (actor crew, as its dashboard sends it) shows as its action.
+        fault_row = '#crew-response tr[data-fault="load/nav_camera/short"]'
+        row = WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, fault_row),
+                                            "the fault in the crew's response")[0]
+        assert row.get_attribute("data-acted") == "false" and "not yet" in row.text, row.text
+        p.session.put(keys.cmd_rail(R, "5V_CH2"), b'{"on": false}', attachment=b"actor=crew")
+        acted = f'{fault_row}[data-acted="true"]'
+        row = WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, acted),
+                                            "the crew's action in its response")[0]
+        assert "acted" in row.text and "5V_CH2" in row.text, row.text
+        shoot(page, artefacts, "crew-short", doc=False)  # the docs take test_views.py's
+        problems = [f"crew view: {x}" for x in page.execute_script(LAYOUT)]
+        problems += [f"crew view: {x}" for x in vocabulary(page.execute_script(TEXT), field_names())]
+        assert not problems, "\n".join(problems)
+    finally:
+        p.delete(short)
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})  # the crew switched it off
+        p.wait_value(rail, lambda v: v["state"] == "on")
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.ID, "crew-all-ok"), "every part OK again")
