@@ -13,6 +13,9 @@ and speaks plainly.
 from __future__ import annotations
 
 import re
+import signal
+import subprocess
+import sys
 from collections.abc import Iterator
 
 import pytest
@@ -23,11 +26,23 @@ from testbed.browser import open_browser
 from tests.console.conftest import MAPP, Live, shoot, start_console
 from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, view
-from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router, stop_process
+from tests.harness import (
+    ALL_SERVICES,
+    ROOT,
+    Probe,
+    Twin,
+    env_without_zenoh_config,
+    free_endpoint,
+    lunaris_cmd,
+    open_router,
+    stop_process,
+)
+from tests.lunaris.conftest import run_tool
 
 pytestmark = pytest.mark.timeout(180)
 
 R = "mapp-1"
+DRILL = ROOT / "config" / "scenarios" / "shorted-camera.yaml"
 CREW = ("#crew-alarms table", "#crew-ok", "#crew-readings table", "#crew-controls table")  # what it reads
 
 
@@ -115,3 +130,46 @@ def test_the_instructor_sees_what_the_crew_sees(site, page, artefacts):
         p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})  # the crew switched it off
         p.wait_value(rail, lambda v: v["state"] == "on")
     WebDriverWait(page, 10).until(lambda d: d.find_elements(By.ID, "crew-all-ok"), "every part OK again")
+
+
+def test_a_drill_and_a_crew_that_responds_turn_the_expectations_met_on_the_page(site, page):
+    """The training loop in the browser (issue 25): a trainee's session, the shipped
+    shorted-camera drill played at x20, a crew process that reads the rail as its dashboard
+    does and acts as the bridge writes its calls (actor crew); the Crew view shows the drill's
+    two expectations pending, then met."""
+    p, ep = site.probe, site.endpoint
+    done = run_tool("session", "start", R, "--trainee", "crew 2", "--connect", ep)
+    assert done.returncode == 0, done.stdout + done.stderr
+    view(page, "crew")
+    env = env_without_zenoh_config()
+    crew = subprocess.Popen([sys.executable, "-m", "tests.lunaris.crew", ep, R, "5V_CH2", "15"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
+    drill = None
+    try:
+        assert crew.stdout is not None and crew.stdout.readline().startswith("crew: watching")
+        drill = subprocess.Popen(lunaris_cmd("scenario", "run", str(DRILL), "--time-scale", "20",
+                                             "--connect", ep, "--clear-at-end"),
+                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT,
+                                 env=env)
+        rows = "#crew-response tr[data-expectation]"
+
+        def expectations(d) -> dict[str, str]:
+            return {e.get_attribute("data-expectation"): e.get_attribute("data-met")
+                    for e in d.find_elements(By.CSS_SELECTOR, rows)}
+        pending = WebDriverWait(page, 30).until(lambda d: len(expectations(d)) == 2 and expectations(d),
+                                                "the drill's two expectations on the page")
+        assert "true" not in pending.values(), pending  # before the crew acted: not met yet
+        met = WebDriverWait(page, 60).until(
+            lambda d: set(expectations(d).values()) == {"true"} and expectations(d),
+            "both expectations met on the page")
+        assert {"isolate the shorted camera - 5V_CH2 off and its trip reset",
+                "restore 5V_CH2 for the hazard cameras"} == set(met)
+        out, _ = drill.communicate(timeout=60)
+        assert drill.returncode == 0 and "expectations of the crew: 2 of 2 met" in out, out
+    finally:
+        for proc in (drill, crew):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                proc.wait(20)
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})
