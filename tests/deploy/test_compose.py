@@ -229,6 +229,11 @@ def test_the_console_runs_with_its_own_identity_and_requires_a_sign_in(compose: 
     assert console["restart"] == "unless-stopped" and "router" in console["depends_on"]
     command = console["command"]
     assert command[0] == "console"
+
+    def rovers(cmd: list[str]) -> list[str]:
+        return [cmd[i + 1] for i, arg in enumerate(cmd) if arg == "--rover"]
+    # the services' rover files: the map, the drive and the radios' forms need them
+    assert rovers(command) == rovers(compose["services"]["clock"]["command"]) != []
     mounts = _mounts(console)
     accounts = command[command.index("--accounts") + 1]
     assert Path(mounts[accounts]) == SECRETS / "console-accounts.json"
