@@ -13,11 +13,13 @@ import os
 import socket
 import subprocess
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from selenium.webdriver.support.ui import WebDriverWait
 
 from common import keys
 from testbed.browser import available, open_browser, size_viewport
@@ -87,6 +89,11 @@ def start_console(endpoint: str, folder: Path, *extra: str) -> Console:
     return c
 
 
+# the page shows the twin: the battery's charge, as "97.3 %"
+SOC_SHOWN = (r"""const e = document.querySelector('#main [data-key="battery/state"][data-field="soc"]');"""
+             r"""return e && /\d+\.\d %/.test(e.textContent);""")
+
+
 @dataclass
 class Live:
     endpoint: str
@@ -96,20 +103,24 @@ class Live:
     folder: Path
 
 
-@pytest.fixture(scope="module")
-def live(tmp_path_factory) -> Iterator[Live]:
+@contextmanager
+def console_site(folder: Path, *console_args: str, rover: Path = MAPP,
+                 services: tuple[str, ...] = ALL_SERVICES,
+                 ready: Callable[[Probe], object] | None = None) -> Iterator[Live]:
+    """A router on a free port, a twin of ``rover`` with ``services``, a probe watching the rover,
+    and a console started with ``console_args`` once the twin is ``ready`` (default: the
+    battery publishes); everything stopped, and the console's log printed, at the end."""
     endpoint = free_endpoint()
     router = open_router(endpoint)
-    folder = tmp_path_factory.mktemp("console")
-    scenarios = folder / "scenarios"
-    scenarios.mkdir()
-    (scenarios / "short-drill.yaml").write_text(SCENARIO)
     try:
-        with Twin(endpoint, [MAPP], folder / "state") as twin, Probe(endpoint) as p:
+        with Twin(endpoint, [rover], folder / "state", services=services) as twin, Probe(endpoint) as p:
             p.watch(f"{keys.ROOT}/{R}/**")
-            p.wait_services(R, ALL_SERVICES)
-            p.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
-            console = start_console(endpoint, folder, "--scenarios", str(scenarios))
+            p.wait_services(R, services)
+            if ready is None:
+                p.wait_value(keys.battery_state(R))
+            else:
+                ready(p)
+            console = start_console(endpoint, folder, *console_args)
             try:
                 yield Live(endpoint, twin, p, console, folder)
             finally:
@@ -117,6 +128,32 @@ def live(tmp_path_factory) -> Iterator[Live]:
                 print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
     finally:
         router.close()
+
+
+@contextmanager
+def console_page(site: Live, ready: str = SOC_SHOWN) -> Iterator:
+    """Chromium at 1280x800 on the console's page, once ``ready`` (a script returning
+    something truthy) says the page shows the twin."""
+    driver = open_browser(1280, 800)
+    driver.set_page_load_timeout(30)
+    try:
+        driver.get(site.console.url + "/")
+        WebDriverWait(driver, 20).until(lambda d: d.execute_script(ready))
+        yield driver
+    finally:
+        driver.quit()
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory) -> Iterator[Live]:
+    folder = tmp_path_factory.mktemp("console")
+    scenarios = folder / "scenarios"
+    scenarios.mkdir()
+    (scenarios / "short-drill.yaml").write_text(SCENARIO)
+    def drawing(p: Probe) -> None:
+        p.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
+    with console_site(folder, "--scenarios", str(scenarios), ready=drawing) as site:
+        yield site
 
 
 SCENARIO = """\

@@ -12,7 +12,6 @@ and speaks plainly.
 
 from __future__ import annotations
 
-import re
 import signal
 import subprocess
 import sys
@@ -22,20 +21,13 @@ import pytest
 from selenium.webdriver.common.by import By
 
 from common import keys
-from testbed.browser import open_browser
-from tests.console.conftest import MAPP, Live, shoot, start_console
+from tests.console.conftest import MAPP, Live, console_page, console_site, shoot
 from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, view
 from tests.harness import (
-    ALL_SERVICES,
     ROOT,
-    Probe,
-    Twin,
     env_without_zenoh_config,
-    free_endpoint,
     lunaris_cmd,
-    open_router,
-    stop_process,
 )
 from tests.lunaris.conftest import run_tool
 
@@ -48,35 +40,14 @@ CREW = ("#crew-alarms table", "#crew-ok", "#crew-readings table", "#crew-control
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[Live]:
-    endpoint = free_endpoint()
-    router = open_router(endpoint)
-    folder = tmp_path_factory.mktemp("console-crew")
-    try:
-        with Twin(endpoint, [MAPP], folder / "state") as twin, Probe(endpoint) as p:
-            p.watch(f"{keys.ROOT}/{R}/**")
-            p.wait_services(R, ALL_SERVICES)
-            p.wait_value(keys.battery_state(R))
-            console = start_console(endpoint, folder, "--rover", str(MAPP))
-            try:
-                yield Live(endpoint, twin, p, console, folder)
-            finally:
-                stop_process(console.proc, 10)
-                print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
-    finally:
-        router.close()
+    with console_site(tmp_path_factory.mktemp("console-crew"), "--rover", str(MAPP)) as live:
+        yield live
 
 
 @pytest.fixture(scope="module")
 def page(site) -> Iterator:
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
-        driver.get(site.console.url + "/")
-        WebDriverWait(driver, 20).until(lambda d: re.search(r"\d+\.\d %", d.find_element(
-            By.CSS_SELECTOR, '#main [data-key="battery/state"][data-field="soc"]').text))
+    with console_page(site) as driver:
         yield driver
-    finally:
-        driver.quit()
 
 
 def crew_text(driver) -> str:

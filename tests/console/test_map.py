@@ -25,17 +25,14 @@ from selenium.webdriver.common.by import By
 from selenium.webdriver.support.select import Select
 
 from common import keys
-from testbed.browser import open_browser, size_viewport
-from tests.console.conftest import Live, save_shot, shoot, start_console
+from testbed.browser import size_viewport
+from tests.console.conftest import Live, console_page, console_site, save_shot, shoot
 from tests.console.page_checks import LAYOUT, TEXT, TOUCH, TOUCH_PX, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, text, view
 from tests.harness import (
     ALL_SERVICES,
     ROVERS,
     Probe,
-    Twin,
-    free_endpoint,
-    open_router,
     stop_process,
     wait_for,
 )
@@ -64,39 +61,24 @@ return {x_m: Number(rover.dataset.xM), y_m: Number(rover.dataset.yM),
 """
 
 
+# the page shows the twin: the battery's values are there
+MAP_SHOWN = "return document.querySelector('#main [data-key=\"battery/state\"]') !== null;"
+
+
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[Live]:
-    endpoint = free_endpoint()
-    router = open_router(endpoint)
-    folder = tmp_path_factory.mktemp("console-map")
-    try:
-        with Twin(endpoint, [ROVERS / "mapp.yaml"], folder / "state", services=SERVICES) as twin, \
-                Probe(endpoint) as p:
-            p.watch(f"{keys.ROOT}/{R}/**")
-            p.wait_services(R, SERVICES)
-            p.wait_value(keys.drive_state(R))
-            p.wait_value(keys.radio_link(R, "lander"))
-            console = start_console(endpoint, folder, "--rover", str(ROVERS / "mapp.yaml"))
-            try:
-                yield Live(endpoint, twin, p, console, folder)
-            finally:
-                stop_process(console.proc, 10)
-                print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
-    finally:
-        router.close()
+    def ready(p: Probe) -> None:
+        p.wait_value(keys.drive_state(R))
+        p.wait_value(keys.radio_link(R, "lander"))
+    with console_site(tmp_path_factory.mktemp("console-map"), "--rover", str(ROVERS / "mapp.yaml"),
+                      rover=ROVERS / "mapp.yaml", services=SERVICES, ready=ready) as live:
+        yield live
 
 
 @pytest.fixture(scope="module")
 def page(site) -> Iterator:
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
-        driver.get(site.console.url + "/")
-        WebDriverWait(driver, 20).until(
-            lambda d: d.find_elements(By.CSS_SELECTOR, '#main [data-key="battery/state"]'))
+    with console_page(site, MAP_SHOWN) as driver:
         yield driver
-    finally:
-        driver.quit()
 
 
 def read_map(driver) -> dict:
@@ -230,7 +212,7 @@ def test_waypoints_typed_and_clicked_are_previewed_sent_and_stopped(site, page):
     p.wait_value(keys.drive_state(R), lambda d: d.get("status") == "parked")
     WebDriverWait(page, 10).until(lambda d: not d.find_elements(By.CSS_SELECTOR, "#map-to-go, #map-driven"),
                                   "the route gone once the rover is parked")
-    assert "parked" in text(page, "#drive-now")
+    WebDriverWait(page, 10).until(lambda d: "parked" in text(d, "#drive-now"), "the rover said parked")
 
 
 def test_a_radio_that_follows_the_drive_has_no_position_form(site, page):

@@ -27,11 +27,10 @@ from selenium.webdriver.support import expected_conditions as ec
 from selenium.webdriver.support.select import Select
 
 from common import keys
-from testbed.browser import open_browser
-from tests.console.conftest import MAPP, Live, shoot, start_console
+from tests.console.conftest import Live, console_page, console_site, shoot
 from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
-from tests.harness import ALL_SERVICES, Probe, Twin, free_endpoint, open_router, stop_process, wait_for
+from tests.harness import wait_for
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -41,35 +40,14 @@ LATE_S = 400.0  # the sim time the snapshot "late" is saved at: later than anyth
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[Live]:
-    endpoint = free_endpoint()
-    router = open_router(endpoint)
-    folder = tmp_path_factory.mktemp("console-sessions")
-    try:
-        with Twin(endpoint, [MAPP], folder / "state") as twin, Probe(endpoint) as p:
-            p.watch(f"{keys.ROOT}/{R}/**")
-            p.wait_services(R, ALL_SERVICES)
-            p.wait_value(keys.battery_state(R))
-            console = start_console(endpoint, folder)
-            try:
-                yield Live(endpoint, twin, p, console, folder)
-            finally:
-                stop_process(console.proc, 10)
-                print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
-    finally:
-        router.close()
+    with console_site(tmp_path_factory.mktemp("console-sessions")) as live:
+        yield live
 
 
 @pytest.fixture(scope="module")
 def page(site) -> Iterator:
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
-        driver.get(site.console.url + "/")
-        WebDriverWait(driver, 20).until(lambda d: re.search(r"\d+\.\d %", d.find_element(
-            By.CSS_SELECTOR, '#main [data-key="battery/state"][data-field="soc"]').text))
+    with console_page(site) as driver:
         yield driver
-    finally:
-        driver.quit()
 
 
 def page_state(driver) -> dict:

@@ -28,19 +28,14 @@ from selenium.webdriver.common.by import By
 from selenium.webdriver.support import expected_conditions as ec
 
 from common import keys
-from testbed.browser import open_browser, size_viewport
-from tests.console.conftest import Live, save_shot, settle, shoot, start_console
+from testbed.browser import size_viewport
+from tests.console.conftest import Live, console_page, console_site, save_shot, settle, shoot
 from tests.console.page_checks import COVERED, LAYOUT, TEXT, TOUCH, TOUCH_PX, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
 from tests.harness import (
     ALL_SERVICES,
     ROOT,
     ROVERS,
-    Probe,
-    Twin,
-    free_endpoint,
-    open_router,
-    stop_process,
     wait_for,
 )
 
@@ -55,38 +50,16 @@ SHIPPED = ROOT / "config" / "scenarios"
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[Live]:
     """The shipped MAPP rover, its drive included, and a console with the shipped drills."""
-    endpoint = free_endpoint()
-    router = open_router(endpoint)
     folder = tmp_path_factory.mktemp("console-views")
-    try:
-        services = (*ALL_SERVICES, "drive")
-        with Twin(endpoint, [ROVERS / "mapp.yaml"], folder / "state", services=services) as twin, \
-                Probe(endpoint) as p:
-            p.watch(f"{keys.ROOT}/{R}/**")
-            p.wait_services(R, services)
-            p.wait_value(keys.battery_state(R))
-            console = start_console(endpoint, folder, "--scenarios", str(SHIPPED), "--rover",
-                                    str(ROVERS / "mapp.yaml"))
-            try:
-                yield Live(endpoint, twin, p, console, folder)
-            finally:
-                stop_process(console.proc, 10)
-                print(f"--- console log ---\n{console.log.read_text()[-3000:]}")
-    finally:
-        router.close()
+    with console_site(folder, "--scenarios", str(SHIPPED), "--rover", str(ROVERS / "mapp.yaml"),
+                      rover=ROVERS / "mapp.yaml", services=(*ALL_SERVICES, "drive")) as live:
+        yield live
 
 
 @pytest.fixture(scope="module")
 def page(site) -> Iterator:
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
-        driver.get(site.console.url + "/")
-        WebDriverWait(driver, 20).until(lambda d: re.search(r"\d+\.\d %", d.find_element(
-            By.CSS_SELECTOR, '#main [data-key="battery/state"][data-field="soc"]').text))
+    with console_page(site) as driver:
         yield driver
-    finally:
-        driver.quit()
 
 
 def steps(driver) -> list[tuple[str, str, str]]:
