@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import re
 import sys
 
 import zenoh
 
 from common.connection import ConnectionConfigError
+from lunaris.processes import quiet_stdout
 
 __all__ = ["COMMANDS", "main"]
 
@@ -61,29 +61,19 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = parser.parse_args(argv)
     except BrokenPipeError:  # the help, read by a reader that went
-        _quiet_stdout()
+        quiet_stdout()
         return 0
     try:
         return int(importlib.import_module(COMMANDS[args.command][0]).main(args) or 0)
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:  # the reader of our output has gone (| head): nothing more to say
-        _quiet_stdout()
+        quiet_stdout()
         return 0
     except (zenoh.ZError, ConnectionConfigError) as exc:  # a port in use, a bad endpoint or file
         print(f"lunaris {args.command}: {_zenoh_message(exc)}", file=sys.stderr)
         return 1
 
-
-def _quiet_stdout() -> None:
-    """Point stdout at /dev/null, so that the interpreter's last flush does not fail again."""
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):
-        pass
-    finally:
-        os.close(devnull)
 
 
 def _zenoh_message(exc: Exception) -> str:

@@ -14,6 +14,7 @@ and the benchmarks (:mod:`testbed`) all do with Lunaris processes:
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -22,7 +23,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["SOURCE", "lunaris_cmd", "run_args", "start_router_process", "stop_process",
+__all__ = ["SOURCE", "lunaris_cmd", "quiet_stdout", "run_args", "start_router_process", "stop_process",
            "stop_processes", "wait_for"]
 
 SOURCE = Path(__file__).resolve().parents[1]  # the folder this lunaris is imported from
@@ -106,3 +107,15 @@ def start_router_process(endpoint: str, log: Path, cwd: str | Path = SOURCE,
         stop_process(proc)
         raise
     return proc
+
+
+def quiet_stdout() -> None:
+    """Point stdout at /dev/null: its reader has gone (``| head``), and the interpreter's last
+    flush must not fail again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    finally:
+        os.close(devnull)

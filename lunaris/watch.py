@@ -40,6 +40,7 @@ from common import keys
 from common.connection import add_connection_args
 from common.messages import ActiveFaults
 from lunaris.client import Mirror, ToolError, close_session, describe_endpoint, open_session
+from lunaris.processes import quiet_stdout
 from lunaris.watch_compact import fleet_compact, render_compact
 from lunaris.watch_view import Connection, Snapshot, render_fleet, render_rover
 
@@ -188,7 +189,7 @@ def main(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         pass
     except BrokenPipeError:  # the reader has gone (| head): close as on Ctrl-C, quietly
-        _quiet_stdout()
+        quiet_stdout()
     if watcher.error:
         print(f"lunaris watch: {watcher.error}", file=sys.stderr, flush=True)
         code = 2
@@ -233,15 +234,6 @@ class _Console(Console):
         self.quiet = True
         raise BrokenPipeError
 
-
-def _quiet_stdout() -> None:
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError):
-        pass
-    finally:
-        os.close(devnull)
 
 
 def _once(args: argparse.Namespace, watcher: _Watcher, console: Console, frame) -> int:
