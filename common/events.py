@@ -18,7 +18,7 @@ from typing import Any
 
 from common.messages import Event
 
-__all__ = ["EVENT_WINDOW", "EventWindow", "event_identity", "source_mismatch"]
+__all__ = ["EVENT_WINDOW", "EventWindow", "event_identity", "session_opened", "source_mismatch"]
 
 EVENT_WINDOW = 4096  # identities remembered: far more than the publishers' caches replay (256 each)
 
@@ -67,3 +67,17 @@ class EventWindow:
 
     def __len__(self) -> int:
         return len(self._order)
+
+
+def session_opened(ev: Event | Mapping[str, Any]) -> tuple[str, str] | None:
+    """(session, trainee) of the clock's event that opens a trainee session (SPEC 12c: its
+    params carry ``session``, ``trainee`` and ``started_wall``), or None for any other event.
+    The one rule the tools' mirror, the response and the report read a session's trainee by."""
+    get = ev.get if isinstance(ev, Mapping) else lambda name, default=None: getattr(ev, name, default)
+    p = get("params")
+    if get("kind") != "session" or get("source") != "clock" or not isinstance(p, Mapping):
+        return None
+    session, trainee = p.get("session"), p.get("trainee")
+    if "started_wall" not in p or not isinstance(session, str):
+        return None
+    return session, trainee if isinstance(trainee, str) else ""

@@ -72,6 +72,7 @@ from typing import Any
 
 import msgspec
 
+from common.events import session_opened
 from common.symptoms import SMOOTH_POWER, SYMPTOMS, TOLERANCE, Band, Direction, Series, SymptomSpec
 
 __all__ = [
@@ -460,10 +461,9 @@ class Response:
         sid = _get(ev, "session", "") or ""
         s = self._session_of(sid, self._t) if sid else self._current
         params = _get(ev, "params") or {}
-        if (kind == "session" and _get(ev, "source") == "clock" and isinstance(params, Mapping)
-                and "started_wall" in params and params.get("session") == s.id):
-            # the clock's word that it opened (the rule of lunaris.client.events.session_opened)
-            s.trainee = str(params.get("trainee") or "")
+        opened = session_opened(ev)
+        if opened is not None and opened[0] == s.id:  # the clock's word that it opened
+            s.trainee = opened[1]
             self.version += 1
         if kind == "fault_injected":
             self._inject(s, key, t, params if isinstance(params, Mapping) else {}, _get(ev, "actor", ""))
