@@ -1,18 +1,37 @@
 # Lunaris: `make run` and `make test` do all the set-up on a fresh machine.
-PYTHON ?= python3
-VENV   ?= .venv
-BIN     = $(VENV)/bin
-ROVER  ?= config/rovers/mapp.yaml
-STAMP   = $(VENV)/.installed
+PYTHON  ?= python3
+VENV    ?= .venv
+BIN      = $(VENV)/bin
+ROVER   ?= config/rovers/mapp.yaml
+PORT    ?= 8080
+STATE   ?= var/state
+WORKERS ?= 3
+# what running needs: the package and its dependencies, no extra
+RUN_STAMP  = $(VENV)/.installed-run
+# and what the tests need besides (the dev and test-ros2 extras)
+TEST_STAMP = $(VENV)/.installed
+# the console page's linters (ESLint, the TypeScript checker), from the npm registry
+NODE_STAMP = node_modules/.installed
+START := $(shell date +%s)
 
 .PHONY: run test lint typecheck reference bench system-deps clean
 
+$(RUN_STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e .
+	@touch $@
+
 # dev: the tools of make test; test-ros2: real ROS 2 (the rclpy wheels of the ros2 extra) and an
-# independent rmw_zenoh client, which the bridge's tests run against.
-$(STAMP): pyproject.toml
+# independent rmw_zenoh client, which the bridge's tests run against. Running needs none of it.
+$(TEST_STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,test-ros2]'
+	@touch $@ $(RUN_STAMP)
+
+$(NODE_STAMP): package.json package-lock.json
+	npm ci --no-audit --no-fund --loglevel=error
 	@touch $@
 
 # docker-compose (v1, Debian) validates docker-compose.yml in the tests; no engine needed.
@@ -29,28 +48,36 @@ system-deps:
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null; \
 	  else echo "warning: chromium or chromedriver missing and cannot be installed; console browser tests will skip"; fi; }
 
-# The twin and the instructor console: open the address it prints (http://127.0.0.1:8080/).
-run: $(STAMP)
-	$(BIN)/lunaris up --rover $(ROVER) --console
+# The twin of ROVER and the instructor console on 127.0.0.1:PORT (open the address it prints).
+# The state (batteries, faults, snapshots) persists in STATE between runs: rm -rf var/state
+# starts afresh.
+run: $(RUN_STAMP)
+	$(BIN)/lunaris up --rover $(ROVER) --state-dir $(STATE) --console 127.0.0.1:$(PORT)
 
-lint: $(STAMP)
+lint: $(TEST_STAMP) $(NODE_STAMP)
 	$(BIN)/ruff check .
+	npm run --silent lint
 
-typecheck: $(STAMP)
+typecheck: $(TEST_STAMP)
 	$(BIN)/mypy
 
 # docs/reference is generated from the code; a test fails when the committed pages are stale.
-reference: $(STAMP)
+reference: $(TEST_STAMP)
 	$(BIN)/python -m lunaris.reference
 
-# ruff, mypy, then every test with coverage (services' subprocesses included); the coverage
-# table and total are printed at the end, and below 90 % the run fails.
-test: $(STAMP) system-deps lint typecheck
+# ruff, mypy, then every test with coverage (services' subprocesses included) on WORKERS
+# pytest-xdist workers, a module's tests on one worker (its shared twin started once); the
+# coverage table and total are printed at the end, and below 90 % the run fails. The last line
+# says how long make test took, set-up included.
+test: $(TEST_STAMP) system-deps lint typecheck
 	rm -f .coverage .coverage.*
-	$(BIN)/pytest --cov --cov-report=term
+	@status=0; $(BIN)/pytest -n $(WORKERS) --dist loadgroup --cov --cov-report=term || status=$$?; \
+	  took=$$(( $$(date +%s) - $(START) )); \
+	  echo "make test took $$((took / 60)) min $$((took % 60)) s ($$took s, $(WORKERS) workers)"; \
+	  exit $$status
 
-bench: $(STAMP)
+bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py
 
 clean:
-	rm -rf $(VENV) .pytest_cache .ruff_cache .hypothesis .mypy_cache .coverage .coverage.*
+	rm -rf $(VENV) node_modules .pytest_cache .ruff_cache .hypothesis .mypy_cache .coverage .coverage.*

@@ -7,7 +7,10 @@ effect, read back with the bridge's own CDR codec (rosbags, ``services/bridge/cd
 tests check it against an independent decoder; here it only has to be read):
 
 - ``bridge diagnostics <flavour>`` for ros2dds, rmw_zenoh and json: a DiagnosticArray,
-  stamped after the put, whose ``<rover>/load/nav_camera`` status lists the ``short``;
+  stamped after the put, that shows the short as the crew sees it (the shipped mapping's
+  ``crew_view: symptoms``, SPEC §12b): ``<rover>/rail/5V_CH2`` at ERROR with its ``tripped``
+  alarm (the figures before the crew's view timed the ``short`` on ``load/nav_camera``, which
+  the crew no longer sees);
 - ``bridge PDM current ros2dds``: ``/pdm/rail_5V_CH2_current_ma`` differs from its value
   before the put (the short's current, then 0 mA once the rail trips);
 - ``bridge diagnostics ros2 (rclpy)``: the ``ros2`` flavour, timed at an rclpy subscriber of
@@ -38,7 +41,7 @@ from services.bridge.cdr import decode_cdr
 from services.bridge.rmw_zenoh import rmw_topic_key
 
 DIAGNOSTICS = "diagnostic_msgs/msg/DiagnosticArray"
-NAV_CAMERA = f"{fl.R}/load/nav_camera"
+RAIL_5V_CH2 = f"{fl.R}/rail/5V_CH2"  # the short's nav_camera is on it
 
 
 def _decode(flavour: str, payload: bytes, typename: str) -> dict:
@@ -54,8 +57,8 @@ def _shows_short(flavour: str) -> Callable[[bytes | None], Callable[[bytes], boo
             stamp = msg["header"]["stamp"]
             if stamp["sec"] * 1_000_000_000 + stamp["nanosec"] < armed_ns:
                 return False  # published before this run's put
-            return any(s["name"] == NAV_CAMERA and s["level"] >= 1
-                       and "short" in [v["key"] for v in s["values"]] for s in msg["status"])
+            return any(s["name"] == RAIL_5V_CH2 and s["level"] == 2
+                       and "tripped" in [v["key"] for v in s["values"]] for s in msg["status"])
         return test
     return make_test
 

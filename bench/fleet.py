@@ -14,16 +14,17 @@ and reports per second of wall time:
   router``, a process of its own as in a deployment, where it is zenohd) beside them, and this
   measuring process's own (neither in the services' total);
 - while the fleet runs, the fault-to-dashboard latency: load shorts on mapp-01's nav_camera,
-  each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it (SPEC §10: p99 under
-  50 ms), cleared and the rail reset between shorts; each written as the instructor's tools
-  write (``common.connection.write``: never dropped, at the instructor's priority, ahead of
-  the fleet's telemetry on the router's links), at a random moment of the tick period (an
-  instructor's fault does not wait for a tick; written a fixed time after the rail came back
-  on, the shorts had fallen mostly in the first 40 ms after a tick, when the fleet's services
-  are all at work), and the figures split by when in the period each was written. This
-  process stands in for the dashboard while it times them: its counting subscriptions
-  undeclared (its load is not the fleet's), its garbage collector off (its pauses are not
-  the twin's).
+  each timed to the first ``mapp_01/diagnostics`` (ros2dds) that shows it as the crew sees it
+  (the shipped mapping's ``crew_view: symptoms``: the 5V_CH2 rail's over-current trip, never
+  the short itself; SPEC §10: p99 under 50 ms), cleared and the rail reset between shorts;
+  each written as the instructor's tools write (``common.connection.write``: never dropped,
+  at the instructor's priority, ahead of the fleet's telemetry on the router's links), at a
+  random moment of the tick period (an instructor's fault does not wait for a tick; written
+  a fixed time after the rail came back on, the shorts had fallen mostly in the first 40 ms
+  after a tick, when the fleet's services are all at work), and the figures split by when in
+  the period each was written. This process stands in for the dashboard while it times them:
+  its counting subscriptions undeclared (its load is not the fleet's), its garbage collector
+  off (its pauses are not the twin's).
 
 Run: ``.venv/bin/python bench/fleet.py [ROVERS] [SECONDS] [--bridges B] [--faults N]``.
 """
@@ -83,8 +84,9 @@ def fault_latencies(probe, n: int, last_tick: Callable[[], float]) -> list[tuple
         if not armed:
             return
         msg = decode_cdr("diagnostic_msgs/msg/DiagnosticArray", s.payload.to_bytes())
-        if any(st["name"] == f"{rover}/load/nav_camera" and "short" in [v["key"] for v in st["values"]]
-               for st in msg["status"]):
+        # the crew's first sign of the short: the rail's over-current trip (SPEC §12b)
+        if any(st["name"] == f"{rover}/rail/5V_CH2" and st["level"] == 2
+               and "tripped" in [v["key"] for v in st["values"]] for st in msg["status"]):
             out.append(((time.perf_counter() - armed.pop()) * 1e3, phase[0]))
             done.set()
 
@@ -97,7 +99,7 @@ def fault_latencies(probe, n: int, last_tick: Callable[[], float]) -> list[tuple
         armed[:] = [now]
         write(probe.session, short, b"")
         if not done.wait(5.0):
-            print(f"  fault {i}: no short on {diag} within 5 s", flush=True)
+            print(f"  fault {i}: no trip on {diag} within 5 s", flush=True)
             armed.clear()
         write(probe.session, short, None)
         try:

@@ -273,7 +273,7 @@ class FaultBook:
 
     def _message(self, rover: str) -> ActiveFaults:
         return ActiveFaults(t_s=self.rt.t_s[rover], service=self.rt.name, faults=self.active(rover),
-                            epoch=self.rt.epoch[rover])
+                            epoch=self.rt.epoch[rover], session=self.rt.session_id[rover])
 
     def _publish_all(self) -> None:
         for rover in sorted(self.injected):

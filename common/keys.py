@@ -14,7 +14,6 @@ conditions, the gatekeeper that refuses keys nobody owns.
 
 from __future__ import annotations
 
-import re
 from typing import Literal, NamedTuple
 
 import msgspec
@@ -23,6 +22,12 @@ from common import messages as m
 from common.scenario_progress import ScenarioProgress
 
 __all__ = [
+    # the families, each a key builder of its own: BATTERY_STATE.key(rover)
+    "BATTERY_STATE", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL", "DRIVE_ROUTE", "DRIVE_STATE", "EVENT",
+    "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION",
+    "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY",
+    "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE",
+    "DELETABLE",
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
@@ -32,9 +37,11 @@ __all__ = [
     "clock",
     "clock_control",
     "cmd_rail",
+    "control_mark",
     "control_reset",
     "control_restore",
     "control_scenario",
+    "control_session",
     "control_snapshot",
     "drive_route",
     "drive_state",
@@ -66,6 +73,7 @@ __all__ = [
     "service_claim",
     "service_claims",
     "service_owner",
+    "sessions",
     "snapshots",
     "snapshots_of",
     "solar_power",
@@ -76,7 +84,7 @@ __all__ = [
 ]
 
 ROOT = "lunaris"
-SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")  # a snapshot's name: one key chunk
+SNAPSHOT_NAME = m.SNAPSHOT_NAME  # a snapshot's name: one key chunk
 PLACEHOLDERS = ("load", "rail", "radio", "panel")  # the component kinds a key can name
 
 
@@ -90,78 +98,78 @@ def under(rover: str, tail: str = "**") -> str:
 
 
 def clock(rover: str) -> str:
-    return f"{ROOT}/{rover}/clock"
+    return CLOCK.key(rover)
 
 
 def clock_control(rover: str) -> str:
-    return f"{ROOT}/{rover}/clock/control"
+    return CLOCK_CONTROL.key(rover)
 
 
 def battery_state(rover: str) -> str:
-    return f"{ROOT}/{rover}/battery/state"
+    return BATTERY_STATE.key(rover)
 
 
 def load_power(rover: str, load: str) -> str:
-    return f"{ROOT}/{rover}/load/{load}/power"
+    return LOAD_POWER.key(rover, load)
 
 
 def rail_state(rover: str, rail: str) -> str:
-    return f"{ROOT}/{rover}/rail/{rail}/state"
+    return RAIL_STATE.key(rover, rail)
 
 
 def power_summary(rover: str) -> str:
-    return f"{ROOT}/{rover}/power/summary"
+    return POWER_SUMMARY.key(rover)
 
 
 def solar_power(rover: str, panel: str) -> str:
-    return f"{ROOT}/{rover}/solar/{panel}/power"
+    return SOLAR_POWER.key(rover, panel)
 
 
 def umbilical_state(rover: str) -> str:
-    return f"{ROOT}/{rover}/umbilical/state"
+    return UMBILICAL_STATE.key(rover)
 
 
 def radio_link(rover: str, radio: str) -> str:
-    return f"{ROOT}/{rover}/radio/{radio}/link"
+    return RADIO_LINK.key(rover, radio)
 
 
 def drive_state(rover: str) -> str:
-    return f"{ROOT}/{rover}/drive/state"
+    return DRIVE_STATE.key(rover)
 
 
 def drive_route(rover: str) -> str:
     """The traverse the rover follows (published on change, for a map)."""
-    return f"{ROOT}/{rover}/drive/route"
+    return DRIVE_ROUTE.key(rover)
 
 
 def input_drive_traverse(rover: str) -> str:
-    return f"{ROOT}/{rover}/input/drive/traverse"
+    return INPUT_DRIVE_TRAVERSE.key(rover)
 
 
 def input_sun_angle(rover: str) -> str:
-    return f"{ROOT}/{rover}/input/sun_angle"
+    return INPUT_SUN_ANGLE.key(rover)
 
 
 def input_panel_sun_angle(rover: str, panel: str) -> str:
     """One panel's sun angle: overrides ``input/sun_angle`` for that panel until deleted."""
-    return f"{ROOT}/{rover}/input/solar/{panel}/sun_angle"
+    return INPUT_PANEL_SUN_ANGLE.key(rover, panel)
 
 
 def input_solar_dust(rover: str, panel: str) -> str:
     """The dashboard's dust on one panel, besides the instructor's dust fault."""
-    return f"{ROOT}/{rover}/input/solar/{panel}/dust"
+    return INPUT_SOLAR_DUST.key(rover, panel)
 
 
 def input_radio_position(rover: str, radio: str) -> str:
-    return f"{ROOT}/{rover}/input/radio/{radio}/position"
+    return INPUT_RADIO_POSITION.key(rover, radio)
 
 
 def input_umbilical(rover: str) -> str:
-    return f"{ROOT}/{rover}/input/umbilical"
+    return INPUT_UMBILICAL.key(rover)
 
 
 def cmd_rail(rover: str, rail: str) -> str:
-    return f"{ROOT}/{rover}/cmd/rail/{rail}"
+    return CMD_RAIL.key(rover, rail)
 
 
 def fault(rover: str, component: str, kind: str) -> str:
@@ -185,7 +193,7 @@ def faults(rover: str) -> str:
 
 def faults_active(rover: str, service: str) -> str:
     """The faults in effect on the components one service owns (published and queryable)."""
-    return f"{ROOT}/{rover}/faults/active/{service}"
+    return FAULTS_ACTIVE.key(rover, service)
 
 
 def faults_journal(rover: str) -> str:
@@ -202,6 +210,22 @@ def control_snapshot(rover: str, name: str) -> str:
 
 def control_restore(rover: str, name: str) -> str:
     return f"{ROOT}/{rover}/control/restore/{name}"
+
+
+def control_session(rover: str) -> str:
+    """``{"trainee", "from_snapshot"?}``: end the running session, begin a trainee's (the clock
+    answers)."""
+    return f"{ROOT}/{rover}/control/session"
+
+
+def control_mark(rover: str) -> str:
+    """``{"text"}``: an instructor's mark on the timeline (a ``mark`` event of the faults service)."""
+    return f"{ROOT}/{rover}/control/mark"
+
+
+def sessions(rover: str) -> str:
+    """``get`` lists the rover's trainee sessions (from the journal, by the faults service)."""
+    return f"{ROOT}/{rover}/sessions"
 
 
 def control_scenario(rover: str) -> str:
@@ -221,11 +245,11 @@ def snapshots_of(rover: str, service: str) -> str:
 
 def prediction(rover: str) -> str:
     """``get`` with ``?hours=8;samples=1000`` returns the Monte Carlo from the live state."""
-    return f"{ROOT}/{rover}/prediction"
+    return PREDICTION.key(rover)
 
 
 def event(rover: str) -> str:
-    return f"{ROOT}/{rover}/event"
+    return EVENT.key(rover)
 
 
 def event_of(rover: str, service: str) -> str:
@@ -305,6 +329,15 @@ class Family(NamedTuple):
         """Zenoh key expression for every component of the family (of every rover)."""
         return "/".join([ROOT, rover, *("*" if c.startswith("{") else c for c in self.chunks)])
 
+    def key(self, rover: str, name: str | None = None) -> str:
+        """The key of one component (``LOAD_POWER.key("mapp-1", "imu")`` ->
+        ``lunaris/mapp-1/load/imu/power``); ``name`` only for a family with a placeholder."""
+        if (name is None) != (self.placeholder is None):
+            wants = f"a {self.placeholder}" if self.placeholder else "no"
+            raise TypeError(f"the key of {self.name} takes {wants} name")
+        named = name or ""  # "" gives a prefix: faults_active(rover, "") -> .../faults/active/
+        return "/".join([ROOT, rover, *(named if c.startswith("{") else c for c in self.chunks)])
+
     def matches(self, parts: list[str] | tuple[str, ...]) -> bool:
         return len(parts) == len(self.chunks) and all(
             c.startswith("{") or c == p for c, p in zip(self.chunks, parts, strict=True))
@@ -316,30 +349,59 @@ def _f(shape: str, payload: type[msgspec.Struct], owner: str, direction: Directi
                   direction or ("out" if m.is_telemetry(payload) else "in"), owner)
 
 
+CLOCK = _f("clock", m.Clock, "clock")
+BATTERY_STATE = _f("battery/state", m.BatteryState, "battery")
+LOAD_POWER = _f("load/{load}/power", m.LoadPower, "loads")
+RAIL_STATE = _f("rail/{rail}/state", m.RailState, "power")
+POWER_SUMMARY = _f("power/summary", m.PowerSummary, "power")
+SOLAR_POWER = _f("solar/{panel}/power", m.SolarPower, "solar")
+UMBILICAL_STATE = _f("umbilical/state", m.UmbilicalState, "solar")
+RADIO_LINK = _f("radio/{radio}/link", m.RadioLink, "radio")
+DRIVE_STATE = _f("drive/state", m.DriveState, "drive")
+DRIVE_ROUTE = _f("drive/route", m.DriveRoute, "drive")
+EVENT = _f("event", m.Event, "*")
+FAULTS_ACTIVE = _f("faults/active/{service}", m.ActiveFaults, "*")
+INPUT_SUN_ANGLE = _f("input/sun_angle", m.SunAngle, "solar")
+INPUT_PANEL_SUN_ANGLE = _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar")
+INPUT_RADIO_POSITION = _f("input/radio/{radio}/position", m.RadioPosition, "radio")
+INPUT_SOLAR_DUST = _f("input/solar/{panel}/dust", m.DustInput, "solar")
+INPUT_UMBILICAL = _f("input/umbilical", m.UmbilicalInput, "solar")
+INPUT_DRIVE_TRAVERSE = _f("input/drive/traverse", m.DriveTraverse, "drive")
+CMD_RAIL = _f("cmd/rail/{rail}", m.RailCommand, "power")
+CLOCK_CONTROL = _f("clock/control", m.ClockControl, "clock")
+PREDICTION = _f("prediction", m.Prediction, "battery", "query")
+# put by the scenario runner (a tool)
+SCENARIO_PROGRESS = _f("scenario/progress", ScenarioProgress, "*", "out")
+
 FAMILIES: tuple[Family, ...] = (
-    _f("clock", m.Clock, "clock"),
-    _f("battery/state", m.BatteryState, "battery"),
-    _f("load/{load}/power", m.LoadPower, "loads"),
-    _f("rail/{rail}/state", m.RailState, "power"),
-    _f("power/summary", m.PowerSummary, "power"),
-    _f("solar/{panel}/power", m.SolarPower, "solar"),
-    _f("umbilical/state", m.UmbilicalState, "solar"),
-    _f("radio/{radio}/link", m.RadioLink, "radio"),
-    _f("drive/state", m.DriveState, "drive"),
-    _f("drive/route", m.DriveRoute, "drive"),
-    _f("event", m.Event, "*"),
-    _f("faults/active/{service}", m.ActiveFaults, "*"),
-    _f("input/sun_angle", m.SunAngle, "solar"),
-    _f("input/solar/{panel}/sun_angle", m.SunAngle, "solar"),
-    _f("input/radio/{radio}/position", m.RadioPosition, "radio"),
-    _f("input/solar/{panel}/dust", m.DustInput, "solar"),
-    _f("input/umbilical", m.UmbilicalInput, "solar"),
-    _f("input/drive/traverse", m.DriveTraverse, "drive"),
-    _f("cmd/rail/{rail}", m.RailCommand, "power"),
-    _f("clock/control", m.ClockControl, "clock"),
-    _f("prediction", m.Prediction, "battery", "query"),
-    _f("scenario/progress", ScenarioProgress, "*", "out"),  # put by the scenario runner (a tool)
+    CLOCK,
+    BATTERY_STATE,
+    LOAD_POWER,
+    RAIL_STATE,
+    POWER_SUMMARY,
+    SOLAR_POWER,
+    UMBILICAL_STATE,
+    RADIO_LINK,
+    DRIVE_STATE,
+    DRIVE_ROUTE,
+    EVENT,
+    FAULTS_ACTIVE,
+    INPUT_SUN_ANGLE,
+    INPUT_PANEL_SUN_ANGLE,
+    INPUT_RADIO_POSITION,
+    INPUT_SOLAR_DUST,
+    INPUT_UMBILICAL,
+    INPUT_DRIVE_TRAVERSE,
+    CMD_RAIL,
+    CLOCK_CONTROL,
+    PREDICTION,
+    SCENARIO_PROGRESS,
 )
+
+
+# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
+# gone, the rover stopped (by family name).
+DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
 
 
 def families(direction: Direction | None = None) -> tuple[Family, ...]:

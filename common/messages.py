@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from typing import Annotated, Any, Literal, TypeVar
 
 import msgspec
@@ -38,8 +39,16 @@ __all__ = [
     "DustInput",
     "Event",
     "EventKind",
+    "ExpectationMark",
     "Severity",
+    "SessionInfo",
+    "SessionStart",
+    "SESSION_ID",
+    "SNAPSHOT_NAME",
     "SnapshotInfo",
+    "TimelineMark",
+    "TRAINEE_MAX",
+    "trainee_problem",
     "LoadPower",
     "Percentiles",
     "PowerSummary",
@@ -69,6 +78,8 @@ __all__ = [
 ]
 
 T = TypeVar("T", bound=msgspec.Struct)
+SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")  # a snapshot's name: one key chunk
+SESSION_ID = re.compile(r"^\d{8}-\d{6}$")  # a session's id: the UTC time it began, YYYYMMDD-HHMMSS
 
 Severity = Literal["info", "warning", "critical"]
 RailStateName = Literal["on", "off", "tripped", "shed", "failed"]
@@ -87,8 +98,9 @@ class Clock(_Msg):
     seq: int
     time_scale: float
     paused: bool
-    epoch: int = 0  # counts the session's resets and restores
+    epoch: int = 0  # counts the twin's resets and restores (a session begins with one)
     cause: str = ""  # what started this epoch: "reset" or "restore:<snapshot>"
+    session: str = ""  # the trainee session running (its id: see SessionInfo); "" from an older clock
 
 
 class BatteryState(_Msg):
@@ -105,7 +117,9 @@ class BatteryState(_Msg):
     fault_code: int
     faults: list[str]
     time_to_empty_s: float | None  # null while charging or idle
-    heat_w: float = 0.0
+    heat_w: Annotated[float, msgspec.Meta(description=(
+        "the heat of the pack's own electrical losses (I^2 R) [W]; an injected heating fault is "
+        "not in it: it shows only as the temperature it raises"))] = 0.0
     polarisation_v: list[float] = []  # the equivalent circuit's branch voltages (rc_pairs)
     depleted_soc: Annotated[float, msgspec.Meta(description=(
         "the state of charge at which the pack counts as empty and goes off line (0..1, the "
@@ -289,7 +303,7 @@ class DriveRoute(_Msg):
 # input, a change of the clock, a bug in a service, events the journal never received.
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error", "state_damaged", "journal_gap"]
+                    "internal_error", "state_damaged", "journal_gap", "mark"]
 
 
 class Event(_Msg):
@@ -305,6 +319,10 @@ class Event(_Msg):
     # who acted: crew, instructor or scenario (the write's attachment), twin (its own:
     # protection, derived faults, internal errors); "" from a journal written before
     actor: str = ""
+    # the trainee session it belongs to (SessionInfo.id): the session its service was in,
+    # as the clock's ticks said; "" from a journal written before sessions, or a service that
+    # has heard no tick yet (the journal counts it in the session running then)
+    session: str = ""
 
 
 FaultOrigin = Literal["injected", "derived"]
@@ -328,6 +346,7 @@ class ActiveFaults(_Msg):
     service: str
     faults: list[ActiveFault]
     epoch: int = 0  # the clock's epoch of t_s: a clock that lost its time learns it back here
+    session: str = ""  # the session of t_s: a clock that lost its state learns it back here
 
 
 class SnapshotInfo(_Msg):
@@ -337,6 +356,28 @@ class SnapshotInfo(_Msg):
     t_s: float  # the rover's sim time when it was saved
     saved_at: float  # wall time when it was saved [s since the epoch]
     services: list[str]  # the services that hold their part of it
+
+
+class SessionInfo(_Msg):
+    """One trainee session of a rover, as ``get lunaris/<rover>/sessions`` lists it (oldest
+    first; the last is the running one)."""
+
+    id: Annotated[str, msgspec.Meta(description=(
+        "the session's id: the UTC wall time it began, YYYYMMDD-HHMMSS (one second later than "
+        "the previous session's when two begin within a second); what "
+        "faults/journal?session=<id> and lunaris report --session take"))]
+    trainee: Annotated[str, msgspec.Meta(description=(
+        "the trainee (or crew) named by control/session; \"\" for a session no control/session "
+        "began (the twin's first)"))]
+    start_t_s: Annotated[float, msgspec.Meta(description="the rover's sim time when it began [s]")]
+    end_t_s: Annotated[float | None, msgspec.Meta(description=(
+        "the rover's sim time when it ended [s]; null while it runs"))]
+    started_wall: Annotated[float | None, msgspec.Meta(description=(
+        "wall time when it began [s since the Unix epoch]; null when the journal lost the "
+        "event that said"))]
+    from_snapshot: Annotated[str | None, msgspec.Meta(description=(
+        "the snapshot it began from; null when it began from the rover file"))] = None
+    events: Annotated[int, msgspec.Meta(description="the events journalled in it")] = 0
 
 
 # -- inputs and commands (decoded strictly) -----------------------------------------------
@@ -451,14 +492,81 @@ BARE_FIELD: dict[type[msgspec.Struct], str] = {
 }
 
 
+class ExpectationMark(_Input):
+    """An expectation of a scenario scored (SPEC §12d), as the journal keeps it: the params of
+    its ``scenario`` event hold it under ``expectation``. Times are the rover's sim time [s]."""
+
+    index: Annotated[int, msgspec.Meta(ge=0, le=10_000)]  # the step, from 0
+    label: Annotated[str, msgspec.Meta(max_length=200)]
+    condition: Annotated[str, msgspec.Meta(max_length=1000)]
+    within_s: Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
+    met: bool
+    at_t_s: float | None = None  # when it was met; null when missed
+    armed_t_s: float | None = None  # when the crew's time began; null: never armed
+    start_t_s: float | None = None  # when the scenario started
+    detail: Annotated[str, msgspec.Meta(max_length=1000)] = ""
+
+
 class ScenarioMark(_Input):
     """``control/scenario``: a scenario's progress, put by the player so that the journal (and
-    the debrief) marks when it started, each step that fired and how it ended."""
+    the debrief) marks when it started, each step that fired, each expectation scored and how
+    it ended."""
 
     scenario: Annotated[str, msgspec.Meta(min_length=1, max_length=200)]
-    what: Literal["start", "step", "end"]
+    what: Literal["start", "step", "end", "expect"]
     message: Annotated[str, msgspec.Meta(max_length=1000)]
     step: Annotated[int, msgspec.Meta(ge=0, le=10_000)] | None = None
+    expectation: ExpectationMark | None = None  # with what: expect
+
+
+TRAINEE_MAX = 64  # characters of a trainee's name
+_TRAINEE_PUNCTUATION = " -_.'&"
+TRAINEE_WORDS = "a trainee's name is letters, digits, spaces and - _ . ' &"
+
+
+def trainee_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a trainee, in words (None: it can): letters of any script,
+    digits, spaces and ``- _ . ' &``, 1 to 64 of them, not only spaces."""
+    if not name.strip():
+        return "give the trainee's name (or the crew's)"
+    bad = [c for c in dict.fromkeys(name) if not (c.isalnum() or c in _TRAINEE_PUNCTUATION)]
+    if bad:
+        said = ", ".join(repr(c) if c.isprintable() else "a control character" for c in bad[:3])
+        return f"{TRAINEE_WORDS}; this one has {said}"
+    if name != name.strip():
+        return f"{TRAINEE_WORDS}, without spaces before or after"
+    return None
+
+
+class SessionStart(_Input):
+    """``control/session``: end the running session and begin a trainee's: the twin reset to
+    its rover file, or to a snapshot (restored all or nothing)."""
+
+    trainee: Annotated[str, msgspec.Meta(max_length=TRAINEE_MAX, description=(
+        "who is trained in the new session: " + TRAINEE_WORDS))]
+    from_snapshot: Annotated[str, msgspec.Meta(description=(
+        "a snapshot to begin from (lunaris snapshot list); absent: the rover file"))] | None = None
+
+    def __post_init__(self) -> None:
+        problem = trainee_problem(self.trainee)
+        if problem is not None:
+            raise ValueError(problem)
+        if self.from_snapshot is not None and not SNAPSHOT_NAME.match(self.from_snapshot):
+            raise ValueError(f"from_snapshot {shown(self.from_snapshot)} names no snapshot: a "
+                             "snapshot name is letters, digits, '-', '_' and '.', at most 64")
+
+
+class TimelineMark(_Input):
+    """``control/mark``: an instructor's mark on the session's timeline (a ``mark`` event)."""
+
+    text: Annotated[str, msgspec.Meta(min_length=1, max_length=500, description=(
+        "what the instructor notes, as the debrief will show it"))]
+
+    def __post_init__(self) -> None:
+        if not self.text.strip():
+            raise ValueError("give the mark's text")
+        if any(not c.isprintable() for c in self.text):
+            raise ValueError("a mark's text is one line of printable characters")
 
 
 def is_telemetry(struct: type[msgspec.Struct]) -> bool:

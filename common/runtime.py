@@ -35,6 +35,14 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
   ``twin`` for its own;
 - :attr:`faults`, the :class:`~common.fault_book.FaultBook` of the components the service
   owns, and :attr:`store`, its :class:`~common.state_store.StateStore` on disk;
+- the trainee session (SPEC §12c): :attr:`Runtime.session_id` is the session the clock's
+  ticks say is running, and every event the service publishes carries it (``session``); it is
+  saved with the time, so a restarted service is in its session before its first tick. What
+  ends with a session is that session's: a fault cleared or an alarm resolved within
+  ``SESSION_GRACE_S`` of a new session's beginning, when it was injected or raised in the
+  session that ended, carries that session (the previous trainee's short, cleared by the new
+  session's reset, and the trip it caused, resolved as the rails come back on, are never in
+  the next trainee's timeline);
 - time that never goes back within an epoch: the sim time a service has reached (and its
   epoch) is saved under ``--state-dir`` (``<service>-time.json``); a restarted service
   starts from it (or from the running clock, if that is later), publishes nothing stamped
@@ -113,6 +121,14 @@ class Sample(NamedTuple):
     age_s: float = 0.0  # how long after sent_at the write arrived here [s]
 
 
+# A fault cleared or an alarm resolved this soon after a session began is the ending session's
+# when it began in that one (see Runtime.event): the reset's consequences reach every service
+# within a tick or two (0.1 s each) of the clock's.
+SESSION_GRACE_S = 2.0
+_OPENS = frozenset({"fault_injected", "fault_raised"})
+_CLOSES = frozenset({"fault_cleared", "fault_resolved"})
+OPENED_KEPT = 4096  # (rover, key) of the faults in effect whose session is remembered
+
 # Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
 TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
 WriteRole = Literal["own", "follow", "gate"]
@@ -131,11 +147,17 @@ class Runtime:
         self.rovers: set[str] = set(rovers)
         self.t_s: dict[str, float] = dict.fromkeys(self.rovers, 0.0)  # sim time per rover
         self.epoch: dict[str, int] = dict.fromkeys(self.rovers, 0)  # the epoch of t_s
+        # the trainee session of t_s, as the ticks say (the clock: as it begins them)
+        self.session_id: dict[str, str] = dict.fromkeys(self.rovers, "")
+        self._session_ended: dict[str, tuple[str, float]] = {}  # rover -> (session, monotonic)
+        self._sessions_left: dict[str, list[str]] = {}  # rover -> the sessions it has ended
+        self._opened_in: dict[tuple[str, str], str] = {}  # (rover, fault key) -> its session
         self.store = StateStore(state_dir, name)
         # Rovers whose time came from the disk, not from a tick: nothing stamped with time is
         # published for them until the clock's first tick has reached that time.
         self._waiting: set[str] = set()
         self._saved_time: dict[str, tuple[int, float]] = {}  # what <name>-time.json held
+        self._saved_session: dict[str, str] = {}  # ... and the session of that time
         self._time_written = b""
         self._behind: set[str] = set()  # rovers whose clock is behind (said once)
         self._makes_time = False  # the clock: it ticks, and waits for no tick
@@ -179,6 +201,7 @@ class Runtime:
         nothing stamped with time goes out (:attr:`_waiting`)."""
         self._saved_time = self._read_time()
         seen: dict[str, tuple[int, float]] = {}
+        sessions: dict[str, str] = {}
         done = threading.Event()
 
         def on_tick(s: zenoh.Sample) -> None:
@@ -189,6 +212,7 @@ class Runtime:
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     return
                 seen[rover] = (tick.epoch, tick.t_s)
+                sessions[rover] = tick.session
                 if len(seen) == len(self.rovers):
                     done.set()
 
@@ -199,13 +223,15 @@ class Runtime:
             live, disk = seen.get(rover), self._saved_time.get(rover)
             if live is not None and (disk is None or live >= disk):
                 self.epoch[rover], self.t_s[rover] = live
+                self.session_id[rover] = sessions.get(rover) or self._saved_session.get(rover, "")
             elif disk is not None:
                 self.epoch[rover], self.t_s[rover] = disk
+                self.session_id[rover] = self._saved_session.get(rover, "")
                 self._waiting.add(rover)
 
     def _read_time(self) -> dict[str, tuple[int, float]]:
-        """The (epoch, sim time) each rover had reached, from ``<name>-time.json``; a damaged
-        record is said aloud and left out."""
+        """The (epoch, sim time) each rover had reached, from ``<name>-time.json`` (and its
+        session, in :attr:`_saved_session`); a damaged record is said aloud and left out."""
         try:
             saved = self.store.load("time")
         except Damaged as exc:
@@ -230,10 +256,14 @@ class Runtime:
                 if isinstance(t_s, bool) or not isinstance(t_s, int | float) or not_finite(
                         float(t_s)) or t_s < 0:
                     raise ValueError(f"t_s {t_s!r} is not a finite number >= 0")
+                session = record.get("session", "")
+                if not isinstance(session, str):
+                    raise ValueError(f"session {session!r} is not text")
             except ValueError as exc:
                 bad[rover] = str(exc)
                 continue
             out[rover] = (epoch, float(t_s))
+            self._saved_session[rover] = session
         if bad:
             moved = self.store.set_aside("time")
             where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
@@ -243,10 +273,11 @@ class Runtime:
         return out
 
     def save_time(self, durable: bool = True) -> None:
-        """Save the (epoch, sim time) each rover has reached, when it has moved."""
+        """Save the (epoch, sim time, session) each rover has reached, when it has moved."""
         if self.store.dir is None:
             return
-        record = {r: {"epoch": self.epoch[r], "t_s": self.t_s[r]} for r in sorted(self.rovers)}
+        record = {r: {"epoch": self.epoch[r], "t_s": self.t_s[r], "session": self.session_id[r]}
+                  for r in sorted(self.rovers)}
         data = msgspec.json.encode(record)
         if data != self._time_written and self.save_state("time", record, durable):
             self._time_written = data
@@ -254,6 +285,10 @@ class Runtime:
     def saved_time(self, rover: str) -> tuple[int, float] | None:
         """The (epoch, sim time) ``rover`` had reached when this service last saved it."""
         return self._saved_time.get(rover)
+
+    def saved_session(self, rover: str) -> str:
+        """The session of the time :meth:`saved_time` gives ("" when none was saved)."""
+        return self._saved_session.get(rover, "")
 
     def makes_time(self) -> None:
         """This service is the clock: it publishes the ticks, so it waits for none and judges
@@ -423,10 +458,45 @@ class Runtime:
         resumed = rover in self._waiting
         self._waiting.discard(rover)
         self.epoch[rover], self.t_s[rover] = tick.epoch, tick.t_s
+        if tick.session:  # (the keeper, at a new epoch, has taken it already)
+            self.enter_session(rover, tick.session)
         if resumed and self._faults is not None:
             self._faults.publish(rover)  # held back until now: the record with a current time
         for fn in self._tick_handlers:
             fn(rover, tick)
+
+    def enter_session(self, rover: str, session: str) -> None:
+        """From now on the events of ``rover`` are ``session``'s (see :meth:`event` for what
+        ends with the previous one). A session ended never runs again: a tick of it still in
+        flight (a service that heard of the next session first) changes nothing."""
+        previous = self.session_id.get(rover, "")
+        if not session or session == previous:
+            return  # (every tick)
+        left = self._sessions_left.setdefault(rover, [])
+        if session in left:
+            return
+        if previous:
+            self._session_ended[rover] = (previous, time.monotonic())
+            left.append(previous)
+            del left[:-8]
+        self.session_id[rover] = session
+
+    def _session_of(self, rover: str, kind: str, key: str) -> str:
+        """The session an event of ``rover`` belongs to: the running one, but for a fault
+        cleared or an alarm resolved just after a new session began that was injected or
+        raised in the one that ended (:data:`SESSION_GRACE_S`)."""
+        current = self.session_id.get(rover, "")
+        if kind in _OPENS:
+            if len(self._opened_in) >= OPENED_KEPT:
+                del self._opened_in[next(iter(self._opened_in))]
+            self._opened_in[(rover, key)] = current
+        elif kind in _CLOSES:
+            opened = self._opened_in.pop((rover, key), None)
+            ended = self._session_ended.get(rover)
+            if opened and ended is not None and opened == ended[0] != current \
+                    and time.monotonic() - ended[1] < SESSION_GRACE_S:
+                return opened
+        return current
 
     def _clock_behind(self, rover: str, tick: Clock) -> None:
         if tick.epoch < self.epoch[rover] or rover in self._behind:
@@ -753,7 +823,8 @@ class Runtime:
         ``lunaris/<rover>/event/<service>`` (the faults service journals it and relays it on
         ``lunaris/<rover>/event``). Events are never dropped under congestion (the journal is
         complete). ``actor``: by default the actor of the write being handled, ``twin`` for
-        the twin's own (:data:`TWIN_KINDS`, or no write). ``(source_id, seq)`` names the event
+        the twin's own (:data:`TWIN_KINDS`, or no write). ``session``: the trainee session
+        the service is in (:attr:`session_id`). ``(source_id, seq)`` names the event
         among the rover's. A rover this service does not serve (a rejection of a key naming
         an unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
         if keys.has_wildcard(rover) or "/" in rover or not rover:  # never a key naming many
@@ -767,7 +838,7 @@ class Runtime:
         ekey = keys.event_of(rover, self.name)
         ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,
                    key=key, message=message, params=params, source_id=self._zid, seq=seq,
-                   actor=actor)
+                   actor=actor, session=self._session_of(rover, kind, key) if served else "")
         if not served:
             self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
                                    congestion_control=zenoh.CongestionControl.BLOCK,

@@ -27,6 +27,10 @@ A scenario::
       - after_s: 0
         traverse: {file: ../traverses/mapp-crater-rim.yaml}   # a traverse file (common.traverse)
 
+      - name: crew isolates the camera                # an expectation of the crew, scored
+        after_s: 0
+        expect: {when: "rail.5V_CH2.state == off", within_s: 60, label: isolate the shorted camera}
+
 A step has a time gate (``at_s`` or ``after_s``, optional), a condition (``when``,
 optional; at least one of the two), and one action: ``inject``, ``clear``,
 ``sun_angle``, ``position``, ``umbilical``, ``clock``, ``rail`` or ``traverse`` (what
@@ -36,6 +40,17 @@ both waits for its time, then for its condition; ``after_s: 0`` with a ``when``
 therefore waits for the condition only once the previous step has fired. A step
 with a ``note`` and no action is a checkpoint: it marks, in the run's report,
 when something the instructor expects (a trip, the crew's response) happened.
+
+A step ``expect: {when, within_s, label}`` is an expectation of the crew (SPEC §12d), scored
+rather than played: from when its time gate opens (``at_s``, ``after_s``, or, with neither,
+when the previous step fires) the crew has ``within_s`` seconds of simulated time to make
+``when`` hold; it is **met** at the first tick it holds (at once if it already does), or
+**missed** when the time is up or the scenario ends first. It holds nothing up: the step after
+it counts its ``after_s`` from when the expectation was armed, and the scenario goes on while
+the crew has its time. Its condition is ``expect.when`` (a step-level ``when`` or ``timeout_s``
+beside it is refused); ``label`` names it in the scores (default: the step's name, or the
+condition). The runner journals each outcome (a ``scenario`` event) and the report and the
+console show them (:mod:`common.response`).
 
 Conditions are the language of :mod:`common.conditions`
 (``battery.soc < 0.4 and rail.5V_CH2.state == on``).
@@ -69,6 +84,7 @@ from common.traverse import TraverseError, load_traverse, plan
 
 __all__ = [
     "ACTIONS",
+    "ExpectAction",
     "Scenario",
     "ScenarioError",
     "Step",
@@ -115,6 +131,17 @@ class RailAction(Strict, frozen=True):
     reset: bool | None = None
 
 
+class ExpectAction(Strict, frozen=True):
+    """An expectation of the crew, scored met (at what time) or missed (SPEC §12d)."""
+
+    when: Annotated[str, msgspec.Meta(description=(
+        "the condition (as `when:` below) the crew is to make hold"))]
+    within_s: Annotated[float, msgspec.Meta(gt=0.0, description=(
+        "the crew's time from when the step is armed [s of simulated time]"))]
+    label: Annotated[str, msgspec.Meta(max_length=200, description=(
+        "what the crew is expected to do, in the scores (default: the step's name)"))] = ""
+
+
 class Step(Strict, frozen=True):
     name: str = ""
     note: str = ""  # shown to the instructor when the step fires
@@ -130,6 +157,18 @@ class Step(Strict, frozen=True):
     clock: ClockAction | None = None
     rail: RailAction | None = None
     traverse: Any = None  # what input/drive/traverse takes, or "stop"
+    expect: Annotated[ExpectAction | None, msgspec.Meta(description=(
+        "an expectation of the crew instead of an action: armed by the time gate (at_s, "
+        "after_s, or with neither when the previous step fires), met at the first tick `when` "
+        "holds, missed after `within_s`; it holds nothing up (the next step's after_s counts "
+        "from when it was armed)"))] = None
+
+    @property
+    def label(self) -> str:
+        """An expectation's words in the scores: its label, the step's name, or its condition."""
+        if self.expect is None:
+            return self.name
+        return self.expect.label or self.name or f"expect {self.expect.when}"
 
 
 class StartFromSnapshot(Strict, frozen=True):
@@ -145,7 +184,8 @@ class Scenario(Strict, frozen=True):
     duration_s: Positive | None = None
 
 
-ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail", "traverse")
+ACTIONS = ("inject", "clear", "sun_angle", "position", "umbilical", "clock", "rail", "traverse",
+           "expect")
 STOP = "stop"
 
 
@@ -224,9 +264,15 @@ def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[st
                    base: Path) -> None:
     if "at_s" in step and "after_s" in step:
         problems.append(f"{path}: give at_s or after_s, not both")
-    if not any(k in step for k in ("at_s", "after_s", "when")):
+    expecting = step.get("expect") is not None
+    if not expecting and not any(k in step for k in ("at_s", "after_s", "when")):
         problems.append(f"{path}: give a trigger: at_s, after_s or when")
-    if "timeout_s" in step and "when" not in step:
+    if expecting:
+        for k in ("when", "timeout_s"):
+            if k in step:
+                problems.append(f"{path}.{k}: an expect step's condition is expect.when and its "
+                                "deadline expect.within_s; give no step-level when or timeout_s")
+    elif "timeout_s" in step and "when" not in step:
         problems.append(f"{path}.timeout_s: only a step with a when condition can time out")
     actions = [a for a in ACTIONS if step.get(a) is not None]
     if len(actions) > 1:
@@ -234,17 +280,10 @@ def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[st
     if not actions and not step.get("note"):
         problems.append(f"{path}: give an action ({', '.join(ACTIONS)}), or a note for a checkpoint")
     if isinstance(step.get("when"), str):
-        try:
-            cond = parse_condition(step["when"])
-        except ValueError as exc:
-            problems.append(f"{path}.when: {exc}")
-        else:
-            for c in cond.comparisons:
-                if c.source == "drive":
-                    _check_drives(rover, f"{path}.when", problems)
-                if c.name is not None:
-                    kind = {"load": "load", "rail": "rail", "solar": "solar", "radio": "radio"}[c.source]
-                    _check_name(kind, c.name, rover, f"{path}.when", problems)
+        _condition_problems(step["when"], f"{path}.when", rover, problems)
+    expect = step.get("expect")
+    if isinstance(expect, dict) and isinstance(expect.get("when"), str):
+        _condition_problems(expect["when"], f"{path}.expect.when", rover, problems)
     for action in ("inject", "clear"):
         a = step.get(action)
         if isinstance(a, dict) and isinstance(a.get("component"), str) and isinstance(a.get("kind"), str):
@@ -283,6 +322,21 @@ def _step_problems(step: dict, path: str, rover: Rover | None, problems: list[st
             problems.append(f"{path}.rail: give on: true|false or reset: true")
         if isinstance(rail.get("name"), str):
             _check_name("switchable rail", rail["name"], rover, f"{path}.rail.name", problems)
+
+
+def _condition_problems(text: str, path: str, rover: Rover | None, problems: list[str]) -> None:
+    """A condition's grammar, and the names it uses against the rover's."""
+    try:
+        cond = parse_condition(text)
+    except ValueError as exc:
+        problems.append(f"{path}: {exc}")
+        return
+    for c in cond.comparisons:
+        if c.source == "drive":
+            _check_drives(rover, path, problems)
+        if c.name is not None:
+            kind = {"load": "load", "rail": "rail", "solar": "solar", "radio": "radio"}[c.source]
+            _check_name(kind, c.name, rover, path, problems)
 
 
 def _check_drives(rover: Rover | None, path: str, problems: list[str]) -> None:

@@ -25,9 +25,13 @@ from common.messages import (
 from common.scenario import Scenario, Step
 from common.writes import Write, answer_of
 
-__all__ = ["Player", "StepResult", "StepStatus", "StepWrite", "describe_action", "describe_trigger"]
+__all__ = ["SETTLED", "Player", "StepResult", "StepStatus", "StepWrite", "describe_action",
+           "describe_trigger"]
 
-StepStatus = Literal["waiting", "armed", "fired", "ramping", "done", "timed out", "not fired"]
+StepStatus = Literal["waiting", "armed", "fired", "ramping", "done", "timed out", "not fired",
+                     "met", "missed"]
+# An expect step ends met or missed (or not fired, never armed); the others end as before.
+SETTLED: frozenset[str] = frozenset({"fired", "done", "timed out", "met", "missed"})
 
 
 @dataclass(frozen=True)
@@ -73,8 +77,13 @@ class StepResult:
     armed_t_s: float | None = None  # when its time gate opened (relative to the start)
     fired_t_s: float | None = None  # relative to the start
     status: StepStatus = "waiting"
-    outcome: str = ""  # accepted, rejected, not applied, reached (set by the runner)
+    outcome: str = ""  # accepted, rejected, not applied, reached (set by the runner); met, missed
     detail: str = ""
+    # an expect step: met (True), missed (False) or not yet scored (None), and when it was
+    # met or its deadline (both relative to the start)
+    met: bool | None = None
+    met_t_s: float | None = None
+    deadline_t_s: float | None = None
 
 
 def _ramp(value: Any) -> tuple[float, float, float] | None:
@@ -133,6 +142,8 @@ def describe_action(step: Step) -> str:
         speed = f" at {t['speed_m_per_s']:g} m/s" if t.get("speed_m_per_s") is not None else ""
         back = ", and back" if t.get("return_to_start") else ""
         return f"traverse through {len(t.get('waypoints', []))} waypoint(s){speed}{back}"
+    if step.expect is not None:
+        return f"expect {step.expect.when} within {step.expect.within_s:g} s"
     return "checkpoint"
 
 
@@ -144,6 +155,8 @@ def describe_trigger(step: Step) -> str:
         parts.append(f"{step.after_s:g} s after the previous step")
     if step.when is not None:
         parts.append(f"when {step.when}" + (f" (within {step.timeout_s:g} s)" if step.timeout_s else ""))
+    if not parts and step.expect is not None:
+        parts.append("when the previous step fires")
     return ", then ".join(parts)
 
 
@@ -156,23 +169,38 @@ class Player:
         self.scenario = scenario
         self.rover = scenario.rover
         self.conditions = [parse_condition(s.when) if s.when else None for s in scenario.steps]
-        self.results = [StepResult(i, s.name or describe_action(s)) for i, s in enumerate(scenario.steps)]
+        self.expects = [parse_condition(s.expect.when) if s.expect else None for s in scenario.steps]
+        self.results = [StepResult(i, s.label if s.expect else s.name or describe_action(s))
+                        for i, s in enumerate(scenario.steps)]
         self.t0: float | None = None
         self.t_rel = 0.0
         self._ramps: dict[int, float] = {}  # step -> start (relative)
         self.finished = False
         self.end_reason = ""
 
+    def _after(self, i: int) -> float | None:
+        """The ``after_s`` of step ``i``: its own, 0 for an expect step without a time gate (it
+        is armed when the previous step fires), None for a step not chained to the previous."""
+        step = self.scenario.steps[i]
+        if step.at_s is not None:
+            return None
+        if step.after_s is not None:
+            return step.after_s
+        return 0.0 if step.expect is not None else None
+
     def _gate(self, i: int) -> float | None:
-        """When step ``i``'s time gate opens (relative), None while it cannot be known."""
+        """When step ``i``'s time gate opens (relative), None while it cannot be known. A step
+        after an expect step counts from when the expectation was armed (it holds nothing up)."""
         step = self.scenario.steps[i]
         if step.at_s is not None:
             return step.at_s
-        if step.after_s is not None:
+        after = self._after(i)
+        if after is not None:
             if i == 0:
-                return step.after_s
-            prev = self.results[i - 1].fired_t_s
-            return None if prev is None else prev + step.after_s
+                return after
+            prev = self.results[i - 1]
+            base = prev.armed_t_s if self.scenario.steps[i - 1].expect is not None else prev.fired_t_s
+            return None if base is None else base + after
         return 0.0
 
     def tick(self, t_s: float, lookup: Lookup) -> list[StepWrite]:
@@ -192,6 +220,9 @@ class Player:
             if r.status == "waiting":
                 r.status, r.armed_t_s = "armed", gate
             assert r.armed_t_s is not None  # set when the step was armed, just above or before
+            if step.expect is not None:
+                self._score(i, t, lookup)
+                continue
             cond = self.conditions[i]
             if cond is not None and not cond.holds(lookup):
                 if step.timeout_s is not None and t - r.armed_t_s >= step.timeout_s:
@@ -221,12 +252,26 @@ class Player:
         self._check_end(t)
         return writes
 
+    def _score(self, i: int, t: float, lookup: Lookup) -> None:
+        """An armed expectation: met at the first tick its condition holds, missed once its
+        ``within_s`` is over without."""
+        expect, cond, r = self.scenario.steps[i].expect, self.expects[i], self.results[i]
+        assert expect is not None and cond is not None and r.armed_t_s is not None
+        r.deadline_t_s = r.armed_t_s + expect.within_s
+        if cond.holds(lookup):
+            r.status, r.outcome, r.met, r.met_t_s = "met", "met", True, t
+            r.detail = f"{cond.describe(lookup)} after {t - r.armed_t_s:.1f} s of {expect.within_s:g} s"
+        elif t >= r.deadline_t_s:
+            r.status, r.outcome, r.met = "missed", "missed", False
+            r.detail = (f"{cond.text} did not hold within {expect.within_s:g} s "
+                        f"({cond.describe(lookup)})")
+
     def _check_end(self, t: float) -> None:
         duration = self.scenario.duration_s
         if duration is not None and t >= duration:
             self.finish(f"duration of {duration:g} s reached")
             return
-        if duration is None and all(r.status in ("fired", "done", "timed out") for r in self.results):
+        if duration is None and all(r.status in SETTLED for r in self.results):
             self.finish("every step has played")
         elif duration is None and not self._ramps and not self._drop_blocked():
             self.finish("no remaining step can fire")
@@ -235,8 +280,11 @@ class Player:
         """What the scenario waits for now, in words (said at least every 10 s while it plays)."""
         if self.finished:
             return f"ended: {self.end_reason}"
+        expecting = "".join(
+            f"; expecting {r.label!r} for {max(0.0, r.deadline_t_s - self.t_rel):.0f} s more"
+            for r in self.results if r.status == "armed" and r.deadline_t_s is not None)
         for r in self.results:
-            if r.status not in ("waiting", "armed"):
+            if r.status not in ("waiting", "armed") or r.deadline_t_s is not None:
                 continue
             step = self.scenario.steps[r.index]
             gate = self._gate(r.index)
@@ -249,7 +297,9 @@ class Player:
                     what += f", for {max(0.0, r.armed_t_s + step.timeout_s - self.t_rel):.0f} s more"
             else:
                 what = describe_trigger(step)
-            return f"waiting for step {r.index + 1} {r.label!r}: {what}"
+            return f"waiting for step {r.index + 1} {r.label!r}: {what}{expecting}"
+        if expecting:
+            return expecting[2:]
         for i, start in self._ramps.items():
             left = start + _ramp_length(self.scenario.steps[i]) - self.t_rel
             return f"step {i + 1} {self.results[i].label!r} ramping, {left:.0f} s to go"
@@ -262,8 +312,7 @@ class Player:
         """Mark the steps chained to a step that will never fire; True if any can still fire."""
         for i, r in enumerate(self.results):
             if r.status in ("waiting", "armed"):
-                step = self.scenario.steps[i]
-                blocked = (step.after_s is not None and i > 0
+                blocked = (self._after(i) is not None and i > 0
                            and self.results[i - 1].status in ("timed out", "not fired"))
                 if not blocked:
                     return True
@@ -277,7 +326,15 @@ class Player:
         self.finished = True
         self.end_reason = reason
         for r in self.results:
-            if r.status in ("waiting", "armed"):
+            if self.scenario.steps[r.index].expect is not None and r.met is None:
+                r.met = False
+                if r.status == "armed":
+                    r.status = r.outcome = "missed"
+                    r.detail = f"not met when the scenario ended ({reason})"
+                else:
+                    r.status, r.outcome = "not fired", "missed"
+                    r.detail = (r.detail + "; " if r.detail else "") + f"never armed ({reason})"
+            elif r.status in ("waiting", "armed"):
                 r.status = "not fired"
             elif r.status == "ramping":
                 r.status = "fired"

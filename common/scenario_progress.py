@@ -14,7 +14,18 @@ from typing import Literal
 
 import msgspec
 
-__all__ = ["ScenarioProgress", "StepProgress"]
+__all__ = ["ExpectProgress", "ScenarioProgress", "StepProgress"]
+
+
+class ExpectProgress(msgspec.Struct, omit_defaults=False):
+    """An expect step's score as it stands: met (true), missed (false), or not yet (null)."""
+
+    label: str  # what the crew is expected to do
+    condition: str  # the condition that scores it
+    within_s: float  # the time the crew has from when it is armed [s]
+    met: bool | None = None
+    met_t_s: float | None = None  # when it was met, from the scenario's start [s]
+    deadline_t_s: float | None = None  # when it is missed if not met, from the start [s]; null until armed
 
 
 class StepProgress(msgspec.Struct, omit_defaults=False):
@@ -24,11 +35,12 @@ class StepProgress(msgspec.Struct, omit_defaults=False):
     label: str  # its name, or what it does
     trigger: str  # "at 2 s", "when battery.soc < 0.5 (within 30 s)" ...
     action: str  # "inject solar/left dust 0.5" ...
-    status: str  # waiting, armed, fired, ramping, done, timed out, not fired
-    outcome: str = ""  # accepted, rejected, not applied, reached ...
+    status: str  # waiting, armed, fired, ramping, done, timed out, not fired; met, missed
+    outcome: str = ""  # accepted, rejected, not applied, reached ...; met, missed
     detail: str = ""  # the reason of a rejection, the condition as it held ...
     armed_t_s: float | None = None  # when its time gate opened, from the scenario's start [s]
     fired_t_s: float | None = None  # when it fired, from the scenario's start [s]
+    expect: ExpectProgress | None = None  # an expect step's score; null for the other steps
 
 
 class ScenarioProgress(msgspec.Struct, omit_defaults=False):
@@ -43,5 +55,5 @@ class ScenarioProgress(msgspec.Struct, omit_defaults=False):
     message: str  # the latest thing it said
     steps: list[StepProgress]
     end_reason: str = ""
-    ok: bool | None = None  # at the end: every step fired and was accepted
+    ok: bool | None = None  # at the end: every step fired and was accepted (expectations aside)
     actor: str = "scenario"

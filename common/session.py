@@ -23,6 +23,9 @@ Then, with no more code in the service:
   service acts at the same point of simulated time, a tick from before a reset is never
   integrated after it, and a service that was down during a reset catches up with it when
   it comes back (the epoch it last followed is persisted with its state);
+- **trainee sessions** (``control/session``, SPEC §12c) begin with an epoch whose ticks carry
+  the new ``session``: a service clears its faults in the ending session, enters the new one
+  (``Runtime.enter_session``), then resets or restores (re-injected faults are the new one's);
 - ``lunaris/<rover>/snapshots/<service>`` answers a query with the snapshots this service
   holds (the faults service gathers them for ``get lunaris/<rover>/snapshots``); with
   ``?check=<name>`` it checks its part of that snapshot as a restore would read it, and
@@ -67,11 +70,11 @@ NO_PART = "no part"  # check_part: this service holds no part of the snapshot
 
 
 def parse_control(parts: list[str]) -> tuple[str, str] | None:
-    """``("reset", "")``, ``("snapshot", name)`` or ``("restore", name)`` from a control key's
-    chunks after ``lunaris/<rover>/``; None when it is none of them."""
+    """``(action, name)`` of a control key's chunks after ``lunaris/<rover>/``: ``reset``,
+    ``session``, ``mark`` (name ""), ``snapshot`` or ``restore`` (a name); None for others."""
     what = parts[1:] if parts[:1] == ["control"] else []
-    if what == ["reset"]:
-        return "reset", ""
+    if what in (["reset"], ["session"], ["mark"]):
+        return what[0], ""
     if len(what) == 2 and what[0] in ("snapshot", "restore") and SNAPSHOT_NAME.match(what[1]):
         return what[0], what[1]
     return None
@@ -251,31 +254,39 @@ class SessionKeeper:
             return False
         if tick.epoch > known:
             self.epoch[rover] = tick.epoch
-            self.begin(rover, tick.cause)
+            self.begin(rover, tick.cause, tick.session)
         return True
 
-    def begin(self, rover: str, cause: str) -> None:
-        """A new epoch: ``reset`` or ``restore:<name>``."""
+    def begin(self, rover: str, cause: str, session: str = "") -> None:
+        """A new epoch: ``reset`` or ``restore:<name>``, in ``session`` (the same one, or a
+        new trainee's)."""
         if cause == "reset":
-            self.reset(rover)
+            self.reset(rover, session)
         elif cause.startswith(RESTORE):
-            self.restore(rover, cause[len(RESTORE):])
+            self.restore(rover, cause[len(RESTORE):], session)
+        else:
+            self._enter(rover, session)
 
-    def reset(self, rover: str) -> None:
+    def _enter(self, rover: str, session: str) -> None:
+        self.rt.enter_session(rover, session)  # once the ending session's faults are cleared
+
+    def reset(self, rover: str, session: str = "") -> None:
         """Every injected fault cleared (journalled), the state back to the rover file's."""
         if self.rt.has_faults:
             self.rt.faults.clear_all(rover)
+        self._enter(rover, session)
         self._reset(rover)
         self.rt.t_s[rover] = 0.0
         self._changed(rover)
 
-    def restore(self, rover: str, name: str) -> bool:
+    def restore(self, rover: str, name: str, session: str = "") -> bool:
         """Put this service's part of snapshot ``name`` back; whether it could. A part that is
         missing or damaged (the clock checks every part before it begins a restore: a service
         that was down then) is said aloud, and the service keeps its state."""
         try:
             state, t_s, faults = self._part(rover, name)
         except ValueError as exc:
+            self._enter(rover, session)
             if str(exc) == NO_PART:
                 self.rt.event(rover, "warning", "session", keys.control_restore(rover, name),
                               f"{self.rt.name} holds no part of snapshot {name!r} of {rover} "
@@ -287,6 +298,7 @@ class SessionKeeper:
             return False
         if self.rt.has_faults:
             self.rt.faults.clear_all(rover)
+        self._enter(rover, session)
         self._set(rover, state)
         self.rt.t_s[rover] = t_s
         if self.rt.has_faults:

@@ -22,19 +22,25 @@ import msgspec
 from common import keys
 from common.datafile import ID_PATTERN, NAME_PATTERN
 from common.faults import parse_fault_key, parse_params
-from common.messages import BARE_FIELD, BadInput, ScenarioMark, decode_input
+from common.messages import BARE_FIELD, BadInput, ScenarioMark, SessionStart, TimelineMark, decode_input
 from common.session import parse_control
 
 __all__ = ["DELETABLE", "FAULT_OWNERS", "Write", "answer_of", "check_chunks", "plan_write",
            "snapshot_name_problem"]
 
-# The inputs that take a delete: a panel back to the rover's sun angle, a panel's dust input
-# gone, the rover stopped.
-DELETABLE = ("input/solar/*/sun_angle", "input/solar/*/dust", "input/drive/traverse")
+DELETABLE = keys.DELETABLE  # the inputs that take a delete
 # The service that owns (and answers for) each component type of the fault catalogue.
 FAULT_OWNERS = {"battery": "battery", "load": "loads", "rail": "power", "solar": "solar",
                 "umbilical": "solar", "radio": "radio"}
 _ACCEPTED = {"cmd": "command", "clock": "clock", "input": "input"}
+# Who answers a control, and with what event kind (the rest: a session event of the faults
+# service): the clock begins a trainee's session and a restore (it checks every part first).
+_CONTROL_ANSWERS = {"control/scenario": ("scenario", "faults"),
+                    "control/mark": ("mark", "faults"),
+                    "control/session": ("session", "clock"),
+                    "control/restore": ("session", "clock")}
+_CONTROL_PAYLOADS: dict[str, type[msgspec.Struct]] = {
+    "scenario": ScenarioMark, "mark": TimelineMark, "session": SessionStart}
 _CHUNK = re.compile(NAME_PATTERN)
 _ROVER = re.compile(ID_PATTERN)
 
@@ -105,7 +111,7 @@ def answer_of(parts: list[str] | tuple[str, ...], delete: bool) -> tuple[str, st
         fk = parse_fault_key(list(parts[1:]))
         return ("fault_cleared" if delete else "fault_injected"), FAULT_OWNERS[fk.component]
     if head == "control":
-        return ("scenario" if list(parts) == ["control", "scenario"] else "session"), "faults"
+        return _CONTROL_ANSWERS.get("/".join(parts[:2]), ("session", "faults"))
     family = keys.family_of(list(parts))
     if family is None or family.direction != "in" or head not in _ACCEPTED:
         writable = ", ".join(f.name for f in keys.families("in"))
@@ -149,14 +155,16 @@ def _plan(rover: str, parts: list[str], payload: bytes | None) -> Write:
         return Write(key, msgspec.json.encode(msgspec.structs.asdict(parse_params(fk, payload))),
                      accepted, owner)
     if head == "control":
-        if parts == ["control", "scenario"]:
+        struct = _CONTROL_PAYLOADS.get(parts[1]) if len(parts) == 2 else None
+        if struct is not None:
             if payload is None:
-                raise BadInput("a scenario mark is a put")
-            return Write(key, msgspec.json.encode(decode_input(payload, ScenarioMark)), accepted, owner)
+                raise BadInput(f"a {'session control' if struct is SessionStart else parts[1] + ' mark'} "
+                               "is a put, not a delete")
+            return Write(key, msgspec.json.encode(decode_input(payload, struct)), accepted, owner)
         if parse_control(parts) is None:
-            raise BadInput(f"no such control {'/'.join(parts)!r} (control/reset, "
-                           "control/snapshot/<name>, control/restore/<name>; a name is letters, "
-                           "digits, '_', '-' and '.', at most 64)")
+            raise BadInput(f"no such control {'/'.join(parts)!r} (control/session, control/mark, "
+                           "control/reset, control/snapshot/<name>, control/restore/<name>; a name "
+                           "is letters, digits, '_', '-' and '.', at most 64)")
         if payload is None:
             raise BadInput("a session control is a put, not a delete")
         return Write(key, b"", accepted, owner)

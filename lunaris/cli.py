@@ -41,6 +41,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "input": ("lunaris.input", "set an input: sun angle, radio position, umbilical, traverse"),
     "reset": ("lunaris.reset", "put a rover back to its rover file's initial conditions"),
     "snapshot": ("lunaris.snapshot", "save, restore and list snapshots of a rover's session"),
+    "session": ("lunaris.session", "begin a trainee's session (the twin reset or a snapshot), or "
+                "list the sessions"),
+    "mark": ("lunaris.mark", "mark the session's timeline with a note"),
     "console": ("lunaris.console", "the instructor console in a web browser"),
 }
 

@@ -19,7 +19,14 @@ from typing import Any
 
 from common import keys
 from common.connection import TX_QUEUE_SIZE
-from lunaris.deploy_dashboard import bridge_hears, dashboard_keys, fleet_names
+from lunaris.deploy_dashboard import (
+    bridge_answers,
+    bridge_hears,
+    crew_writes,
+    dashboard_calls,
+    dashboard_keys,
+    fleet_names,
+)
 from lunaris.deploy_site import DEFAULT_SITE, IDENTITIES, PEOPLE, SERVICES, Site, router_identity
 from services.bridge import MappingFile, RoverNames
 
@@ -34,8 +41,10 @@ ROUTER_FILE = REPO / "deploy" / "zenohd.json5"
 _TWIN = ["lunaris/**", "lunaris/**/@adv/**"]
 # Every key expression a subscriber may be declared on: `**` includes every one without a
 # verbatim chunk; those with one ('@adv', ROS 2 discovery, rmw_zenoh's caches) are listed.
-_EVERY_KEY = ["**", "**/@adv/**", "@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
-_ROS = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**"]
+_EVERY_KEY = ["**", "**/@adv/**", "@ros2_lv/**", "@/*/@ros2_pub_cache/**", "@/*/@ros2_lv/**"]
+# ROS 2 discovery: rmw_zenoh's tokens, zenoh-bridge-ros2dds' caches and its tokens (a service
+# server announced on Zenoh: the bridge's SS tokens of the crew's controls)
+_ROS = ["@ros2_lv/**", "@/*/@ros2_pub_cache/**", "@/*/@ros2_lv/**"]
 _ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
                  "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]
 _READ_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
@@ -49,12 +58,13 @@ _WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
 _PROGRESS = [keys.under("*", "scenario/progress"), keys.under("*", "scenario/progress/@adv/**")]
 # What the crew must discover from effects, not read: the instructor's puts, the journal,
 # the faults in effect, the events that name them (the journal's stream and each
-# service's own), the session's snapshots, and a scenario's progress (what the drill does
-# next).
+# service's own), the session's snapshots, the trainee sessions (the journal's segments,
+# with the trainees' names), and a scenario's progress (what the drill does next).
 _CREW_HIDDEN = ["lunaris/*/fault/**", "lunaris/*/event", "lunaris/*/event/**",
                 "lunaris/*/event/@adv/**", "lunaris/*/event/*/@adv/**",
                 "lunaris/*/faults", "lunaris/*/faults/**", "lunaris/*/control/**",
-                "lunaris/*/snapshots", "lunaris/*/snapshots/**", *_PROGRESS]
+                "lunaris/*/snapshots", "lunaris/*/snapshots/**", "lunaris/*/sessions",
+                *_PROGRESS]
 
 
 def _pattern(chunks: tuple[str, ...]) -> str:
@@ -75,7 +85,8 @@ def _answered(service: str) -> list[str]:
     """The queries one service kind answers."""
     out = [f"lunaris/*/faults/active/{service}", f"lunaris/*/snapshots/{service}"]
     if service == "faults":
-        out += ["lunaris/*/faults", "lunaris/*/faults/journal", "lunaris/*/snapshots"]
+        out += ["lunaris/*/faults", "lunaris/*/faults/journal", "lunaris/*/snapshots",
+                "lunaris/*/sessions"]
     if service == "battery":
         out += ["lunaris/*/prediction"]
     return out
@@ -105,8 +116,10 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
     generated file says how Zenoh matches)."""
     reads, writes = dashboard_keys(mf, fleet)
     hears = bridge_hears(mf, fleet)
-    inbound = sorted({m.key.replace("{rover}", "*") for m in mf.mappings if m.direction == "in"})
-    inbound = [re.sub(r"\{[a-z_]*\}", "*", k) for k in inbound]
+    # the crew's controls: the dashboard calls them, the bridge answers (its queryables open
+    # across the rovers it serves, as it hears the inbound topics)
+    calls, answers = dashboard_calls(mf, fleet), bridge_answers(mf, fleet)
+    crew = crew_writes(mf)  # what the bridge writes for the crew: inputs and commands
     dash_adv = [f"{k}/@adv/**" for k in reads]
     rules = [
         _rule("read-twin", "allow", ["ingress"], _READ_IN, _TWIN),
@@ -130,6 +143,11 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
         _rule("dashboard-deliver", "allow", ["egress"], _READ_OUT, reads + dash_adv + _ROS),
         _rule("dashboard-write", "allow", ["ingress"], ["put", "liveliness_token"],
               writes + _ROS[:1]),
+        # the crew's controls (SPEC §12a): the dashboard calls exactly these services, and
+        # learns of the bridge's queryables (a ROS 2 client waits for its server)
+        _rule("dashboard-call", "allow", ["ingress"], ["query"], calls),
+        _rule("dashboard-answered", "allow", ["egress"], ["reply"], calls),
+        _rule("dashboard-servers", "allow", ["egress"], ["declare_queryable"], calls + answers),
     ]
     subjects = [{"id": person, "usernames": [person]} for person in PEOPLE]
     policies = [
@@ -141,6 +159,7 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
          "rules": ["read-twin", "deliver-twin", "crew-hidden-deliver", "crew-hidden-ask"]},
         {"id": "dashboard", "subjects": ["dashboard"],
          "rules": ["dashboard-listen", "dashboard-read", "dashboard-deliver", "dashboard-write",
+                   "dashboard-call", "dashboard-answered", "dashboard-servers",
                    "learn-subscribers"]},
     ]
     if routers_in or routers_out:
@@ -161,23 +180,24 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
         answered = _answered(service)
         adv = [f"{k}/@adv/**" for k in pub]
         extra_pub: list[str] = []
-        if service == "bridge":  # the dashboard's topics, and the inputs they carry in
-            extra_pub = reads + dash_adv + ["@ros2_lv/**"] + inbound
+        if service == "bridge":  # the dashboard's topics, and the crew's inputs and commands
+            extra_pub = reads + dash_adv + ["@ros2_lv/**"] + crew
         r = f"svc-{service}"
         rules += [
             _rule(f"{r}-publish", "allow", ["ingress"], ["put", "delete"], pub + extra_pub),
             # A cache answers a late joiner with the samples themselves: replies on pub too.
             _rule(f"{r}-answer", "allow", ["ingress"], ["declare_queryable", "reply"],
-                  answered + pub + adv + (reads + dash_adv if service == "bridge" else [])),
+                  answered + pub + adv
+                  + (reads + dash_adv + calls + answers if service == "bridge" else [])),
             # The faults service gathers with one query for every owner (a wildcard): each
             # owner may be asked it, and may reply only on its own key.
             _rule(f"{r}-asked", "allow", ["egress"], ["query"],
                   answered + pub + adv + ["lunaris/*/faults/active/*", "lunaris/*/snapshots/*"]
-                  + (reads + dash_adv if service == "bridge" else [])),
+                  + (reads + dash_adv + calls if service == "bridge" else [])),
             _rule(f"{r}-announce", "allow", ["ingress"], ["liveliness_token"],
                   # its token, and its claims while it starts (Runtime.claim: claim/<zid>, owner/<zid>)
                   [f"lunaris/*/service/{service}", f"lunaris/*/service/{service}/*/*"] + adv
-                  + (dash_adv + ["@ros2_lv/**"] if service == "bridge" else [])),
+                  + (dash_adv + ["@ros2_lv/**", "@/*/@ros2_lv/**"] if service == "bridge" else [])),
         ]
         if service == "bridge":  # it hears the dashboard's inbound topics and ROS 2 discovery
             # (a bridge serving several rovers hears a topic of them all on one key expression)

@@ -15,7 +15,8 @@ from pathlib import Path
 from common.config import load_rover
 from services.bridge import Binding, MappingFile, RoverNames, open_keyexpr, ros_name, rover_names, zenoh_key
 
-__all__ = ["FLEET_FILES", "bridge_hears", "dashboard_keys", "fleet_names", "inbound_regexes"]
+__all__ = ["FLEET_FILES", "bridge_answers", "bridge_hears", "crew_writes", "dashboard_calls",
+           "dashboard_keys", "fleet_names", "inbound_regexes"]
 
 REPO = Path(__file__).resolve().parent.parent
 # The rovers docker-compose.yml serves (in this order: the fleet, so rover i has ROS 2 domain i).
@@ -32,10 +33,11 @@ def fleet_names(files: list[str] | tuple[str, ...] = FLEET_FILES) -> list[RoverN
 
 
 def _dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> list[tuple[int, str, str, str]]:
-    """(mapping index, flavour, direction, key) of every dashboard topic of every rover of the
-    fleet in every enabled Zenoh flavour: its own namespace (ros2dds, json) and ROS 2 domain
-    (rmw_zenoh), component names as ``$*``; an inbound rmw_zenoh key with any type hash (a
-    Humble node's as well as a Jazzy one's)."""
+    """(mapping index, flavour, role, key) of every dashboard topic and service of every rover
+    of the fleet in every enabled Zenoh flavour: its own namespace (ros2dds, json) and ROS 2
+    domain (rmw_zenoh), component names as ``$*``; an inbound rmw_zenoh key with any type
+    hash (a Humble node's as well as a Jazzy one's). The role: ``out`` (the dashboard reads
+    it), ``in`` (it writes it) or ``call`` (a service: it queries it, the bridge answers)."""
     out = mf.bridge.outputs
     several = len(fleet) > 1
     prefix = mf.bridge.fleet_topic_prefix if several else mf.bridge.topic_prefix
@@ -45,11 +47,12 @@ def _dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> list[tuple[int,
         for i, m in enumerate(mf.mappings):
             topic = "/" + _topic_key((prefix + m.topic).replace("{rover}", ros_name(rover.id)))
             b = Binding(i, m, rover.id, None, "", topic, place, several)
+            role = "call" if m.kind == "service" else m.direction
             for f in flavours:
                 key = zenoh_key(b, mf.bridge, f)
-                if m.direction == "in" and f == "rmw_zenoh":
+                if role == "in" and f == "rmw_zenoh":
                     key = key.rsplit("/", 1)[0] + "/*"
-                got.append((i, f, m.direction, key))
+                got.append((i, f, role, key))
     return got
 
 
@@ -62,19 +65,42 @@ def dashboard_keys(mf: MappingFile, fleet: list[RoverNames]) -> tuple[list[str],
             sorted({k for _, _, d, k in keys if d == "in"}))
 
 
-def bridge_hears(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
-    """The key expressions a bridge may hear the dashboard's inbound topics on: one for all
-    the rovers of each topic and flavour, as a bridge serving several of them subscribes
+def dashboard_calls(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
+    """The keys of the services the dashboard may call (the crew's controls, SPEC §12a), in
+    every enabled Zenoh flavour, for each rover of the fleet."""
+    return sorted({k for _, _, role, k in _dashboard_keys(mf, fleet) if role == "call"})
+
+
+def _open(mf: MappingFile, fleet: list[RoverNames], role: str) -> list[str]:
+    """The key expressions a bridge declares for the dashboard's keys of ``role``: one for
+    all the rovers of each mapping and flavour, as a bridge serving several of them does
     (:func:`~services.bridge.bindings.open_keyexpr`; a shard's is within the fleet's)."""
     groups: dict[tuple[int, str], list[str]] = {}
-    for i, f, direction, key in _dashboard_keys(mf, fleet):
-        if direction == "in":
+    for i, f, got, key in _dashboard_keys(mf, fleet):
+        if got == role:
             groups.setdefault((i, f), []).append(key)
     out: set[str] = set()
     for ks in groups.values():
         shared = open_keyexpr(ks)
         out |= {shared} if shared is not None else set(ks)
     return sorted(out)
+
+
+def bridge_hears(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
+    """The key expressions a bridge may hear the dashboard's inbound topics on."""
+    return _open(mf, fleet, "in")
+
+
+def bridge_answers(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
+    """The key expressions a bridge may declare its services' queryables on."""
+    return _open(mf, fleet, "call")
+
+
+def crew_writes(mf: MappingFile) -> list[str]:
+    """The twin keys the bridge writes for the crew: those of the inbound topics and of the
+    services (components as ``*``)."""
+    return sorted({re.sub(r"\{[a-z_]*\}", "*", m.key.replace("{rover}", "*"))
+                   for m in mf.mappings if m.kind == "service" or m.direction == "in"})
 
 
 def inbound_regexes(mf: MappingFile) -> list[str]:

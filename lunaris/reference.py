@@ -27,8 +27,9 @@ from common.conditions import SOURCES
 from common.config import Rover
 from common.datafile import struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RETIRED_CODES, NoParams
-from common.messages import Prediction, PredictionRequest
+from common.messages import Prediction, PredictionRequest, SessionInfo, SessionStart, TimelineMark
 from common.scenario import Scenario
+from common.symptoms import SYMPTOMS, TOLERANCE
 from common.traverse import TraverseFile
 from services.bridge import CONVERTERS, MappingFile
 
@@ -202,7 +203,23 @@ def keys_page() -> str:
                  "file implies that did not answer (its faults are not listed)"),
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
-                ("`faults/journal` (query)", "the session's events, oldest first"),
+                ("`faults/journal` (query)", "the journal's events, oldest first: those of the "
+                 "running trainee session; `?session=<id>` another session's, `?session=all` "
+                 "every session's, `?last=N` the latest N of them"),
+                ("`sessions` (query)", "the rover's trainee sessions, oldest first (the last is "
+                 "the running one), from the journal: a list of `SessionInfo`: "
+                 + _payload_fields(SessionInfo)),
+                ("`control/session`", "`put` " + _payload_fields(SessionStart) + ": ends the "
+                 "running session and begins a trainee's (the twin reset to its rover file, or "
+                 "the snapshot restored, all or nothing); the clock's ticks carry the new "
+                 "session's id and every event from there its `session`; answered by the clock "
+                 "with a `session` event (`params`: `session, trainee, from_snapshot, "
+                 "started_wall, start_t_s`), or refused in words"),
+                ("`control/mark`", "`put` " + _payload_fields(TimelineMark) + ": a `mark` event "
+                 "of the faults service on the session's timeline"),
+                ("`control/reset`, `control/snapshot/<name>`, `control/restore/<name>`",
+                 "`put` (empty): within the running session, the twin back to its rover file, "
+                 "a snapshot saved, restored (all or nothing); `get snapshots` lists them"),
                 ("`event/<service>`", "each service's own events (`Event`), which the faults "
                  "service journals and relays unchanged on `event`; an event whose `source` is "
                  "not the service its key names is refused and said in a `critical` event"),
@@ -264,7 +281,7 @@ def faults_page() -> str:
 
 
 def mapping_page() -> str:
-    converters = [(f"`{name}`", f"`{c.type}`", f"`lunaris/{{rover}}/{'/'.join(c.shape)}`",
+    converters = [(f"`{name}`", f"`{c.type}`", f"`{c.key}`",
                    ", ".join(sorted(c.options)) or "-") for name, c in CONVERTERS.items()]
     return (f"# The bridge mapping\n\n{GENERATED}"
             "A YAML file in `config/bridge/` maps twin keys onto the dashboard's ROS 2 topics, "
@@ -275,6 +292,8 @@ def mapping_page() -> str:
 
 
 def scenario_page() -> str:
+    symptoms = [(f"`{c}/{k}`", f"`{spec.family}` `{spec.field}` ({spec.direction})", spec.words)
+                for (c, k), spec in SYMPTOMS.items()]
     sources = [(f"`{name}`" + (f".<{fam.placeholder}>" if fam.placeholder else ""),
                 f"`{fam.name}`", ", ".join(f"`{f.encode_name}`"
                                            for f in struct_fields(fam.payload)))
@@ -285,7 +304,22 @@ def scenario_page() -> str:
             + struct_table(Scenario)
             + "\n## Conditions\n\n`when:` is `<source>.<field> <op> <value>` joined by `and`, "
             "`op` one of `< <= > >= == !=`, `value` a number, `true`/`false` or a word:\n\n"
-            + _table(("source", "key", "fields"), sources))
+            + _table(("source", "key", "fields"), sources)
+            + "\n## The crew's response\n\nEach expectation is journalled as it is scored (a "
+            "`scenario` event whose params hold `expectation`: label, condition, within_s, met, "
+            "at_t_s, armed_t_s, start_t_s) and shown, per trainee session, by `lunaris report "
+            "FILE.mcap --json` (and its score sheet) and the console's `GET "
+            "/api/rovers/<rover>/response` (the running session, live) beside each fault's "
+            "response (`common.response`, `common.symptoms`): "
+            "when it was injected, when the crew could first see it, the crew's actions (events "
+            "with `actor: crew`) and when it was resolved. A symptom is the first derived alarm "
+            "raised on the fault's component or the rail it sits on, or this value leaving the "
+            "band it kept the minute before (widened by "
+            + ", ".join(f"`{name}` {a:g} {name.rsplit('_', 1)[-1].upper()}"
+                        + (f" or {rel * 100:g} %, the larger" if rel else "")
+                        for name, (a, rel, _) in TOLERANCE.items())
+            + "); none (null) when it stays in it:\n\n"
+            + _table(("fault", "value watched", "symptom"), symptoms))
 
 
 def traverse_page() -> str:

@@ -3,9 +3,10 @@
 The format is :mod:`common.scenario`, the player's logic :mod:`common.scenario_player`, and the
 run against the twin :class:`lunaris.client.runner.Runner` (the console plays scenarios with
 the same runner); this prints what the run says as it plays: each step as it fires and the
-twin's answer to it (accepted, rejected and why, not applied and why), what it waits for at
-least every 10 s, and at the end a summary. Exit status: 0 when every step fired and was
-accepted, 1 otherwise, 2 when it could not start.
+twin's answer to it (accepted, rejected and why, not applied and why), each expectation of the
+crew as it is met or missed, what it waits for at least every 10 s, and at the end a summary.
+Exit status: 0 when every step fired and was accepted (a missed expectation is the crew's score,
+not the run's), 1 otherwise, 2 when it could not start.
 """
 
 from __future__ import annotations
@@ -141,11 +142,24 @@ def _summary(args: argparse.Namespace, runner: Runner) -> int:
         fired = f"{r.fired_t_s:8.1f}s" if r.fired_t_s is not None else f"{'-':>9}"
         print(f"  {r.index + 1:>2}  {fired}  {r.status:<10} {r.outcome or '-':<11} {r.label}"
               + (f"  ({r.detail})" if r.detail and r.outcome != "accepted" else ""))
+    expected = [r for r in status.steps if r.expect is not None]
+    if expected:
+        met = sum(1 for r in expected if r.expect is not None and r.expect.met)
+        print(f"expectations of the crew: {met} of {len(expected)} met")
+        for r in expected:
+            assert r.expect is not None
+            when = (f"met at {r.expect.met_t_s:.1f} s" if r.expect.met and r.expect.met_t_s is not None
+                    else "MISSED")
+            print(f"  {r.index + 1:>2}  {when:<16} {r.label} (within {r.expect.within_s:g} s: "
+                  f"{r.expect.condition})")
     if args.json_summary:
         Path(args.json_summary).write_text(json.dumps({
             "scenario": status.scenario, "rover": status.rover, "start_t_s": runner.player.t0,
             "end_reason": status.end_reason, "ok": bool(status.ok),
-            "steps": [msgspec.to_builtins(r) for r in status.steps]}, indent=2))
+            "steps": [msgspec.to_builtins(r) for r in status.steps],
+            "expectations": [{"label": r.label, "met": bool(r.expect.met), "within_s": r.expect.within_s,
+                              "met_t_s": r.expect.met_t_s, "condition": r.expect.condition}
+                             for r in expected if r.expect is not None]}, indent=2))
     verdict = "every step fired and was accepted" if status.ok else "NOT every step played as planned"
-    print(f"result: {verdict}")
+    print(f"result: {verdict}" + (" (expectations are the crew's score, not the run's)" if expected else ""))
     return runner.code if runner.code is not None else 1

@@ -4,7 +4,9 @@ With ``--rover`` it shows the battery (energy, state of charge, voltage, current
 temperature, time to empty), the power summary, solar panels and umbilical,
 radios, the PDM table (every rail with its loads), the active faults and the
 latest events; alarms are coloured by severity. Without it, one line per rover,
-the fleet's active faults and events.
+the fleet's active faults and events. Each rover is shown in its trainee session: the header
+names the trainee (and the session's id), and the events are the session's only (a new
+session starts the list empty: :class:`lunaris.client.Mirror`).
 
 What it shows is the client's mirror of the twin (:class:`lunaris.client.Mirror`): values
 appear at once when the tool joins a running session (the publishers' caches), events are
@@ -59,9 +61,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_connection_args(p)
 
 
-def snapshot_of(mirror: Mirror) -> Snapshot:
+def snapshot_of(mirror: Mirror, rover: str | None = None) -> Snapshot:
     """What one frame is drawn from: the mirror's latest values, events (in sim time order:
-    services interleave), faults in effect, live services and links."""
+    services interleave), faults in effect, live services and links (``rover``'s too when
+    nothing of it has been heard: cut off, or not running)."""
     latest: dict[str, tuple[bytes, float]] = {}
     faults: dict[str, list[dict[str, Any]]] = {}
     for key, v in mirror.latest().items():
@@ -73,7 +76,11 @@ def snapshot_of(mirror: Mirror) -> Snapshot:
     for listed in faults.values():
         listed.sort(key=lambda f: (f["since_t_s"], f["key"]))
     events = sorted(((rover, ev) for rover, ev, _ in mirror.events()), key=lambda re: re[1].t_s)
-    return Snapshot(latest, events, faults, mirror.all_services(), links=mirror.links())
+    links = mirror.links()
+    if rover is not None and rover not in links:
+        links[rover] = mirror.link(rover)
+    return Snapshot(latest, events, faults, mirror.all_services(), links=links,
+                    sessions=mirror.sessions())
 
 
 COMPACT_BELOW = 110  # columns: narrower than this, the compact layout (an 80x24 terminal)
@@ -157,7 +164,7 @@ def main(args: argparse.Namespace) -> int:
 
     def frame() -> RenderableType:
         watcher.refresh_connection()
-        return render(snapshot_of(watcher.mirror), watcher.conn, args.rover, args.events,
+        return render(snapshot_of(watcher.mirror, args.rover), watcher.conn, args.rover, args.events,
                       width=console.size.width, height=console.size.height)
 
     code = 0
@@ -244,7 +251,10 @@ def _once(args: argparse.Namespace, watcher: _Watcher, console: Console, frame) 
     def ready() -> bool:
         return (watcher.mirror.get(want) is not None) if want else bool(watcher.mirror.latest())
 
-    while not ready() and time.monotonic() < deadline and not watcher.error:
+    def lost() -> bool:  # a rover asked for, cut off (or not running): said at once, not waited for
+        return bool(args.rover) and watcher.mirror.link(args.rover).state == "lost"
+
+    while not ready() and not lost() and time.monotonic() < deadline and not watcher.error:
         time.sleep(0.05)
     # The caches of the other publishers answer within a moment of the first one.
     settle = time.monotonic() + min(0.5, max(0.0, deadline - time.monotonic()))
@@ -253,6 +263,10 @@ def _once(args: argparse.Namespace, watcher: _Watcher, console: Console, frame) 
     watcher.refresh_connection()
     console.print(frame())
     if not ready():
+        if lost():
+            print(f"lunaris watch: link to {args.rover} lost: {watcher.mirror.link(args.rover).reason}",
+                  file=sys.stderr)
+            return 1
         what = f"telemetry of {args.rover}" if args.rover else "telemetry"
         print(f"lunaris watch: no {what} within {args.timeout:g} s", file=sys.stderr)
         return 1

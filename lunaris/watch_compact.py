@@ -20,6 +20,7 @@ from lunaris.watch_view import (
     duration,
     rover_header,
     severity_style,
+    trainee_label,
     worst,
 )
 
@@ -105,7 +106,9 @@ def fleet_compact(snap: Snapshot, n_events: int) -> RenderableType:
         on = sum(1 for r in rails.values() if r.state == "on")
         link = snap.links.get(rover)
         lost = link is not None and link.state == "lost"
-        label = Text(rover + (" LOST" if lost else ""), style="bold white on red" if lost else "bold")
+        trainee = trainee_label(snap, rover)
+        label = Text(rover + (f" ({trainee})" if trainee else "") + (" LOST" if lost else ""),
+                     style="bold white on red" if lost else "bold")
         fault_style = severity_style(worst_severity) if worst_severity else "green"
         t.add_row(label, f"{c[0].t_s:.0f}" if c else "-",
                   f"{b[0].soc * 100:.1f} %" if b else "-", f"{b[0].voltage_v:.1f}" if b else "-",

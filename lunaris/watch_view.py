@@ -34,10 +34,10 @@ from common.messages import (
     UmbilicalState,
     decode,
 )
-from lunaris.client import Link
+from lunaris.client import Link, Session
 
 __all__ = ["DRIVE_STYLE", "RAIL_STYLE", "Connection", "Snapshot", "banner", "duration", "render_fleet",
-           "render_rover", "rover_header", "severity_style", "worst"]
+           "render_rover", "rover_header", "severity_style", "trainee_label", "worst"]
 
 SEVERITY_STYLE = {"info": "cyan", "warning": "yellow", "critical": "bold red"}
 SEVERITY_RANK = {"info": 0, "warning": 1, "critical": 2}
@@ -57,6 +57,7 @@ class Snapshot:
     services: dict[str, set[str]]  # rover -> live services
     now: float = field(default_factory=time.time)  # the clock of the times in ``latest``
     links: dict[str, Link] = field(default_factory=dict)  # rover -> its link (lunaris.client)
+    sessions: dict[str, Session] = field(default_factory=dict)  # rover -> its trainee session
 
     def rovers(self) -> list[str]:
         found = set(self.services) | set(self.faults) | set(self.links)
@@ -323,8 +324,23 @@ def _events_table(events: list[tuple[str, Event]], n: int, fleet: bool) -> Table
     return t
 
 
+def trainee_label(snap: Snapshot, rover: str) -> str:
+    """Who the rover's running session trains: ``Ana``, ``no trainee named``, ``trainee ?``
+    (the event that opened the session not heard), or "" before the clock's first tick."""
+    session = snap.sessions.get(rover)
+    if session is None:
+        return ""
+    if session.trainee is None:
+        return "trainee ?"
+    return session.trainee or "no trainee named"
+
+
 def rover_header(snap: Snapshot, rover: str) -> Text:
     text = Text(f"LUNARIS  {rover}", style="bold")
+    session = snap.sessions.get(rover)
+    if session is not None:
+        text.append(f"   {trainee_label(snap, rover)}", style="bold cyan")
+        text.append(f" (session {session.id})", style="dim")
     got = snap.value(keys.clock(rover), Clock)
     if got is not None:
         c, age = got
@@ -375,7 +391,9 @@ def render_fleet(snap: Snapshot, n_events: int) -> RenderableType:
         bad_rails = sum(1 for r in rails.values() if r.state in ("tripped", "failed"))
         link = snap.links.get(rover)
         lost = link is not None and link.state == "lost"
-        row: list[Text | str] = [Text(rover + (" LINK LOST" if lost else ""),
+        trainee = trainee_label(snap, rover)
+        row: list[Text | str] = [Text(rover + (f" ({trainee})" if trainee else "")
+                                      + (" LINK LOST" if lost else ""),
                                       style="bold white on red" if lost else "bold")]
         row += [f"{c[0].t_s:.1f}", f"{c[0].time_scale:g}"] if c else ["-", "-"]
         if b:

@@ -1,6 +1,11 @@
 """The twin on a bench, for the tests and the benchmarks: a router, the services, a probe.
 
-- :func:`free_endpoint` picks a free loopback TCP port.
+- :func:`open_router` opens an embedded router on a loopback port the system chooses (the
+  router binds port 0) and :func:`router_endpoint` says which: no other process can take the
+  port between its choice and its use, as tests run in parallel (pytest-xdist). For a router
+  that must come back on the same endpoint, or one in a process of its own,
+  :func:`free_endpoint` names a free port outside the range the system gives out
+  (:func:`free_port`, for any other server a test starts).
 - :class:`Twin` starts services as ``lunaris run`` subprocesses connected to a
   router, waits for their liveliness tokens, and stops them (SIGINT, then kill)
   even when the test fails.
@@ -21,6 +26,7 @@ import atexit
 import functools
 import json
 import os
+import random
 import shutil
 import socket
 import subprocess
@@ -46,9 +52,10 @@ from lunaris.processes import (
     wait_for,
 )
 
-__all__ = ["ALL_SERVICES", "ROOT", "ROVERS", "Probe", "Twin", "copies_of", "env_without_zenoh_config",
-           "free_endpoint", "json_bridge_extra", "lunaris_cmd", "mapp_fleet", "open_router",
-           "rover_without_drive", "start_router_process", "static_rover", "stop_process", "wait_for"]
+__all__ = ["ALL_SERVICES", "ANY_PORT", "ROOT", "ROVERS", "Probe", "Twin", "copies_of",
+           "env_without_zenoh_config", "free_endpoint", "free_port", "json_bridge_extra", "lunaris_cmd",
+           "mapp_fleet", "open_router", "router_endpoint", "rover_without_drive",
+           "start_router_process", "static_rover", "stop_process", "wait_for"]
 
 ROOT = Path(__file__).resolve().parent.parent
 ROVERS = ROOT / "config" / "rovers"
@@ -106,20 +113,52 @@ def copies_of(rover: Rover, n: int, **load_changes: Any) -> list[Rover]:
                                     loads=loads) for i in range(n)]
 
 
+ANY_PORT = "tcp/127.0.0.1:0"  # a router listening here gets a free port from the system
+
+
+def _ephemeral_ports() -> range:
+    """The ports the system gives to a socket bound to port 0 or connecting out."""
+    try:
+        low, high = map(int, Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
+    except (OSError, ValueError):
+        low, high = 32768, 60999  # Linux's default
+    return range(low, high + 1)
+
+
+def free_port() -> int:
+    """A loopback TCP port nothing listens on, drawn at random below the system's ephemeral
+    range: no socket bound to port 0 and no outgoing connection can take it before the
+    caller binds it (two draws of parallel tests meet with a chance of about 1 in 20,000)."""
+    ephemeral = _ephemeral_ports()
+    pool = range(10000, ephemeral.start) if ephemeral.start > 12000 else range(ephemeral.stop, 65536)
+    rng = random.SystemRandom()
+    while True:
+        port = rng.choice(pool)
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+        return port
+
+
 def free_endpoint() -> str:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+    """A loopback TCP endpoint (:func:`free_port`) for a router that must come back on the same
+    endpoint or that runs in a process of its own; elsewhere :func:`open_router` and
+    :func:`router_endpoint` let the router take a port itself."""
+    return f"tcp/127.0.0.1:{free_port()}"
 
 
-def json_bridge_extra(folder: Path) -> dict[str, list[str]]:
+def json_bridge_extra(folder: Path, crew_view: str = "symptoms") -> dict[str, list[str]]:
     """``Twin(extra=...)`` for a bridge with the shipped mapping and its json flavour on too
-    (the shipped mapping leaves it off), so a test can read the dashboard topics as JSON."""
+    (the shipped mapping leaves it off), so a test can read the dashboard topics as JSON; in
+    the crew's view (``symptoms``, the shipped default) or ``full`` (every fault in effect)."""
     text = (ROOT / "config" / "bridge" / "default.yaml").read_text()
-    assert "json: {enabled: false, prefix: json}" in text
+    assert "json: {enabled: false, prefix: json}" in text and "crew_view: symptoms" in text
     path = folder / "every-flavour.yaml"
     path.write_text(text.replace("json: {enabled: false, prefix: json}",
-                                 "json: {enabled: true, prefix: json}"))
+                                 "json: {enabled: true, prefix: json}")
+                    .replace("crew_view: symptoms", f"crew_view: {crew_view}"))
     return {"bridge": ["--bridge-config", str(path)]}
 
 
@@ -281,8 +320,28 @@ class Probe:
         return [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
 
 
-def open_router(endpoint: str) -> zenoh.Session:
-    return zenoh.open(make_config("router", listen=[endpoint]))
+def open_router(endpoint: str = ANY_PORT) -> zenoh.Session:
+    """An embedded Zenoh router listening on ``endpoint`` (default: a loopback port the system
+    chooses; :func:`router_endpoint` tells which). Its admin space is readable, for that."""
+    conf = make_config("router", listen=[endpoint])
+    conf.insert_json5("adminspace/enabled", "true")
+    return zenoh.open(conf)
+
+
+def router_endpoint(router: zenoh.Session, timeout_s: float = 10.0) -> str:
+    """The TCP endpoint a router of :func:`open_router` listens on (port 0 resolved), as its
+    admin space (``@/<zid>/router``) lists it."""
+    selector = f"@/{router.info.zid()}/router"
+
+    def listening() -> str | None:
+        for reply in router.get(selector, timeout=timeout_s):
+            if reply.ok is not None:
+                found = [loc.split("?")[0] for loc in json.loads(reply.ok.payload.to_bytes())["locators"]
+                         if loc.startswith("tcp/")]
+                if found:
+                    return found[0]
+        return None
+    return wait_for(listening, timeout_s, f"the router's endpoint in {selector}")
 
 
 def env_without_zenoh_config() -> dict[str, str]:

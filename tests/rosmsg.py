@@ -18,7 +18,8 @@ from typing import Any, NamedTuple
 
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
-__all__ = ["RmwAttachment", "decode", "encode", "parse_attachment", "schema"]
+__all__ = ["RmwAttachment", "decode", "decode_service", "encode", "encode_service",
+           "parse_attachment", "schema"]
 
 MSGDEFS = Path(__file__).resolve().parent / "msgdefs"
 _PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
@@ -84,6 +85,32 @@ def decode(typename: str, payload: bytes) -> SimpleNamespace:
 def encode(typename: str, msg: dict[str, Any]) -> bytes:
     """CDR (little endian, with the encapsulation header) of a dict of fields."""
     return bytes(_encoder(typename)(msg))
+
+
+def _service_part(srv: str, part: str) -> tuple[str, str]:
+    """(``pkg/Name_Request``, its definition) of a service's ``.srv`` file in tests/msgdefs."""
+    pkg, _, name = srv.split("/")
+    request, _, response = (MSGDEFS / pkg / "srv" / f"{name}.srv").read_text().partition("---")
+    text = request if part == "Request" else response
+    # a structure without fields carries one dummy byte, as rosidl generates it
+    fields = [ln for ln in text.splitlines() if ln.split("#", 1)[0].strip()]
+    return f"{pkg}/{name}_{part}", text if fields else "uint8 structure_needs_at_least_one_member"
+
+
+@cache
+def _service_codec(srv: str, part: str):
+    name, text = _service_part(srv, part)
+    return generate_dynamic(name, text)[name], serialize_dynamic(name, text)[name]
+
+
+def decode_service(srv: str, part: str, payload: bytes) -> SimpleNamespace:
+    """A service's ``Request`` or ``Response`` (CDR with its header) as a namespace."""
+    return _service_codec(srv, part)[0](bytes(payload))
+
+
+def encode_service(srv: str, part: str, fields: dict[str, Any]) -> bytes:
+    """CDR (with its header) of a service's ``Request`` or ``Response``."""
+    return bytes(_service_codec(srv, part)[1](fields))
 
 
 class RmwAttachment(NamedTuple):

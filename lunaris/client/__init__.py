@@ -2,7 +2,8 @@
 
 - :class:`Mirror` (:mod:`~lunaris.client.mirror`): a live, bounded mirror of one rover or of
   every rover: the latest value (and a bounded history) per key, the events taken once by
-  ``(source_id, seq)``, the live services, and each rover's link (:class:`Link`).
+  ``(source_id, seq)``, the live services, each rover's link (:class:`Link`) and its trainee
+  session (:class:`Session`: history and events start empty with each session).
 - :class:`Writer` (:mod:`~lunaris.client.writer`): one write and its answer,
   :class:`Accepted`, :class:`Rejected` or :class:`NotApplied`; the write itself is planned,
   checked, by :func:`common.writes.plan_write`.
@@ -17,7 +18,7 @@
 
 from lunaris.client.events import EventWindow, event_identity
 from lunaris.client.link import LINK_TIMEOUT_S, Link, clock_time
-from lunaris.client.mirror import Change, Mirror, Token, Value
+from lunaris.client.mirror import Change, Mirror, Session, Token, Value
 from lunaris.client.session import (
     START_HINT,
     ToolError,
@@ -45,6 +46,7 @@ __all__ = [
     "Mirror",
     "NotApplied",
     "Rejected",
+    "Session",
     "Token",
     "ToolError",
     "Value",

@@ -1,5 +1,8 @@
 """A live mirror of the twin: what every tool that shows the twin reads (STYLE habit 11).
 
+Longer than 450 lines: one lock over everything a tool reads of the twin (values, history,
+events, trainee sessions, services, links), kept and bounded together.
+
 One :class:`Mirror` per tool subscribes, for one rover or every rover (``"*"``), to
 
 - the telemetry key families it is asked for (advanced subscribers with history: a tool that
@@ -8,6 +11,13 @@ One :class:`Mirror` per tool subscribes, for one rover or every rover (``"*"``),
   per ``history_every_s``);
 - the events on ``lunaris/<rover>/event`` and ``event/<service>`` (DECISIONS D1), each taken
   once (:mod:`lunaris.client.events`), the latest ``keep_events`` per rover;
+- each rover's trainee session (SPEC §12c): its id from the clock's ticks, its trainee from the
+  clock's event that opened it. When a tick says another session runs, the rover's history
+  and events are dropped (a tool's plots and event log start empty with each session) and the
+  listeners are told (a ``session`` change); an event of an earlier session (late, or replayed
+  from a cache) is not kept, one of a later session (the event that opens it comes before its
+  first tick) is kept but not read before the tick says that session runs. Session ids grow
+  (the UTC time each began, ``YYYYMMDD-HHMMSS``), which says earlier from later;
 - the services' liveliness tokens: which services are live, and since when one is gone;
 
 and judges each rover's link from its clock (:mod:`lunaris.client.link`): lost when no tick
@@ -40,12 +50,12 @@ import zenoh.ext as zext
 from common import keys
 from common.conditions import Lookup
 from common.messages import Event
-from lunaris.client.events import EventWindow, event_identity, source_mismatch
+from lunaris.client.events import EventWindow, event_identity, in_session, session_opened, source_mismatch
 from lunaris.client.link import LINK_TIMEOUT_S, Link, LinkTracker, clock_time
-from lunaris.client.records import Change, Token, Value, _Rover
+from lunaris.client.records import Change, Session, Token, Value, _Rover
 from lunaris.client.session import ignored
 
-__all__ = ["MAX_SAMPLE_BYTES", "Change", "Mirror", "Token", "Value"]
+__all__ = ["MAX_SAMPLE_BYTES", "Change", "Mirror", "Session", "Token", "Value"]
 
 MAX_ROVERS = 256  # rovers kept at once (a fleet of 200 is measured in docs/fleet.md)
 MAX_NAMES = 64  # components of one family of one rover (loads, rails, panels, radios ...)
@@ -54,6 +64,7 @@ MAX_EVENT_BYTES = 4_096  # an event's message is at most a thousand characters
 BUDGET_BYTES = 32 * 1024 * 1024  # the latest values of every key, together
 FORGET_S = 600.0  # a rover whose services are all gone is forgotten after this long quiet
 STRANGER_S = 30.0  # ... one that never had a live service, sooner
+TRAINEES_KEPT = 8  # the trainees of the latest sessions, per rover
 SWEEP_EVERY_S = 5.0
 
 
@@ -95,6 +106,7 @@ class Mirror:
         self._last_sweep = clock()
         self._forgotten: deque[str] = deque(maxlen=1024)  # told at the next sweep
         self.session: zenoh.Session | None = None
+        self.started_at: float | None = None  # when start() subscribed
 
     # -- Zenoh ------------------------------------------------------------------------------
 
@@ -104,6 +116,7 @@ class Mirror:
         with one answers such questions itself, from what it has heard so far (at first,
         nothing)."""
         self.session = session
+        self.started_at = self.clock()
         history = zext.HistoryConfig(detect_late_publishers=True)
         for family in self.families:
             self._keep.append(zext.declare_advanced_subscriber(
@@ -176,13 +189,15 @@ class Mirror:
             return None
         if not put:
             return None  # telemetry and events are puts; a delete of one means nothing
+        told: Change | None = None
         if parts and parts[0] == "event":
-            change = self._event(key, rover, parts, raw)
+            change, told = self._event(key, rover, parts, raw)
         else:
-            change = self._value(key, rover, parts, raw)
-        if change is not None:
-            for listener in self._listeners:
-                listener(change)
+            change, told = self._value(key, rover, parts, raw)
+        for c in (told, change):
+            if c is not None:
+                for listener in self._listeners:
+                    listener(c)
         return change
 
     def _decode(self, typ: type, raw: bytes) -> Any:
@@ -191,23 +206,28 @@ class Mirror:
             dec = self._decoders[typ] = msgspec.json.Decoder(typ)
         return dec.decode(raw)
 
-    def _value(self, key: str, rover: str, parts: list[str], raw: bytes) -> Change | None:
+    def _value(self, key: str, rover: str, parts: list[str], raw: bytes
+               ) -> tuple[Change | None, Change | None]:
+        """(the change, a session change it brought first or None)."""
         family = next((f for f in self.families if f.matches(parts)), None)
         if family is None:
-            return None
+            return None, None
         if len(raw) > MAX_SAMPLE_BYTES:
             ignored(key, f"{len(raw)} bytes, more than a {family.name} sample ever holds")
-            return None
+            return None, None
         try:
             value = self._decode(family.payload, raw)
         except (msgspec.DecodeError, msgspec.ValidationError) as exc:
             ignored(key, f"not a valid {family.payload.__name__} ({exc})")
-            return None
+            return None, None
         now = self.clock()
+        told: Change | None = None
         with self._lock:
             r = self._admit(rover, key, now)
             if r is None:
-                return None
+                return None, None
+            if family.name == "clock" and value.session and value.session != r.session:
+                told = self._new_session(r, rover, value.session)
             old = r.latest.get(key)
             if old is None:
                 if family.placeholder is not None:
@@ -221,10 +241,10 @@ class Mirror:
                         refused = ""
                     if not name:
                         ignored(key, refused)
-                        return None
+                        return None, told
                 if self._bytes + len(raw) > self.budget_bytes:
                     ignored(key, f"the values held reached {self.budget_bytes // 2**20} MB")
-                    return None
+                    return None, told
             self._bytes += len(raw) - (len(old.raw) if old is not None else 0)
             v = r.latest[key] = Value(raw, value, now)
             points = self.history_len.get(family.name)
@@ -237,32 +257,62 @@ class Mirror:
             if family.name == "clock":
                 r.link.tick(now)
             self._maybe_sweep(now)
-        return Change("value", rover, key, raw, value)
+        return Change("value", rover, key, raw, value), told
 
-    def _event(self, key: str, rover: str, parts: list[str], raw: bytes) -> Change | None:
+    def _new_session(self, r: _Rover, rover: str, session: str) -> Change:
+        """(Lock held.) The clock says ``session`` runs: what the mirror kept of the previous
+        one goes (its history; its events, and those of no session). At the first tick heard
+        only the events of other sessions go (replayed from the caches)."""
+        first = not r.session  # the first tick heard: the history is the caches' latest values
+        r.session = session
+        if not first:
+            for h in r.history.values():
+                h.clear()
+        r.events = deque((ev, raw) for ev, raw in r.events
+                         if ev.session == session or (first and not ev.session))
+        return Change("session", rover, keys.rover_prefix(rover), b"",
+                      Session(session, r.trainees.get(session)))
+
+    def _event(self, key: str, rover: str, parts: list[str], raw: bytes
+               ) -> tuple[Change | None, Change | None]:
+        """(the change, a session change it brought first or None: the trainee of the
+        running session learnt)."""
         if len(raw) > MAX_EVENT_BYTES:
             ignored(key, f"an event of {len(raw)} bytes (at most {MAX_EVENT_BYTES})")
-            return None
+            return None, None
         try:
             ev = self._decode(Event, raw)
         except (msgspec.DecodeError, msgspec.ValidationError) as exc:
             ignored(key, f"not an event ({exc})")
-            return None
+            return None, None
         wrong = source_mismatch(parts, ev)
         if wrong is not None:
             ignored(key, wrong)
-            return None
+            return None, None
         now = self.clock()
+        told: Change | None = None
         with self._lock:
             if not self._window.first(event_identity(rover, ev)):
-                return None  # heard on the journal's key and the service's, or replayed
+                return None, None  # heard on the journal's key and the service's, or replayed
             r = self._admit(rover, key, now)
             if r is None:
-                return None
+                return None, None
+            opened = session_opened(ev)
+            if opened is not None and opened[0] not in r.trainees:
+                r.trainees[opened[0]] = opened[1]
+                while len(r.trainees) > TRAINEES_KEPT:
+                    del r.trainees[next(iter(r.trainees))]
+                if opened[0] == r.session:
+                    told = Change("session", rover, keys.rover_prefix(rover), b"",
+                                  Session(r.session, opened[1]))
+            if r.session and ev.session and ev.session < r.session:
+                return None, told  # an earlier session's, late or replayed
             r.events.append((ev, raw))
             while len(r.events) > self.keep_events:
                 r.events.popleft()
-        return Change("event", rover, key, raw, ev)
+            if not in_session(ev, r.session):
+                return None, told  # a later session's: told once its first tick has come
+        return Change("event", rover, key, raw, ev), told
 
     def feed_token(self, key: str, alive: bool) -> Change | None:
         """A liveliness token of ``lunaris/<rover>/service/<name>`` put (alive) or gone."""
@@ -375,11 +425,26 @@ class Mirror:
             return list(r.history.get(key, ())) if r is not None else []
 
     def events(self, rover: str | None = None) -> list[tuple[str, Event, bytes]]:
-        """(rover, event, payload) of the events kept, oldest first per rover."""
+        """(rover, event, payload) of the events kept of each rover's running session,
+        oldest first per rover."""
         with self._lock:
             names = [rover] if rover is not None else sorted(self._rovers)
             return [(n, ev, raw) for n in names if n in self._rovers
-                    for ev, raw in self._rovers[n].events]
+                    for ev, raw in self._rovers[n].events if in_session(ev, self._rovers[n].session)]
+
+    def session_of(self, rover: str) -> Session | None:
+        """The rover's running session (None before its clock's first tick)."""
+        with self._lock:
+            r = self._rovers.get(rover)
+            if r is None or not r.session:
+                return None
+            return Session(r.session, r.trainees.get(r.session))
+
+    def sessions(self) -> dict[str, Session]:
+        """Every rover's running session (the rovers whose clock has ticked)."""
+        with self._lock:
+            return {name: Session(r.session, r.trainees.get(r.session))
+                    for name, r in self._rovers.items() if r.session}
 
     def services(self, rover: str) -> set[str]:
         """The services of ``rover`` whose liveliness token is there now."""
@@ -405,9 +470,15 @@ class Mirror:
                 since = self.disconnected_at or now
                 return Link("lost", since, f"the router is unreachable since {clock_time(since)}")
             r = self._rovers.get(rover)
-            if r is None:
-                return Link("unknown", None, "nothing heard of it yet")
-            return r.link.state(now)
+            link = Link("unknown", None, "nothing heard of it yet") if r is None else r.link.state(now)
+            waited = now - self.started_at if self.started_at is not None else 0.0
+            if link.state == "unknown" and self.connected and waited > self.link_timeout_s:
+                # a rover asked for that has not ticked since the tool connected: cut off, or
+                # not running (a tool started during a partition must say so, not wait)
+                return Link("lost", self.started_at, f"no clock tick of {rover} in the {waited:.0f} s "
+                                                     "since this tool connected: unreachable or not "
+                                                     "running")
+            return link
 
     def links(self) -> dict[str, Link]:
         return {rover: self.link(rover) for rover in self.rovers()}
@@ -428,3 +499,4 @@ class Mirror:
                     "events": sum(len(r.events) for r in self._rovers.values()),
                     "history": sum(len(h) for r in self._rovers.values() for h in r.history.values()),
                     "bytes": self._bytes, "event_window": len(self._window)}
+

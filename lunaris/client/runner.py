@@ -11,9 +11,11 @@ answer: accepted, rejected (and why), not applied (and why). A ramp's first and 
 are awaited, the ones between are only sent.
 
 A scenario may start from a reset or a snapshot (``start``): the runner asks for it and waits
-for the clock's first tick of the new epoch before it plays. It marks its start, each step
-and its end in the journal (``control/scenario``), and while it plays it is never silent for
-10 s of wall time: it says what it waits for. At the end it puts the clock back to the speed
+for the clock's first tick of the new epoch before it plays. It marks its start, each step,
+each expectation scored (met or missed, SPEC §12d: a ``scenario`` event whose params hold the
+outcome, :class:`common.messages.ExpectationMark`) and its end in the journal
+(``control/scenario``), and while it plays it is never silent for 10 s of wall time: it says
+what it waits for. At the end it puts the clock back to the speed
 it had (and, if asked, clears the faults it injected that are still active).
 """
 
@@ -32,10 +34,10 @@ import zenoh
 import zenoh.ext as zext
 
 from common import keys
-from common.messages import BadInput, Clock, ScenarioMark
+from common.messages import BadInput, Clock, ExpectationMark, ScenarioMark
 from common.scenario import Scenario, describe_start
-from common.scenario_player import Player, StepWrite, describe_action, describe_trigger
-from common.scenario_progress import ScenarioProgress, StepProgress
+from common.scenario_player import Player, StepResult, StepWrite, describe_action, describe_trigger
+from common.scenario_progress import ExpectProgress, ScenarioProgress, StepProgress
 from common.writes import Write, plan_write
 from lunaris.client.mirror import Change, Mirror
 from lunaris.client.session import ToolError, live_rovers, unknown_rover
@@ -80,6 +82,7 @@ class Runner:
         self.pending: dict[int, list[Pending]] = {}  # step -> its writes awaiting an answer
         self.awaited: set[int] = set()  # steps whose first write was awaited
         self.injected: dict[str, int] = {}  # fault key -> step, of the faults still active
+        self.journalled: set[int] = set()  # the expect steps whose outcome is in the journal
         self.stopped = threading.Event()
         self.state: Literal["starting", "playing", "ended"] = "starting"
         self.first_clock: Clock | None = None
@@ -106,7 +109,7 @@ class Runner:
         p, sc = self.player, self.scenario
         steps = [StepProgress(r.index, r.label, describe_trigger(sc.steps[r.index]),
                               describe_action(sc.steps[r.index]), r.status, r.outcome, r.detail,
-                              r.armed_t_s, r.fired_t_s) for r in p.results]
+                              r.armed_t_s, r.fired_t_s, self._expect_progress(r)) for r in p.results]
         waiting = p.waiting(self.mirror.lookup(self.rover)) if self.state == "playing" else (
             f"ended: {p.end_reason}" if self.state == "ended" else "starting")
         return ScenarioProgress(
@@ -236,11 +239,18 @@ class Runner:
                                                    or now.paused != first.paused):
             self.clock_changed = True  # the reset changed it: put it back at the end
 
-    def _mark(self, what: Literal["start", "step", "end"], message: str, step: int | None = None) -> None:
+    def _expect_progress(self, r: StepResult) -> ExpectProgress | None:
+        expect = self.scenario.steps[r.index].expect
+        if expect is None:
+            return None
+        return ExpectProgress(r.label, expect.when, expect.within_s, r.met, r.met_t_s, r.deadline_t_s)
+
+    def _mark(self, what: Literal["start", "step", "end", "expect"], message: str,
+              step: int | None = None, expectation: ExpectationMark | None = None) -> None:
         """The scenario's progress in the journal (``scenario`` events), for the debrief."""
         if self.writer is None:
             return
-        mark = ScenarioMark(self.scenario.scenario.name[:200], what, message[:1000], step)
+        mark = ScenarioMark(self.scenario.scenario.name[:200], what, message[:1000], step, expectation)
         with contextlib.suppress(BadInput, zenoh.ZError):
             self.writer.put(self._plan("control/scenario", mark))
 
@@ -267,13 +277,14 @@ class Runner:
                                  "link lost?), ") + (f"sim t {tick.t_s:.1f} s, " if tick else "")
                                 + player.waiting(self.mirror.lookup(self.rover)))
             self._publish()
+        yield from self._scores()  # the expectations the end scored (missed)
         yield from self._wait_answers()
         yield from self._finish_clock()
         if self.clear_at_end:
             yield from self._clear_injected()
         self.ok = not self.interrupted and all(
             r.fired_t_s is not None and r.outcome not in ("rejected", "not applied")
-            for r in player.results)
+            for r in player.results if self.scenario.steps[r.index].expect is None)
         self.code = 0 if self.ok else 1
         self.state = "ended"
         self._mark("end", f"ended: {player.end_reason}; "
@@ -301,8 +312,32 @@ class Runner:
                 yield self._say(f"step {i + 1} {r.label!r}: ramp complete")
         for w in writes:
             self._send(w)
+        yield from self._scores()
         if player.finished:
             yield self._say(f"end: {player.end_reason}")
+
+    def _scores(self) -> Iterator[Progress]:
+        """Each expectation scored (met or missed) said and journalled, once."""
+        t0 = self.player.t0
+        for r in self.player.results:
+            step = self.scenario.steps[r.index]
+            if step.expect is None or r.met is None or r.index in self.journalled:
+                continue
+            self.journalled.add(r.index)
+
+            def sim(rel: float | None) -> float | None:
+                return None if rel is None or t0 is None else t0 + rel
+            if r.met:
+                assert r.met_t_s is not None and r.armed_t_s is not None
+                words = (f"expectation {r.label!r} met at t+{r.met_t_s:.1f} s, "
+                         f"{r.met_t_s - r.armed_t_s:.1f} s of its {step.expect.within_s:g} s")
+            else:
+                words = f"expectation {r.label!r} MISSED: {r.detail}"
+            yield self._say(words)
+            self._mark("expect", words[:300], r.index + 1, ExpectationMark(
+                index=r.index, label=r.label[:200], condition=step.expect.when[:300],
+                within_s=step.expect.within_s, met=r.met, at_t_s=sim(r.met_t_s),
+                armed_t_s=sim(r.armed_t_s), start_t_s=t0, detail=r.detail[:300]))
 
     def _send(self, w: StepWrite) -> None:
         assert self.writer is not None

@@ -166,7 +166,10 @@ def close_session(session: zenoh.Session) -> None:
     deadline = time.monotonic() + CALLBACK_THREADS_WAIT_S
     for thread in threading.enumerate():
         if thread.daemon and thread.name.endswith("(pyo3-closure)"):
-            thread.join(max(0.0, deadline - time.monotonic()))
+            try:
+                thread.join(max(0.0, deadline - time.monotonic()))
+            except RuntimeError:  # listed while it starts (threading's "limbo"): nothing to wait for yet
+                continue
 
 
 def live_rovers(session: zenoh.Session, timeout_s: float = 2.0) -> dict[str, set[str]]:

@@ -3,7 +3,8 @@
 A :class:`Writer` sends a planned write (:func:`common.writes.plan_write`: the key, the
 payload, the event that accepts it and the service that answers) and waits for the answer
 on the services' own event keys, ``lunaris/<rover>/event/*`` (and the journal's ``event``,
-the same events once more, taken once): it works without the faults service. Each write
+the same events once more, taken once): it works without the faults service. The waiting
+itself, Zenoh aside, is :mod:`common.answers` (the bridge's crew controls wait the same way). Each write
 carries who made it (``actor``, D4): ``instructor`` from the CLI and the console,
 ``scenario`` from the scenario player.
 
@@ -25,81 +26,25 @@ of the rover. Thread-safe; :meth:`Writer.awrite` for asyncio.
 from __future__ import annotations
 
 import asyncio
-import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import msgspec
 import zenoh
 
 from common import keys
+from common.answers import ANSWER_S, Accepted, Answer, Awaiting, NotApplied, Pending, Rejected
+from common.answers import answers as _answers  # noqa: F401 - its old name, which tests read
 from common.connection import write as put_or_delete
 from common.messages import Event
 from common.writes import Write
-from lunaris.client.events import EventWindow, event_identity, source_mismatch
 from lunaris.client.link import LINK_TIMEOUT_S, clock_time
 from lunaris.client.mirror import Mirror
-from lunaris.client.words import humane
 
 __all__ = ["ANSWER_S", "Accepted", "Actor", "Answer", "NotApplied", "Pending", "Rejected", "Writer"]
 
-ANSWER_S = 3.0  # how long a write waits for its answer: longer than the 2 s of WRITE_MAX_AGE_S
 Actor = Literal["crew", "instructor", "scenario"]
-
-
-@dataclass(frozen=True)
-class Accepted:
-    """The owner applied the write; ``event`` says what it did."""
-
-    write: Write
-    event: Event
-
-    @property
-    def message(self) -> str:
-        return self.event.message
-
-
-@dataclass(frozen=True)
-class Rejected:
-    """The twin refused the write; nothing changed. ``reason`` in words."""
-
-    write: Write
-    event: Event
-
-    @property
-    def message(self) -> str:
-        return humane(self.event.message.removeprefix("rejected: "))
-
-
-@dataclass(frozen=True)
-class NotApplied:
-    """The write did not take effect and will not: ``reason`` says why. ``unreachable``: the
-    owner is known to be out of reach (else nothing answered in time)."""
-
-    write: Write
-    reason: str
-    unreachable: bool
-    sent: bool
-
-    @property
-    def message(self) -> str:
-        return self.reason
-
-
-Answer = Accepted | Rejected | NotApplied
-
-
-@dataclass
-class Pending:
-    """A write sent and waiting for its answer."""
-
-    write: Write
-    deadline: float  # monotonic
-    on_answer: Callable[[Answer], None] | None = None
-    answer: Answer | None = None
-    done: threading.Event = field(default_factory=threading.Event)
 
 
 class Writer:
@@ -108,9 +53,7 @@ class Writer:
     def __init__(self, session: zenoh.Session, mirror: Mirror, actor: Actor = "instructor",
                  timeout_s: float = ANSWER_S):
         self.session, self.mirror, self.actor, self.timeout_s = session, mirror, actor, timeout_s
-        self._lock = threading.Lock()
-        self._pending: list[Pending] = []
-        self._window = EventWindow()
+        self._awaiting = Awaiting()
         self._decoder = msgspec.json.Decoder(Event)
         # live events only: a cache replayed is an old answer, not this write's
         self._sub = session.declare_subscriber(keys.under(mirror.rover, "event/**"), self._on_event)
@@ -174,15 +117,14 @@ class Writer:
         p = Pending(write, time.monotonic() + self.timeout_s, on_answer)
         why = self.unreachable(write, sending=True)
         if why is not None:
-            self._settle(p, NotApplied(write, f"not applied: {why}", True, False))
+            self._awaiting.settle(p, NotApplied(write, f"not applied: {why}", True, False))
             return p
-        with self._lock:
-            self._pending.append(p)
+        self._awaiting.add(p)
         try:
             self._send(write)
         except zenoh.ZError as exc:
-            self._settle(p, NotApplied(write, f"not applied: the write could not be sent ({exc})",
-                                       True, False))
+            self._awaiting.settle(p, NotApplied(
+                write, f"not applied: the write could not be sent ({exc})", True, False))
         return p
 
     def wait(self, p: Pending) -> Answer:
@@ -215,11 +157,9 @@ class Writer:
 
     def give_up(self, p: Pending) -> Answer:
         """The answer to ``p`` if it came; else stop waiting: not applied, and why."""
-        with self._lock:
-            if p.answer is not None:
-                return p.answer
-            if p in self._pending:
-                self._pending.remove(p)
+        got = self._awaiting.withdraw(p)
+        if got is not None:
+            return got
         why = self.unreachable(p.write)
         if why is not None:
             answer = NotApplied(p.write, f"not applied: {why}; the twin refuses the write if it "
@@ -227,20 +167,11 @@ class Writer:
         else:
             answer = NotApplied(p.write, f"no answer within {self.timeout_s:g} s: not applied; the "
                                          "twin refuses it if it arrives later", False, True)
-        self._settle(p, answer)
+        self._awaiting.settle(p, answer)
         return p.answer or answer
 
     def _send(self, write: Write) -> None:
         put_or_delete(self.session, write.key, write.payload, actor=self.actor)
-
-    def _settle(self, p: Pending, answer: Answer) -> None:
-        with self._lock:
-            if p.answer is not None:
-                return
-            p.answer = answer
-        p.done.set()
-        if p.on_answer is not None:
-            p.on_answer(answer)
 
     # -- the answers -------------------------------------------------------------------------------
 
@@ -250,25 +181,7 @@ class Writer:
             ev = self._decoder.decode(s.payload.to_bytes())
         except (ValueError, msgspec.DecodeError, msgspec.ValidationError):
             return  # said by the mirror, which reads the same keys
-        if source_mismatch(parts, ev) is not None:
-            return
-        with self._lock:  # every event is remembered: its copy on the journal's key is no answer
-            if not self._window.first(event_identity(rover, ev)) or not self._pending:
-                return
-            match = next((p for p in self._pending if _answers(p.write, ev)), None)
-            if match is None:
-                return
-            self._pending.remove(match)
-        answer: Answer = Rejected(match.write, ev) if ev.kind == "rejected" else Accepted(match.write, ev)
-        self._settle(match, answer)
-
-
-def _answers(write: Write, ev: Event) -> bool:
-    """Whether ``ev`` is the answer to ``write``: its rejection (by its owner or the gatekeeper),
-    or the accepting event from its owner."""
-    if ev.key != write.key:
-        return False
-    return ev.kind == "rejected" or (ev.kind == write.accepted and ev.source == write.owner)
+        self._awaiting.hear(rover, parts, ev)
 
 
 def describe(answer: Answer) -> dict[str, Any]:

@@ -16,6 +16,10 @@
   ``missing``, the owners' absence in words);
   ``GET /api/catalogue``: the fault catalogue the forms are built from; ``GET /api/me``: who
   is signed in and what they may do.
+- ``GET /api/rovers/<rover>/crew``: what the crew's dashboard shows of the rover now (SPEC
+  §12b), rendered from the twin's values as the bridge renders them
+  (:func:`services.bridge.crew_view`): its ``/diagnostics`` statuses, every topic's message
+  and the crew's controls; 404 for a rover the console has not heard of.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import asyncio
 import json
 import math
 import re
+import time
 from typing import Any
 
 import zenoh
@@ -38,6 +43,7 @@ from common.writes import Write, plan_write
 from lunaris.client import Accepted, NotApplied, Rejected, describe, humane
 from lunaris.console.auth import User
 from lunaris.console.live import Hub
+from services.bridge import crew_view
 
 __all__ = ["TooLarge", "answer", "catalogue", "read_body", "refused", "routes", "send"]
 
@@ -193,6 +199,22 @@ async def _query(request: Request) -> Response:
     return JSONResponse(ok[0])
 
 
+async def _crew(request: Request) -> Response:
+    rover = request.path_params["rover"]
+    if not ROVER.match(rover):
+        return JSONResponse({"message": f"bad rover id {rover!r}"}, status_code=404)
+    hub: Hub = request.app.state.hub
+    latest = hub.mirror.latest(rover)
+    if not latest:
+        known = ", ".join(hub.mirror.rovers()) or "none"
+        return JSONResponse({"message": f"unknown rover {rover!r} (rovers: {known})"}, status_code=404)
+    now = time.time()
+    view = crew_view(rover, {k: v.value for k, v in latest.items()},
+                     {k: now - v.at for k, v in latest.items()},
+                     config=request.app.state.rover_files.by_id.get(rover), stamp_ns=time.time_ns())
+    return JSONResponse(view)
+
+
 async def _live(request: Request) -> Response:
     hub: Hub = request.app.state.hub
     sign_ins = request.app.state.sign_ins
@@ -218,5 +240,6 @@ def routes() -> list[Route]:
         Route("/api/catalogue", _catalogue),
         Route("/api/live", _live),
         Route("/api/rovers/{rover}/keys/{key:path}", _write, methods=["PUT", "DELETE"]),
+        Route("/api/rovers/{rover}/crew", _crew),
         Route("/api/rovers/{rover}/{what}", _query),
     ]

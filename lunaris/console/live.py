@@ -22,15 +22,22 @@ The messages (``data:`` lines of the event stream, JSON):
 - ``{"type": "snapshot", "v", "values": {key: payload}, "events": [event], "services":
   {rover: [service]}, "history": {rover: {t, soc, temperature_c, load_w, generation_w}},
   "connected": bool, "router": {"state", "endpoint", "message"}, "links": {rover: {"state":
-  "up"|"lost"|"unknown", "since": wall time or null, "reason": words}}}``
-- ``{"type": "batch", "v", "values", "events", "services", "links"}``: what changed (``links``
-  holds the rovers whose link changed, often none)
+  "up"|"lost"|"unknown", "since": wall time or null, "reason": words}}, "sessions": {rover:
+  {"id", "trainee"}}}``
+- ``{"type": "batch", "v", "values", "events", "services", "links", "sessions"}``: what
+  changed (``links`` holds the rovers whose link changed, ``sessions`` those whose session's
+  trainee became known: often none)
 - ``{"type": "link", "v", "connected": bool, "router"}``: the router came or went.
 
 ``router`` says where the console is with the twin's router, in words for the page:
 ``state`` is ``waiting`` (the console has not reached it yet: it serves the page before the
 twin is up), ``connected`` or ``lost``; ``message`` is "waiting for the twin at
 tcp/127.0.0.1:7447 ...", "connected to the twin at ..." or "the twin at ... is gone ...".
+
+``sessions`` says each rover's trainee session (SPEC §12c): ``id`` (as ``get sessions`` lists
+it) and ``trainee`` (``""``: none named; null: not known yet). When a rover's session changes
+(a new trainee), the mirror has dropped that rover's history and events, and every page is
+sent a snapshot: its plots and event log start empty with the session.
 """
 
 from __future__ import annotations
@@ -82,6 +89,8 @@ class Hub:
         self._pending_events: deque[bytes] = deque(maxlen=PENDING_EVENTS)
         self._pending_services: set[str] = set()
         self._pending_links: dict[str, Link] = {}
+        self._pending_sessions: set[str] = set()
+        self._session_ids: dict[str, str] = {}  # rover -> the session the pages were sent
         self._flush_handle: asyncio.TimerHandle | None = None
         self._last_flush = 0.0
         self._changed = asyncio.Event()
@@ -143,7 +152,7 @@ class Hub:
         with self._lock:
             items, self._incoming = self._incoming, []
             self._scheduled = False
-        forgot = False
+        forgot = new_session = False
         for c in items:
             if c.kind == "value":
                 self._pending_values[c.key] = c.raw
@@ -151,17 +160,23 @@ class Hub:
                 self._pending_events.append(c.raw)
             elif c.kind == "services":
                 self._pending_services.add(c.rover)
+            elif c.kind == "session":  # a new trainee: the pages start again, empty of the last
+                new_session |= self._session_ids.get(c.rover) != c.value.id
+                self._session_ids[c.rover] = c.value.id
+                self._pending_sessions.add(c.rover)
             else:  # forget: the pages start again from a snapshot without it
                 forgot = True
-        if forgot:
+        if forgot or new_session:
             self._restart_due = True
-            self._restart()
+            self._restart(force=new_session)
         self._schedule()
 
-    def _restart(self) -> None:
+    def _restart(self, force: bool = False) -> None:
         """Every page takes a new snapshot (a rover was forgotten), at most every RESTART_S
-        (a flood of forged rovers, each making room for the next, costs the pages little)."""
-        if not self._restart_due or self.loop.time() - self._last_restart < RESTART_S:
+        (a flood of forged rovers, each making room for the next, costs the pages little);
+        at once for a new session (``force``: the clock's ticks say it, which only the clock
+        may publish)."""
+        if not self._restart_due or (not force and self.loop.time() - self._last_restart < RESTART_S):
             return
         self._restart_due, self._last_restart = False, self.loop.time()
         self.version += 1
@@ -169,6 +184,7 @@ class Hub:
         self._pending_values, self._pending_services = {}, set()
         self._pending_events.clear()
         self._pending_links = {}
+        self._pending_sessions = set()
         self._notify()
 
     async def _watch_links(self) -> None:
@@ -200,15 +216,19 @@ class Hub:
         self._flush_handle = None
         self._last_flush = self.loop.time()
         if not (self._pending_values or self._pending_events or self._pending_services
-                or self._pending_links):
+                or self._pending_links or self._pending_sessions):
             return
         self.version += 1
         values = b",".join(msgspec.json.encode(k) + b":" + v for k, v in self._pending_values.items())
         services = msgspec.json.encode({r: sorted(self.mirror.services(r)) for r in self._pending_services})
         links = msgspec.json.encode({r: lk.as_json() for r, lk in self._pending_links.items()})
-        body = (b'{"type":"batch","v":%d,"values":{%s},"events":[%s],"services":%s,"links":%s}'
-                % (self.version, values, b",".join(self._pending_events), services, links))
+        sessions = msgspec.json.encode({r: s for r, s in self.sessions().items()
+                                        if r in self._pending_sessions})
+        body = (b'{"type":"batch","v":%d,"values":{%s},"events":[%s],"services":%s,"links":%s,'
+                b'"sessions":%s}' % (self.version, values, b",".join(self._pending_events), services,
+                                     links, sessions))
         self._pending_values, self._pending_services, self._pending_links = {}, set(), {}
+        self._pending_sessions = set()
         self._pending_events.clear()
         self._log.append((self.version, body))
         self._notify()
@@ -250,6 +270,10 @@ class Hub:
             out[rover] = h
         return out
 
+    def sessions(self) -> dict[str, dict[str, str | None]]:
+        """Each rover's trainee session as the pages are sent it: ``{"id", "trainee"}``."""
+        return {r: {"id": s.id, "trainee": s.trainee} for r, s in self.mirror.sessions().items()}
+
     def snapshot(self) -> bytes:
         latest = self.mirror.latest()
         values = b",".join(msgspec.json.encode(k) + b":" + v.raw for k, v in latest.items())
@@ -259,7 +283,8 @@ class Hub:
             "history": self.history(),
             "connected": self.connected,
             "router": self.router(),
-            "links": {r: lk.as_json() for r, lk in self.mirror.links().items()}})
+            "links": {r: lk.as_json() for r, lk in self.mirror.links().items()},
+            "sessions": self.sessions()})
         return (b'{"type":"snapshot","v":%d,"values":{%s},"events":[%s],%s'
                 % (self.version, values, events, rest[1:]))
 

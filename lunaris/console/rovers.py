@@ -12,12 +12,11 @@ the console was given with ``--rover FILE``; ``lunaris up --console`` gives it i
   the rover file, also the radio's ``site`` and its footprint (``a_m``, ``b_m``,
   ``offset_x_m``, ``offset_y_m``).
 
-How the console knows, most certain first: the radio's own telemetry when it says so
-(``radio/<radio>/link`` with a ``follows_drive`` field: not published yet, read when it is),
-the rover file, then the twin's liveliness: a rover the drive service does not serve does
-not drive, so none of its radios follows a drive. The twin does not say which radios stand
-at a site: for a rover that drives and whose file the console was not given, ``follows_drive``
-is null and ``why`` says how to know (give the console the rover file).
+How the console knows, most certain first: the radio's own telemetry (``radio/<radio>/link``
+says ``follows_drive``, its ``site`` and its nominal footprint), the rover file, then the
+twin's liveliness: a rover the drive service does not serve does not drive, so none of its
+radios follows a drive. Before a radio's first sample, for a rover that drives and whose file
+the console was not given, ``follows_drive`` is null and ``why`` says how to know.
 """
 
 from __future__ import annotations
@@ -83,6 +82,10 @@ def _radio(rover: str, name: str, mirror: Mirror, files: RoverFiles, drives: boo
     if radio is not None:
         out.update(site=None if radio.site is None else {"x_m": radio.site.x_m, "y_m": radio.site.y_m},
                    a_m=radio.a_m, b_m=radio.b_m, offset_x_m=radio.offset_x_m, offset_y_m=radio.offset_y_m)
+    elif link is not None and isinstance(said, bool):  # the twin's own numbers (nominal footprint)
+        site = getattr(link, "site", None)
+        out.update(site=None if site is None else {"x_m": site.x_m, "y_m": site.y_m},
+                   a_m=link.a_m, b_m=link.b_m, offset_x_m=link.offset_x_m, offset_y_m=link.offset_y_m)
     if isinstance(said, bool):
         follows: bool | None = said
         why = "the radio's telemetry says so"

@@ -52,7 +52,7 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from lunaris.address import ABOUT_APP, ABOUT_PATH
 from lunaris.client import ToolError, close_session
-from lunaris.console import api, drive, extras, rovers
+from lunaris.console import api, drive, extras, response, rovers
 from lunaris.console.auth import COOKIE, LOCAL, SESSION_S, Accounts, AccountsError, Attempts, SignIns
 from lunaris.console.live import Hub
 
@@ -329,6 +329,8 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
         hub = Hub(asyncio.get_running_loop(), flush_s, endpoint=endpoint, **mirror)
         app.state.hub = hub
+        app.state.responses = response.Responses(hub.mirror)  # the crew's response, live (SPEC 12d)
+        hub.mirror.listen(app.state.responses.on_change)
         app.state.verifying = asyncio.Semaphore(VERIFYING)
         stop = threading.Event()
         connecting = None
@@ -357,6 +359,7 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
         Route(ABOUT_PATH, _about),
         *drive.routes(),
         *rovers.routes(),
+        *response.routes(),  # before api's /api/rovers/{rover}/{what}
         *api.routes(),
         *extras.routes(),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),

@@ -439,7 +439,8 @@ class BatteryModel:
             tte = usable_j / drain_w if usable_j > 0.0 else 0.0
             if not math.isfinite(tte):
                 tte = None  # a vanishing draw: as good as idle
-        heat_w = point.current_a**2 * r0 + self.injected_heat_w + sum(
+        # the pack's own losses (I^2 R): an injected heating shows only as temperature (SPEC 12b)
+        heat_w = point.current_a**2 * r0 + sum(
             v * v / r for v, r in zip(self.branch_v, rj, strict=True) if r > 0.0)
         return BatteryReading(
             energy_j=self.energy_j, capacity_j=self.capacity_j, soc=self.soc, ocv_v=v_oc,

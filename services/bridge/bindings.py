@@ -2,7 +2,8 @@
 
 :func:`expand` turns each mapping into one :class:`Binding` per rover and per component
 (``{load}``, ``{rail}``, ``{radio}``, ``{panel}`` placeholders run over the rover's
-components), checking the resulting ROS 2 names and that no two bindings share a topic in
+components; a command on ``{rail}`` over the rails that can be switched, not the solar rail),
+checking the resulting ROS 2 names and that no two bindings share a topic in
 one ROS 2 domain. A key of the drive (``drive/state``) has no binding for a rover that does
 not drive, as a ``{radio}`` mapping has none for a rover without radios; a key that names a
 component the rover lacks follows the mapping's ``otherwise`` (``first``: the rover's first
@@ -22,7 +23,7 @@ from typing import NamedTuple
 from common import keys
 from common.config import Rover
 from common.datafile import ConfigError
-from services.bridge.mapping import ROS_TOPIC, BridgeOptions, Mapping, MappingFile, ros_name
+from services.bridge.mapping import PLACEHOLDERS, ROS_TOPIC, BridgeOptions, Mapping, MappingFile, ros_name
 from services.bridge.rmw_zenoh import rmw_topic_key
 
 __all__ = ["Binding", "RoverNames", "domain_of", "expand", "open_keyexpr", "rover_names", "zenoh_key"]
@@ -37,6 +38,7 @@ class RoverNames(NamedTuple):
     radio: tuple[str, ...] = ()
     panel: tuple[str, ...] = ()
     drives: bool = False  # the rover has a drive section
+    solar_rail: str = ""  # the rail of the panels: in the PDM, but never switched
 
 
 def rover_names(rover: Rover) -> RoverNames:
@@ -48,6 +50,7 @@ def rover_names(rover: Rover) -> RoverNames:
         radio=tuple(x.name for x in rover.radios),
         panel=tuple(x.name for x in rover.solar.panels),
         drives=rover.drive is not None,
+        solar_rail=rover.solar.rail.name,
     )
 
 
@@ -135,10 +138,12 @@ def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mappin
             place = fleet.index(rover.id)
             if shape.owner == "drive" and not rover.drives:
                 continue
-            if placeholder is None:
+            if placeholder not in PLACEHOLDERS:  # none, or every owner's (faults/active/*)
                 items: tuple[str | None, ...] = (None,)
             elif item is not None and item.startswith("{"):
                 items = getattr(rover, placeholder)
+                if shape.direction == "in" and placeholder == "rail":  # a command: not the solar rail
+                    items = tuple(r for r in items if r != rover.solar_rail)
             else:
                 have = getattr(rover, placeholder)
                 if item in have:
@@ -162,7 +167,8 @@ def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mappin
                     continue
                 where = f"mappings[{i}] for {rover.id}" + (f" {it}" if it else "")
                 group = mf.bridge.rover_domains.get(rover.id, place)
-                first = owner.setdefault((m.direction, group, topic), where)
+                role = "service" if m.kind == "service" else m.direction
+                first = owner.setdefault((role, group, topic), where)
                 if first != where:
                     problems.append(f"mappings[{i}].topic: {topic} of {where} is also the topic "
                                     f"of {first} in the same ROS 2 domain")

@@ -45,6 +45,7 @@ __all__ = [
     "out_message",
     "out_value",
     "stamp",
+    "topic_message",
 ]
 
 # == values ====================================================================================
@@ -101,6 +102,18 @@ def out_message(m: Mapping, payload: msgspec.Struct, stamp_ns: int = 0) -> dict 
     return None if value is None else {"data": value}
 
 
+def topic_message(m: Mapping, payload: Any, battery: Battery | None, stamp_ns: int,
+                  distro: str = "jazzy", stale: bool = False) -> dict | None:
+    """The message an outbound topic carries for a twin payload (its converter's, or the
+    mapped values'), None to publish nothing; ``battery``: the rover's, for BatteryState."""
+    if m.convert == "battery_state":
+        return battery_state_message(payload, battery, stamp_ns, m.frame_id, m.options, distro,
+                                     stale)
+    if m.convert == "odometry":
+        return odometry_message(payload, stamp_ns, m.frame_id, m.options)
+    return out_message(m, payload, stamp_ns)
+
+
 def _multi_array(names: list[str], values: list) -> dict:
     # One dimension whose label names the fields in order ("distance_m,angle_deg").
     n = len(values)
@@ -110,8 +123,9 @@ def _multi_array(names: list[str], values: list) -> dict:
 
 
 def in_payload(m: Mapping, msg: dict) -> dict[str, Any]:
-    """The twin input (a JSON object) for an inbound dashboard message; :class:`BadInput` if
-    the message does not carry what the mapping expects or a value is not finite."""
+    """The twin input or command (a JSON object) for an inbound dashboard message, with the
+    mapping's constant ``payload`` fields; :class:`BadInput` if the message does not carry
+    what the mapping expects or a value is not finite."""
     if m.fields:
         data = list(msg.get("data", []))
         if len(data) != len(m.fields):
@@ -123,7 +137,7 @@ def in_payload(m: Mapping, msg: dict) -> dict[str, Any]:
             raise BadInput(f"{m.type} on {m.topic}: no data field")
         assert m.field is not None  # a one-value mapping names its field (parse_mapping checks)
         pairs = [(m.field, msg["data"])]
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = dict(m.payload)  # the fields every write of the mapping carries
     for name, value in pairs:
         if isinstance(value, bool):
             out[name] = value
@@ -194,9 +208,9 @@ def nominal_voltage_v(battery: Battery) -> float:
     return battery.cells_series * mean
 
 
-def battery_state_message(state: BatteryState, battery: Battery, stamp_ns: int,
+def battery_state_message(state: BatteryState, battery: Battery | None, stamp_ns: int,
                           frame_id: str = "", options: dict[str, str] | None = None,
-                          distro: str = "jazzy") -> dict:
+                          distro: str = "jazzy", stale: bool = False) -> dict:
     """``sensor_msgs/msg/BatteryState`` from the twin's ``battery/state``.
 
     ROS conventions (REP-103 SI units and the message's own comments):
@@ -210,17 +224,21 @@ def battery_state_message(state: BatteryState, battery: Battery, stamp_ns: int,
     - ``percentage`` 0..1 (the state of charge);
     - ``power_supply_status``: DISCHARGING / CHARGING by the sign of the current, FULL at rest
       when full, NOT_CHARGING otherwise (and whenever the pack is off the bus);
-    - ``power_supply_health`` from the active faults (:data:`HEALTH`): OVERHEAT, DEAD (depleted
-      or cut off for under-voltage), COLD,
-      UNSPEC_FAILURE for any other fault, GOOD with none;
+    - ``power_supply_health`` from the pack's own alarms (:data:`HEALTH`; the telemetry's
+      ``faults`` carry no other, SPEC §12b): OVERHEAT, DEAD (depleted or cut off for
+      under-voltage), COLD, UNSPEC_FAILURE for any other alarm, GOOD with none; UNKNOWN when
+      ``stale`` (the pack's telemetry has gone silent: this is its last word, repeated);
     - ``cell_voltage`` and ``cell_temperature``: one NaN per series cell, the message's way of
       saying the number of cells is known but not their values;
     - ``present`` is always true: a pack off the bus (``disconnected``) is still in the rover,
       and says so through its health and status.
+
+    Without the rover's ``battery`` (a view of the twin that lacks the rover file) the charges
+    and the cells are unknown: NaN, and no cells.
     """
     options = options or {}
     c = constants(distro, "sensor_msgs/msg/BatteryState")
-    v_nom = nominal_voltage_v(battery)
+    v_nom = nominal_voltage_v(battery) if battery is not None else math.nan
     faults = set(state.faults)
     current_a = state.current_a
     if not state.operational:
@@ -231,9 +249,9 @@ def battery_state_message(state: BatteryState, battery: Battery, stamp_ns: int,
         status = "CHARGING"
     else:
         status = "FULL" if state.soc >= _FULL_SOC else "NOT_CHARGING"
-    health = next((h for name, h in HEALTH if name in faults),
-                  "UNSPEC_FAILURE" if faults else "GOOD")
-    nan_cells = [math.nan] * battery.cells_series
+    health = "UNKNOWN" if stale else next((h for name, h in HEALTH if name in faults),
+                                          "UNSPEC_FAILURE" if faults else "GOOD")
+    nan_cells = [math.nan] * (battery.cells_series if battery is not None else 0)
     return {
         "header": {"stamp": stamp(stamp_ns), "frame_id": frame_id},
         "voltage": state.voltage_v,
@@ -241,7 +259,7 @@ def battery_state_message(state: BatteryState, battery: Battery, stamp_ns: int,
         "current": -current_a,
         "charge": state.energy_j / v_nom / 3600.0,
         "capacity": state.capacity_j / v_nom / 3600.0,
-        "design_capacity": battery.capacity_j / v_nom / 3600.0,
+        "design_capacity": (battery.capacity_j if battery is not None else math.nan) / v_nom / 3600.0,
         "percentage": min(max(state.soc, 0.0), 1.0),
         "power_supply_status": c[f"POWER_SUPPLY_STATUS_{status}"],
         "power_supply_health": c[f"POWER_SUPPLY_HEALTH_{health}"],

@@ -1,5 +1,9 @@
 """The bridge's mapping file: its format, its validation, where the shipped one is.
 
+Longer than 450 lines: the format and its validation are read together, each field of a
+mapping beside the problems it can have (topics, converters, services), in one module the
+CLI and the deployment reach through the bridge's public face.
+
 :func:`parse_mapping` validates a whole mapping file and names every problem
 (``mappings[3].field: BatteryState has no field 'volts'``) as rover definitions do;
 the twin keys a mapping may name are the families of :mod:`common.keys`.
@@ -23,6 +27,7 @@ import msgspec
 from common import keys
 from common.datafile import ConfigError, Strict, doc, field_kind, parse_yaml, read_text, struct_fields
 from services.bridge.cdr import ARRAY_TYPES, INT_RANGES, SCALAR_TYPES, constants, typestore
+from services.bridge.srv import SERVICE_TYPES, request_fields, response_fields
 
 __all__ = [
     "DEFAULT_MAPPING",
@@ -30,7 +35,10 @@ __all__ = [
     "JOINT_STATE",
     "OTHERWISE",
     "CONVERTERS",
+    "CREW_VIEWS",
     "FLAVOURS",
+    "KINDS",
+    "SERVICE_ANSWERS",
     "PLACEHOLDERS",
     "ROS_TOPIC",
     "BridgeOptions",
@@ -40,9 +48,15 @@ __all__ = [
     "parse_mapping",
     "resolve_mapping",
     "ros_name",
+    "service_response",
 ]
 
 FLAVOURS = ("ros2dds", "rmw_zenoh", "json", "ros2")
+KINDS = ("topic", "service")
+CREW_VIEWS = ("symptoms", "full")
+# What a service's response fields may carry of the twin's answer to the write it made:
+# accepted (bool: the owner applied it) and reason (string: the twin's answer in words).
+SERVICE_ANSWERS = {"accepted": "bool", "reason": "string"}
 PLACEHOLDERS = keys.PLACEHOLDERS  # component placeholders; {rover} is always there
 _PLACEHOLDER = re.compile(r"\{([a-z_]*)\}")
 REPO = Path(__file__).resolve().parents[2]  # the source tree (an installed package: site-packages)
@@ -124,18 +138,29 @@ class BridgeOptions(Strict, frozen=True):
                                                "often [s]")] = 1.0
     stale_after_s: Annotated[float, doc("a component whose telemetry is silent this long is "
                                         "STALE [s]")] = 3.0
+    crew_view: Annotated[str, doc("symptoms: /diagnostics and the battery's health show what the "
+                                  "rover's own sensors and protection report (the twin's alarms, "
+                                  "silent telemetry), never an instructor's fault (SPEC §12b); "
+                                  "full: every fault in effect with its parameters, for "
+                                  "integration work")] = "symptoms"
     outputs: Outputs = Outputs()
 
 
 class Mapping(Strict, frozen=True):
-    """One line of the mapping: a twin key and a dashboard topic."""
+    """One line of the mapping: a twin key and a dashboard topic, or a ROS 2 service of the
+    dashboard's that writes a twin key and answers with the twin's answer."""
 
-    topic: Annotated[str, doc("absolute ROS 2 topic; may hold {rover} and the key's component "
-                              "placeholder (a name is made ROS-safe: mapp-1 -> mapp_1)")]
-    type: Annotated[str, doc("ROS 2 message type, pkg/msg/Name")]
+    topic: Annotated[str, doc("absolute ROS 2 topic (or service name); may hold {rover} and the "
+                              "key's component placeholder (a name is made ROS-safe: mapp-1 -> "
+                              "mapp_1)")]
+    type: Annotated[str, doc("ROS 2 message type, pkg/msg/Name (a service: pkg/srv/Name)")]
     key: Annotated[str, doc("twin key lunaris/{rover}/...; {load} {rail} {radio} {panel} in place "
-                            "of a name run over every such component: one topic each")]
-    direction: Annotated[str, doc("out: twin -> dashboard; in: dashboard -> twin input")] = "out"
+                            "of a name run over every such component: one topic each (a "
+                            "command on {rail}: the rails that can be switched)")]
+    kind: Annotated[str, doc("topic, or service: the dashboard calls it; the call writes the key "
+                             "(actor crew) and is answered with the twin's answer")] = "topic"
+    direction: Annotated[str, doc("out: twin -> dashboard; in: dashboard -> twin input or command "
+                                  "(a topic only)")] = "out"
     field: Annotated[str | None, doc("the payload field of a one-value std_msgs type (its data)")] = None
     fields: Annotated[list[str] | None, doc("the payload fields of a MultiArray, in order")] = None
     scale: Annotated[float, doc("out: ROS value = twin value x scale (V -> mV: 1000); in: twin "
@@ -160,6 +185,15 @@ class Mapping(Strict, frozen=True):
     label: Annotated[str | None, doc("how the dashboard names the value (lunaris pdm)")] = None
     unit: Annotated[str | None, doc("the value's unit, as the dashboard shows it")] = None
     group: Annotated[str | None, doc("pdm: part of the PDM device distribution")] = None
+    request: Annotated[dict[str, str], doc("service: payload field <- request field ({on: data})")] = {}
+    payload: Annotated[dict[str, Any], doc(
+        "service or inbound topic: payload fields every write carries ({reset: true})")] = {}
+    write: Annotated[str, doc("service: put (default), or delete (a delete of the key: "
+                              "input/drive/traverse stops the rover)")] = "put"
+    response: Annotated[dict[str, str] | None, doc(
+        "service: response field <- accepted (bool: the twin applied the write) or reason "
+        "(string: the twin's answer in words). Default {success: accepted, message: reason} "
+        "when the response has those fields")] = None
 
 
 class MappingFile(Strict, frozen=True):
@@ -170,16 +204,25 @@ class MappingFile(Strict, frozen=True):
 
 
 class Converter(NamedTuple):
+    """A whole-message converter: the message it makes, the twin key it reads (``also``:
+    older spellings still accepted) and its options."""
+
     type: str
-    shape: tuple[str, ...]
+    key: str
     options: frozenset[str]
+    also: tuple[str, ...] = ()
 
 
 CONVERTERS: dict[str, Converter] = {
-    "battery_state": Converter("sensor_msgs/msg/BatteryState", ("battery", "state"),
+    "battery_state": Converter("sensor_msgs/msg/BatteryState", "lunaris/{rover}/battery/state",
                                frozenset({"technology", "location", "serial_number"})),
-    "diagnostics": Converter("diagnostic_msgs/msg/DiagnosticArray", ("event",), frozenset()),
-    "odometry": Converter("nav_msgs/msg/Odometry", ("drive", "state"), frozenset({"child_frame_id"})),
+    # every owning service's faults in effect and the components' telemetry (which says each
+    # is alive, and in the crew's view what it shows); `event` was its first, untrue spelling
+    "diagnostics": Converter("diagnostic_msgs/msg/DiagnosticArray",
+                             "lunaris/{rover}/faults/active/*", frozenset(),
+                             also=("lunaris/{rover}/event",)),
+    "odometry": Converter("nav_msgs/msg/Odometry", "lunaris/{rover}/drive/state",
+                          frozenset({"child_frame_id"})),
 }
 
 # -- parsing and validation ---------------------------------------------------------------------
@@ -196,6 +239,16 @@ def ros_name(value: str) -> str:
     """A twin name made fit for a ROS 2 topic: every character but letters, digits and ``_``
     becomes ``_`` (``mapp-1`` -> ``mapp_1``)."""
     return re.sub(r"[^A-Za-z0-9_]", "_", value)
+
+
+def service_response(m: Mapping) -> dict[str, str]:
+    """A service mapping's response fields and what of the twin's answer each carries
+    (``{"success": "accepted", "message": "reason"}``)."""
+    if m.response is not None:
+        return dict(m.response)
+    have = response_fields(m.type) if m.type in SERVICE_TYPES else {}
+    return {name: what for name, what in (("success", "accepted"), ("message", "reason"))
+            if have.get(name) == SERVICE_ANSWERS[what]}
 
 
 def resolve_mapping(mapping_file: str | None) -> Path:
@@ -237,13 +290,24 @@ def parse_mapping(text: str, source: str = "<mapping>") -> MappingFile:
             if m is None:
                 continue
             problems += [f"mappings[{i}].{p}" for p in _mapping_problems(m, distro)]
-            first = seen.setdefault((m.direction, m.topic), i)
+            first = seen.setdefault((_role(m), m.topic), i)
             if first != i:
                 problems.append(f"mappings[{i}].topic: {m.topic} is already mapped by "
                                 f"mappings[{first}]")
+        # a service and a topic of one name would share their keys (ros2dds, json)
+        for (role, topic), i in seen.items():
+            other = [j for (r, t), j in seen.items() if t == topic and r != role]
+            if role == "service" and other:
+                problems.append(f"mappings[{i}].topic: the service {topic} has the name of the "
+                                f"topic of mappings[{min(other)}]")
     if problems:
         raise ConfigError(source, problems)
     return msgspec.convert(data, MappingFile)
+
+
+def _role(m: Mapping) -> str:
+    """A mapping's place among the names: a service, an outbound or an inbound topic."""
+    return "service" if m.kind == "service" else m.direction
 
 
 def _convert(raw: Any, typ: type) -> Any:
@@ -259,6 +323,8 @@ def _option_problems(o: BridgeOptions) -> list[str]:
         problems.append(f"bridge.ros_distro: expected jazzy or humble, got {o.ros_distro!r}")
     if o.stamp not in ("wall", "sim"):
         problems.append(f"bridge.stamp: expected wall or sim, got {o.stamp!r}")
+    if o.crew_view not in CREW_VIEWS:
+        problems.append(f"bridge.crew_view: expected {' or '.join(CREW_VIEWS)}, got {o.crew_view!r}")
     for name in ("topic_prefix", "fleet_topic_prefix"):
         prefix = getattr(o, name)
         problems += [f"bridge.{name}: {p}" for p in _topic_problems(prefix, allow_empty=True)]
@@ -325,6 +391,18 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
     """Problems of one mapping, each starting with the field it is about."""
     problems: list[str] = []
     problems += [f"topic: {p}" for p in _topic_problems(m.topic)]
+    if m.kind not in KINDS:
+        problems.append(f"kind: expected {' or '.join(KINDS)}, got {m.kind!r}")
+        return problems
+    if m.kind == "service":
+        return problems + _service_problems(m)
+    service_only: list[tuple[str, Any, Any]] = [
+        ("request", m.request, {}), ("write", m.write, "put"), ("response", m.response, None)]
+    for name, value, unset in service_only:
+        if value != unset:
+            problems.append(f"{name}: only a service (kind: service) has a {name}")
+    if m.payload and m.direction != "in":
+        problems.append("payload: only an inbound topic or a service writes a payload")
     if m.direction not in ("out", "in"):
         problems.append(f"direction: expected out or in, got {m.direction!r}")
     store = typestore(distro)
@@ -373,9 +451,8 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
             return problems
         if m.type != conv.type:
             problems.append(f"type: the {m.convert} converter makes {conv.type}, not {m.type}")
-        if shape.chunks != conv.shape:
-            problems.append(f"key: the {m.convert} converter reads lunaris/{{rover}}/"
-                            f"{'/'.join(conv.shape)}")
+        if m.key != conv.key and m.key not in conv.also:
+            problems.append(f"key: the {m.convert} converter reads {conv.key}")
         for name, value, unset in (("field", m.field, None), ("fields", m.fields, None),
                                    ("scale", m.scale, 1.0), ("integer", m.integer, None),
                                    ("default", m.default, None)):
@@ -432,9 +509,115 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
         problems.append(f"integer: {m.type} holds integers; the value is always rounded")
     if m.direction == "in":
         used = m.fields or ([m.field] if m.field else [])
-        missing = [f.name for f in fields.values() if f.required and f.name not in used]
+        problems += _payload_problems(m.payload, fields, name, set(used))
+        missing = [f.name for f in fields.values() if f.required and f.name not in used
+                   and f.name not in m.payload]
         if missing:
             problems.append(f"fields: the input {name} needs {', '.join(missing)}")
         if m.default is not None:
             problems.append("default: only outbound values can be null")
+    return problems
+
+
+def _payload_problems(payload: dict[str, Any], fields: dict[str, Any], name: str,
+                      given: set[str]) -> list[str]:
+    """Problems of the constant fields a write carries (``payload:``)."""
+    problems = []
+    for f, value in payload.items():
+        if f not in fields:
+            problems.append(f"payload.{f}: {name} has no field {f!r} (fields: {', '.join(fields)})")
+        elif f in given:
+            problems.append(f"payload.{f}: also taken from the message")
+        else:
+            kind = _field_kind(fields[f])
+            if (kind == "bool") != isinstance(value, bool) or (
+                    kind == "number" and not isinstance(value, int | float)) or (
+                    kind not in ("bool", "number") and not isinstance(value, str)):
+                problems.append(f"payload.{f}: {name}.{f} is a {kind}, not {value!r}")
+    return problems
+
+
+_ROS_KINDS = {"bool": "bool", "string": "word", **{t: "number" for t in INT_RANGES},
+              "float32": "number", "float64": "number"}
+
+
+def _service_problems(m: Mapping) -> list[str]:
+    """Problems of a service entry (``kind: service``), each starting with its field."""
+    problems: list[str] = []
+    unused: list[tuple[str, Any, Any]] = [
+        ("field", m.field, None), ("fields", m.fields, None), ("convert", m.convert, None),
+        ("rate_hz", m.rate_hz, None), ("default", m.default, None), ("integer", m.integer, None),
+        ("joint_names", m.joint_names, None), ("options", m.options, {}), ("scale", m.scale, 1.0),
+        ("direction", m.direction, "out")]
+    for name, value, unset in unused:
+        if value != unset:
+            problems.append(f"{name}: not used by a service (request, payload and response say "
+                            "what it carries)")
+    if m.type not in SERVICE_TYPES:
+        problems.append(f"type: unknown ROS 2 service type {m.type!r} (known: "
+                        f"{', '.join(SERVICE_TYPES)})")
+    found = keys.family_of_template(m.key)
+    if found is None or found[0].direction != "in":
+        problems.append(f"key: a service writes a key the twin reads (lunaris/{{rover}}/...: "
+                        f"{', '.join(f.name for f in keys.families('in'))}), not {m.key!r}")
+        return problems
+    shape, item = found
+    key_item = shape.placeholder if item is not None and item.startswith("{") else None
+    unknown = set(_placeholders(m.key)) | set(_placeholders(m.topic))
+    unknown -= {"rover", *PLACEHOLDERS}
+    if unknown:
+        problems.append(f"key: unknown placeholder(s) {', '.join(sorted(unknown))}")
+    extra = set(_placeholders(m.topic)) - {"rover"} - ({key_item} if key_item else set())
+    if extra:
+        problems.append(f"topic: {', '.join('{' + e + '}' for e in sorted(extra))} "
+                        "does not appear in the key")
+    if key_item and f"{{{key_item}}}" not in m.topic:
+        problems.append(f"topic: must contain {{{key_item}}} like the key, or every {key_item} "
+                        "would have the same service")
+    if m.otherwise not in OTHERWISE:
+        problems.append(f"otherwise: expected {', '.join(OTHERWISE)}, got {m.otherwise!r}")
+    elif m.otherwise != "error" and (item is None or key_item is not None):
+        problems.append("otherwise: only for a key that names one component (radio/lander)")
+    fields = _payload_fields(shape.payload)
+    name = shape.payload.__name__
+    if m.write == "delete":
+        if shape.name not in keys.DELETABLE:
+            problems.append(f"write: {shape.name} takes a put, not a delete "
+                            f"(deletable: {', '.join(keys.DELETABLE)})")
+        if m.request or m.payload:
+            problems.append("write: a delete carries no payload: no request or payload fields")
+    elif m.write != "put":
+        problems.append(f"write: expected put or delete, got {m.write!r}")
+    elif m.type in SERVICE_TYPES:
+        asked = request_fields(m.type)
+        for f, field_name in m.request.items():
+            if f not in fields:
+                problems.append(f"request.{f}: {name} has no field {f!r} (fields: "
+                                f"{', '.join(fields)})")
+            elif field_name not in asked:
+                problems.append(f"request.{f}: the {m.type} request has no field {field_name!r} "
+                                f"(fields: {', '.join(asked) or 'none'})")
+            elif _ROS_KINDS.get(asked[field_name]) != _field_kind(fields[f]):
+                problems.append(f"request.{f}: {name}.{f} is a {_field_kind(fields[f])}, the "
+                                f"request's {field_name} a {asked[field_name]}")
+        problems += _payload_problems(m.payload, fields, name, set(m.request))
+        missing = [f.name for f in fields.values() if f.required
+                   and f.name not in m.request and f.name not in m.payload]
+        if missing:
+            problems.append(f"request: the write {name} needs {', '.join(missing)}")
+        elif not m.request and not m.payload:
+            problems.append(f"request: the write would carry nothing; give request or payload "
+                            f"fields ({name}: {', '.join(fields)})")
+    if m.type in SERVICE_TYPES:
+        have = response_fields(m.type)
+        for f, what in (m.response or {}).items():
+            if f not in have:
+                problems.append(f"response.{f}: the {m.type} response has no field {f!r} "
+                                f"(fields: {', '.join(have) or 'none'})")
+            elif what not in SERVICE_ANSWERS:
+                problems.append(f"response.{f}: expected {' or '.join(SERVICE_ANSWERS)}, "
+                                f"got {what!r}")
+            elif have[f] != SERVICE_ANSWERS[what]:
+                problems.append(f"response.{f}: {what} is a {SERVICE_ANSWERS[what]}, the "
+                                f"response's {f} a {have[f]}")
     return problems

@@ -34,10 +34,12 @@ JSON = zenoh.Encoding.APPLICATION_JSON
 
 
 class Shared:
-    """What every outlet of one bridge process shares."""
+    """What every outlet of one bridge process shares; ``clock`` (monotonic seconds) times the
+    rates."""
 
-    def __init__(self, rt: Runtime, opts: BridgeOptions, zid: str, graph: Ros2Graph | None):
-        self.rt, self.opts, self.zid, self.graph = rt, opts, zid, graph
+    def __init__(self, rt: Runtime, opts: BridgeOptions, zid: str, graph: Ros2Graph | None,
+                 clock: Callable[[], float] = time.monotonic):
+        self.rt, self.opts, self.zid, self.graph, self.clock = rt, opts, zid, graph, clock
         self.ros2_base = (opts.outputs.ros2.domain_id if opts.outputs.ros2.domain_id is not None
                           else env_domain())
         self.due: list[tuple[float, int, Outlet]] = []  # outlets waiting for their rate

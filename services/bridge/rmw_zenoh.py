@@ -1,8 +1,10 @@
 """rmw_zenoh's names for a ROS 2 graph on Zenoh (ros2/rmw_zenoh ``docs/design.md``).
 
-The topic key ``<domain>/<topic>/<pkg>::msg::dds_::<Name>_/<RIHS01 hash>``, the liveliness
-tokens of a node (``NN``), its publishers (``MP``) and subscriptions (``MS``), the GID of an
-entity and the 33-byte attachment every sample carries.
+The topic key ``<domain>/<topic>/<pkg>::msg::dds_::<Name>_/<RIHS01 hash>`` (a service's:
+``<domain>/<name>/<pkg>::srv::dds_::<Name>_/<the service type's hash>``), the liveliness
+tokens of a node (``NN``), its publishers (``MP``), subscriptions (``MS``) and service servers
+(``SS``), the GID of an entity and the 33-byte attachment every sample carries (a service's
+request and reply carry the same layout: the client's sequence number and GID).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import struct
 import xxhash
 
 from services.bridge.cdr import typestore
+from services.bridge.srv import service_type_hash
 
 __all__ = [
     "ATTACHMENT_LEN",
@@ -44,14 +47,19 @@ def dds_type_name(typename: str) -> str:
 
 def type_hash(typename: str, distro: str = "jazzy") -> str:
     """REP-2016 type hash (``RIHS01_<sha256>``) as Jazzy and later advertise it; Humble's
-    rmw_zenoh has none and writes ``TypeHashNotSupported``."""
+    rmw_zenoh has none and writes ``TypeHashNotSupported``. A service (``pkg/srv/Name``):
+    the hash of the service type, which rmw_zenoh puts in a service's key and tokens
+    (:func:`services.bridge.srv.service_type_hash`)."""
     if distro == "humble":
         return "TypeHashNotSupported"
+    if "/srv/" in typename:
+        return service_type_hash(typename, distro)
     return typestore(distro).hash_rihs01(typename)
 
 
 def rmw_topic_key(domain_id: int, topic: str, typename: str, distro: str = "jazzy") -> str:
-    """``<domain>/<topic without its outer '/'>/<dds type>/<type hash>``."""
+    """``<domain>/<topic without its outer '/'>/<dds type>/<type hash>``; a service's key is
+    made the same way from its name and service type (``std_srvs::srv::dds_::SetBool_``)."""
     return f"{domain_id}/{topic.strip('/')}/{dds_type_name(typename)}/{type_hash(typename, distro)}"
 
 
@@ -79,8 +87,9 @@ def node_token(domain_id: int, zid: str, node_id: int, namespace: str, node: str
 def entity_token(domain_id: int, zid: str, node_id: int, entity_id: int, kind: str,
                  namespace: str, node: str, topic: str, typename: str, qos: str,
                  distro: str = "jazzy", enclave: str = "/") -> str:
-    """A publisher (``MP``) or subscription (``MS``) token: the node's chunks, then the mangled
-    topic, the DDS type name, the type hash and the QoS chunk."""
+    """A publisher (``MP``), subscription (``MS``) or service server (``SS``) token: the node's
+    chunks, then the mangled topic (or service name), the DDS type name, the type hash and the
+    QoS chunk."""
     assert kind in ("MP", "MS", "SS", "SC")
     return "/".join(["@ros2_lv", str(domain_id), zid, str(node_id), str(entity_id), kind,
                      mangle(enclave), mangle(namespace), node, mangle(topic),

@@ -6,7 +6,8 @@ without them. The ROS 2 environment is passed through (``RMW_IMPLEMENTATION``,
 ``FASTDDS_BUILTIN_TRANSPORTS``, ...); the domain of each rover is given explicitly.
 
 One rclpy context and node per ROS 2 domain (a fleet gives each rover its own domain), each
-spun by an executor on its own thread for the inbound topics. Messages cross as CDR bytes
+spun by an executor on its own thread for the inbound topics and the services (the crew's
+controls, answered when the twin has answered: :meth:`Ros2Graph.serve`). Messages cross as CDR bytes
 both ways: a publisher is handed the bytes :mod:`services.bridge.cdr` already made for the
 Zenoh flavours (each value is encoded once), and a subscription hands its raw bytes to the
 same decoding as every other flavour.
@@ -19,6 +20,10 @@ import os
 import threading
 from collections.abc import Callable
 from typing import Any
+
+# a service's handler: the request's fields, and the function that sends the response's fields
+# (from any thread, once)
+ServiceCall = Callable[[dict[str, Any], Callable[[dict[str, Any]], None]], None]
 
 __all__ = ["Ros2Unavailable", "Ros2Graph", "env_domain"]
 
@@ -51,6 +56,9 @@ class Ros2Graph:
         self._signals = _import("rclpy.signals")
         self._context_mod = _import("rclpy.context")
         self._node_mod = _import("rclpy.node")
+        self._groups_mod = _import("rclpy.callback_groups")
+        self._task_mod = _import("rclpy.task")
+        self._service_groups: dict[int, Any] = {}
         self.node_name, self.namespace = node, namespace
         self._nodes: dict[int, tuple[Any, Any, Any, threading.Thread]] = {}
         self._lock = threading.Lock()
@@ -107,6 +115,41 @@ class Ros2Graph:
         """Hand every message on a topic, as CDR bytes, to ``callback`` (an executor thread)."""
         self.node(domain).create_subscription(self.message_class(typename), topic, callback,
                                               self.subscription_qos, raw=True)
+
+    def serve(self, domain: int, name: str, typename: str, call: ServiceCall) -> None:
+        """Serve a ROS 2 service (``std_srvs/srv/SetBool``) whose answer comes later, from
+        another thread: ``call(fields, respond)`` gets the request's fields and calls
+        ``respond(fields)`` once with the response's. The rclpy callback is a coroutine that
+        awaits an rclpy Future completed on the executor's own thread (``create_task``: a
+        Future completed from another thread does not wake the executor), in a reentrant
+        callback group, so that calls overlap instead of waiting for each other. The executor
+        resumes a waiting coroutine only when something wakes it: the Future's result is set
+        and the executor woken in the same task (else the answer waits for the next message
+        or timer, forever on a quiet node)."""
+        node = self.node(domain)
+        executor = self._nodes[domain][2]
+        group = self._service_groups.setdefault(domain, self._groups_mod.ReentrantCallbackGroup())
+        srv_type = self.message_class(typename)
+        asked = [f for f in srv_type.Request.get_fields_and_field_types()
+                 if f != "structure_needs_at_least_one_member"]
+        future_type = self._task_mod.Future
+
+        async def callback(request: Any, response: Any) -> Any:
+            fut = future_type(executor=executor)
+
+            def settle(values: dict[str, Any]) -> None:
+                if not fut.done():
+                    fut.set_result(values)
+                executor.wake()  # the service's coroutine is resumed on the next turn
+
+            def respond(values: dict[str, Any]) -> None:
+                executor.create_task(settle, values)
+            call({f: getattr(request, f) for f in asked}, respond)
+            for field, value in (await fut).items():
+                setattr(response, field, value)
+            return response
+
+        node.create_service(srv_type, name, callback, callback_group=group)
 
     def close(self) -> None:
         with self._lock:

@@ -10,13 +10,42 @@ starts a new epoch, and every tick carries the epoch and what started it (``caus
 The other services follow the tick stream, so each acts on a reset or a restore at the
 same point of simulated time, and a tick from before it can never be taken for one
 after it.
+
+And the trainee *session* each tick belongs to (SPEC §12c): a session begins with an epoch
+(the twin reset, or a snapshot restored) and lasts until the next session begins; resets
+and restores within it keep it. Its id is the UTC wall time it began (:func:`session_id`),
+one second past the previous id when two begin within a second, so ids grow and never repeat
+for a rover. The session is the one begun last: a snapshot of an earlier session, restored,
+never brings that session back (:meth:`ClockModel.set_state`).
 """
 
 from __future__ import annotations
 
+import calendar
+import time
 from typing import NamedTuple
 
-__all__ = ["ClockModel", "Tick"]
+from common.messages import SESSION_ID
+
+__all__ = ["ClockModel", "Tick", "session_id"]
+
+_FORMAT = "%Y%m%d-%H%M%S"
+
+
+def session_id(wall_s: float, after: str = "") -> str:
+    """The id of a session begun at wall time ``wall_s`` [s since the Unix epoch]: its UTC
+    time to the second, ``20250114-195312``; one second later than ``after`` (the previous
+    session's id) if it would not come after it.
+
+    >>> session_id(1736884392.7)
+    '20250114-195312'
+    >>> session_id(1736884392.7, after='20250114-195312')
+    '20250114-195313'
+    """
+    second = int(wall_s)
+    if SESSION_ID.match(after):
+        second = max(second, calendar.timegm(time.strptime(after, _FORMAT)) + 1)
+    return time.strftime(_FORMAT, time.gmtime(second))
 
 
 class Tick(NamedTuple):
@@ -27,6 +56,7 @@ class Tick(NamedTuple):
     paused: bool
     epoch: int
     cause: str
+    session: str
 
 
 class ClockModel:
@@ -41,19 +71,46 @@ class ClockModel:
         self.paused = paused
         self.epoch = 0
         self.cause = ""
+        # the session running: its id, the epoch it began with, its trainee, when it began
+        self.session = ""
+        self.session_epoch = -1
+        self.trainee = ""
+        self.session_wall = 0.0
 
     def state(self) -> dict[str, float | int | bool | str]:
         return {"t_s": self.t_s, "seq": self.seq, "time_scale": self.time_scale,
-                "paused": self.paused, "epoch": self.epoch, "cause": self.cause}
+                "paused": self.paused, "epoch": self.epoch, "cause": self.cause,
+                "session": self.session, "session_epoch": self.session_epoch,
+                "trainee": self.trainee, "session_wall": self.session_wall}
 
     def set_state(self, state: dict) -> None:
-        """Time and speed as saved; the epoch never goes back (see :meth:`new_epoch`)."""
+        """Time and speed as saved; the epoch never goes back (see :meth:`new_epoch`), nor
+        does the session: a state saved in the session running (or a later one: the state
+        read back at a restart) brings its session, one saved in an earlier session (a
+        snapshot restored) leaves the running session as it is."""
         self.t_s = float(state.get("t_s", 0.0))
         self.seq = int(state.get("seq", 0))
         self.set_scale(float(state.get("time_scale", 1.0)))
         self.paused = bool(state.get("paused", False))
         self.epoch = max(self.epoch, int(state.get("epoch", 0)))
         self.cause = str(state.get("cause", self.cause))
+        saved_epoch = int(state.get("session_epoch", -1))
+        if state.get("session") and saved_epoch >= self.session_epoch:
+            self.session, self.session_epoch = str(state["session"]), saved_epoch
+            self.trainee = str(state.get("trainee", ""))
+            self.session_wall = float(state.get("session_wall", 0.0))
+
+    def begin_session(self, trainee: str, wall_s: float) -> str:
+        """A new session from now (the epoch that begins it already begun): its id."""
+        self.session = session_id(wall_s, after=self.session)
+        self.session_epoch = self.epoch
+        self.trainee = trainee
+        self.session_wall = wall_s
+        return self.session
+
+    def resume_session(self, session: str, epoch: int) -> None:
+        """Go on in ``session`` (learnt from the twin by a clock that lost its state)."""
+        self.session, self.session_epoch = session, epoch
 
     def new_epoch(self, cause: str) -> None:
         """A reset or a restore begins: later ticks say so."""
@@ -78,10 +135,12 @@ class ClockModel:
     def mark(self) -> Tick:
         """A tick that advances nothing: the present time, at once (after a reset)."""
         self.seq += 1
-        return Tick(self.t_s, 0.0, self.seq, self.time_scale, self.paused, self.epoch, self.cause)
+        return Tick(self.t_s, 0.0, self.seq, self.time_scale, self.paused, self.epoch, self.cause,
+                    self.session)
 
     def tick(self) -> Tick:
         dt = 0.0 if self.paused else self.time_scale / self.tick_hz
         self.t_s += dt
         self.seq += 1
-        return Tick(self.t_s, dt, self.seq, self.time_scale, self.paused, self.epoch, self.cause)
+        return Tick(self.t_s, dt, self.seq, self.time_scale, self.paused, self.epoch, self.cause,
+                    self.session)

@@ -13,6 +13,9 @@ publishers' caches after a restart are recognised and not written twice, and tho
 never come back (beyond what a cache kept) are counted and said in a ``journal_gap`` event:
 every event journalled one by one, summarised, or counted lost. Without a state directory
 the journal is kept in memory for the life of the service.
+
+The journal is in segments, one per trainee session (:class:`~services.faults.sessions.SessionIndex`):
+:meth:`Journal.lines` gives one session's events, :meth:`Journal.session_infos` the sessions.
 """
 
 from __future__ import annotations
@@ -24,10 +27,11 @@ from pathlib import Path
 import msgspec
 
 from common import keys
-from common.messages import Event
+from common.messages import Event, SessionInfo
 from common.state_store import set_aside, write_atomically
 from services.faults.ledger import Gap, Ledger
 from services.faults.model import FloodGate
+from services.faults.sessions import SessionIndex
 
 __all__ = ["Journal"]
 
@@ -49,6 +53,7 @@ class Journal:
         self._recent: deque[tuple] = deque(maxlen=_RECENT)  # events without a source_id
         self._recent_set: set[tuple] = set()
         self._last_t_s = 0.0
+        self.sessions = SessionIndex()
         self.count = 0
         self.summarised = 0
         self.lost = 0  # events counted lost in journal_gap events
@@ -99,6 +104,7 @@ class Journal:
         """A written event, accounted for (and what a summary or a gap counts)."""
         self._account(ev, now_s)
         self.count += 1
+        self.sessions.note(ev)
         self._last_t_s = max(self._last_t_s, ev.t_s)
         params = ev.params or {}
         if ev.kind == "rejected" and "summarised" in params:
@@ -153,7 +159,7 @@ class Journal:
                     "while the faults service was down or cut off, beyond what the service "
                     "kept for it; counted here, not listed",
             params={"lost": n, "source": gap.source, "source_id": gap.source_id,
-                    "from_seq": gap.first, "to_seq": gap.last})
+                    "from_seq": gap.first, "to_seq": gap.last}, session=self.sessions.running)
 
     def _write(self, events: list[Event], now_s: float) -> list[Event]:
         if not events:
@@ -169,13 +175,36 @@ class Journal:
             f.write(b"".join(line + b"\n" for line in lines))
         return events
 
-    def lines(self) -> list[bytes]:
-        """Every journalled event as its JSON text, oldest first."""
+    def lines(self, session: str | None = None) -> list[bytes]:
+        """Every journalled event as its JSON text, oldest first; of one session only when
+        ``session`` is given."""
         if self.path is None:
-            return list(self._memory)
-        if not self.path.is_file():
+            lines = list(self._memory)
+        elif not self.path.is_file():
             return []
-        return self.path.read_bytes().splitlines()
+        else:
+            lines = self.path.read_bytes().splitlines()
+        if session is None:
+            return lines
+        placed = self.sessions.of_line
+        if len(placed) != len(lines):  # the file changed under the journal: read each line
+            placed = [_session_of(line) for line in lines]
+        return [line for line, sid in zip(lines, placed, strict=True) if sid == session]
+
+    def session_infos(self, running: str = "") -> list[SessionInfo]:
+        """The sessions of the journal (:class:`~common.messages.SessionInfo`), oldest first."""
+        return self.sessions.infos(running)
+
+
+class _SessionOnly(msgspec.Struct):
+    session: str = ""
+
+
+def _session_of(line: bytes) -> str:
+    try:
+        return msgspec.json.decode(line, type=_SessionOnly).session
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return ""
 
 
 def _where(moved: Path | None) -> str:

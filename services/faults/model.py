@@ -55,6 +55,7 @@ class FloodGate:
             message=f"{len(self._held)} more rejections summarised (sim t {first.t_s:.1f} to "
                     f"{last.t_s:.1f} s; {top}); the last: {last.message}",
             params={"summarised": len(self._held), "from_t_s": first.t_s, "to_t_s": last.t_s,
-                    "keys": dict(self._keys.most_common(10)), "seq": spans})
+                    "keys": dict(self._keys.most_common(10)), "seq": spans},
+            session=last.session)
         self._held, self._keys = [], Counter()
         return [summary]

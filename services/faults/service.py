@@ -1,8 +1,12 @@
 """Faults service: the session's journal, ``get lunaris/<rover>/faults``, and the gatekeeper.
 
-- **The journal**: every event of the rover, kept on disk for the whole session (a flood of
-  rejections is summarised, and the summary says so), answered to
-  ``get lunaris/<rover>/faults/journal`` (``?last=N`` for the latest N). Each service
+- **The journal**: every event of the rover, kept on disk for the whole training day (a flood
+  of rejections is summarised, and the summary says so), in one segment per trainee session
+  (SPEC §12c: each event says its ``session``), answered to
+  ``get lunaris/<rover>/faults/journal``: the running session's events, ``?session=<id>``
+  another's (``?session=all``: every session's), ``?last=N`` the latest N of them.
+  ``get lunaris/<rover>/sessions`` lists the sessions (``id, trainee, start_t_s, end_t_s,
+  started_wall``, oldest first). Each service
   publishes its events on its own key, ``lunaris/<rover>/event/<service>`` (which the access
   control lets only that service write); an event whose ``source`` is not that service is
   refused and said in a ``critical`` event. Each event journalled goes out again, unchanged,
@@ -27,6 +31,9 @@
   what the services hold. A restore is the clock's to answer: it checks every part first
   (all or nothing, see ``common.session``).
   A scenario's progress (``control/scenario``) is journalled as ``scenario`` events.
+  A trainee's session (``control/session``) is the clock's to answer, as a restore is.
+- **Marks**: ``control/mark`` ``{"text"}`` is answered with a ``mark`` event (by whoever wrote
+  it: its ``actor``), an instructor's note on the timeline.
 """
 
 from __future__ import annotations
@@ -41,12 +48,14 @@ from common import keys
 from common.config import Rover
 from common.faults import check_component
 from common.messages import (
+    SESSION_ID,
     ActiveFault,
     ActiveFaults,
     BadInput,
     Event,
     ScenarioMark,
     SnapshotInfo,
+    TimelineMark,
     decode,
     decode_input,
     encode,
@@ -61,6 +70,8 @@ __all__ = ["fault_owners", "serve"]
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
 # The heads of the keys that instructors, scenarios and dashboards write.
 WRITABLE = ("fault/**", "input/**", "cmd/**", "clock/control/**", "control/**")
+CONTROLS = ("control/session, control/mark, control/reset, control/snapshot/<name>, "
+            "control/restore/<name>")
 SESSION_MESSAGES = {
     "reset": "session reset: every service back to the rover file's initial conditions, "
              "injected faults cleared, the clock at 0",
@@ -111,6 +122,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                      f"({ev.kind}: {shown(ev.message)}); not journalled")
             return
         relay(s.rover, journals[s.rover].record(ev, time.monotonic()))
+        if ev.source == "clock" and ev.kind == "session" and ev.session > rt.session_id[s.rover] \
+                and "started_wall" in (ev.params or {}):
+            # the clock's word that a session begins: a write answered here after it is in
+            # that session, whether its first tick has come or not (ids grow: a session's
+            # event replayed from a cache never takes this service back)
+            rt.enter_session(s.rover, ev.session)
 
     def relay(rover: str, written: list[Event]) -> None:
         """What the journal wrote, unchanged, on ``lunaris/<rover>/event``: the journal's
@@ -163,19 +180,26 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             if s.deleted:
                 raise BadInput("a scenario mark is a put")
             mark = decode_input(s.payload, ScenarioMark)
+            params = {"scenario": mark.scenario, "what": mark.what, "step": mark.step}
+            if mark.expectation is not None:  # an expectation scored (SPEC 12d)
+                params["expectation"] = msgspec.to_builtins(mark.expectation)
             rt.event(s.rover, "info", "scenario", s.key, f"scenario {mark.scenario!r}: {mark.message}",
-                     {"scenario": mark.scenario, "what": mark.what, "step": mark.step})
+                     params)
             return
         control = parse_control(s.parts)
         if control is None:
-            raise BadInput(f"no such control {'/'.join(s.parts)!r} (control/reset, "
-                           "control/snapshot/<name>, control/restore/<name>; a name is letters, "
-                           "digits, '_', '-' and '.', at most 64)")
+            raise BadInput(f"no such control {'/'.join(s.parts)!r} ({CONTROLS}; a name is "
+                           "letters, digits, '_', '-' and '.', at most 64)")
         if s.deleted:
-            raise BadInput("a session control is a put, not a delete")
+            raise BadInput(f"a {'mark' if control[0] == 'mark' else 'session control'} is a put, "
+                           "not a delete")
         action, name = control
-        if action == "restore":
-            return  # the clock checks every part, then restores or refuses: it answers
+        if action in ("restore", "session"):
+            return  # the clock checks every part, then begins it or refuses: it answers
+        if action == "mark":
+            note = decode_input(s.payload, TimelineMark)
+            rt.event(s.rover, "info", "mark", s.key, f"mark: {note.text}", {"text": note.text})
+            return
         rt.event(s.rover, "info", "session", s.key, SESSION_MESSAGES[action].format(name=name))
 
     def gather_snapshots(rover: str) -> list[SnapshotInfo]:
@@ -198,22 +222,44 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                     q.reply(key, msgspec.json.encode(gather_snapshots(rover)),
                             encoding=zenoh.Encoding.APPLICATION_JSON)
 
+    def running(rover: str) -> str:
+        """The session running: as the ticks say, or the journal's latest."""
+        return rt.session_id.get(rover) or journals[rover].sessions.running
+
     def on_journal_query(q: zenoh.Query) -> None:
         with q:
             last = q.parameters.get("last")
             if last is not None and not last.isdigit():
                 q.reply_err(f"last={last!r}: give a whole number of events")
                 return
+            asked = q.parameters.get("session")
+            if asked is not None and asked != "all" and not SESSION_ID.match(asked):
+                q.reply_err(f"session={shown(asked)}: give a session's id (YYYYMMDD-HHMMSS, as "
+                            "get sessions lists them) or all")
+                return
             for rover, journal in journals.items():
                 key = keys.faults_journal(rover)
                 if zenoh.KeyExpr(key).intersects(q.key_expr):
-                    lines = journal.lines()
+                    session = running(rover) if asked is None else asked
+                    if session not in ("all", running(rover)) and not journal.sessions.known(session):
+                        ids = ", ".join(journal.sessions.ids()) or "none"
+                        q.reply_err(f"no session {session} of {rover} in its journal (sessions: {ids})")
+                        continue
+                    lines = journal.lines(None if session == "all" else session)
                     if last is not None:
                         lines = lines[-int(last):] if int(last) else []
                     # megabytes for a long session: never dropped behind a burst of events
                     q.reply(key, b"[" + b",".join(lines) + b"]",
                             encoding=zenoh.Encoding.APPLICATION_JSON,
                             congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def on_sessions_query(q: zenoh.Query) -> None:
+        with q:
+            for rover, journal in journals.items():
+                key = keys.sessions(rover)
+                if zenoh.KeyExpr(key).intersects(q.key_expr):
+                    q.reply(key, msgspec.json.encode(journal.session_infos(running(rover))),
+                            encoding=zenoh.Encoding.APPLICATION_JSON)
 
     def on_faults_query(q: zenoh.Query) -> None:
         # Answered on Zenoh's thread: the owners are asked at once, and the query is
@@ -258,9 +304,19 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if journal.damage:
             rt.state_damaged(rover, f"faults journal of {rover} damaged: {journal.damage}",
                              keys.faults_journal(rover))
-        if journal.count == 0:  # a new session: its first line
+    # A new journal's first line, in the session the clock's ticks say (once one has come)
+    unopened = {rover for rover, journal in journals.items() if journal.count == 0}
+
+    def open_journal(rover: str, tick: object = None) -> None:
+        if rover in unopened and rt.session_id.get(rover):
+            unopened.discard(rover)
             rt.event(rover, "info", "session", keys.faults_journal(rover),
-                     f"journal opened: the session of {rover} begins")
+                     f"journal opened: the journal of {rover} begins in session "
+                     f"{rt.session_id[rover]}")
+
+    for rover in sorted(unopened):
+        open_journal(rover)
+    rt.on_tick(lambda rover, tick: open_journal(rover) if unopened else None)
     rt.every(1.0, end_floods)
     rt.on_exit(lambda: end_floods(force=True))
     def on_one_chunk(s: Sample) -> None:
@@ -274,3 +330,4 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
     rt.queryable(keys.faults_journal("*"), on_journal_query)
     rt.queryable(keys.snapshots("*"), on_snapshots_query)
+    rt.queryable(keys.sessions("*"), on_sessions_query)

@@ -11,6 +11,11 @@ judged on what the loads draw now, not on a sample the loads have since replaced
 news travels as telemetry, behind an instructor's command: a short cleared and the rail reset
 at once had the reset judged on the short's 500 W still, and the rail tripped again (1 in
 ~400 shorts with a fleet of 100 rovers).
+
+A reset that leaves its rail on is answered one tick of loads later (at most ``RESET_HOLD_S``):
+the loads of a tripped rail draw nothing, so what the rail feeds shows only once they have seen
+it on again. A short still there has tripped the rail by then, and the answer says so (SPEC
+§12a: the crew hears that its reset did not hold), never "the rail is now on".
 """
 
 from __future__ import annotations
@@ -76,6 +81,14 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         rt.publish(keys.power_summary(rover), PowerSummary(t, *summary))
 
     held: dict[str, list[_Held]] = {}  # rover -> its rail commands waiting for a tick, in order
+    # rover -> the resets applied whose answer waits for the loads to follow (tick_t: the tick
+    # they were applied on)
+    answering: dict[str, list[_Held]] = {}
+
+    def answer_due(rover: str, now: float) -> None:
+        pending = answering.get(rover)
+        if pending and (newest.get(rover) != pending[0].tick_t or now >= pending[0].until):
+            answer(rover, answering.pop(rover))
 
     def flush() -> None:
         now = time.monotonic()
@@ -89,21 +102,41 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                                   or now >= held[rover][0].until):
                 command(rover, held.pop(rover))
             publish(rover)
+            answer_due(rover, now)
         for rover in [r for r, cmds in held.items() if now >= cmds[0].until]:  # no tick came
             command(rover, held.pop(rover))
             publish(rover)
+        for rover in list(answering):
+            answer_due(rover, now)
 
     def command(rover: str, cmds: list[_Held]) -> None:
         """Apply rail commands, each answered by an event with the rail's state after it."""
         m = models[rover]
         for c in cmds:
             m.command(c.rail, on=c.cmd.on, reset=bool(c.cmd.reset))
-        states = {r.name: r.state for r in m.compute()[0]}  # trips a rail a reset cannot hold
+        readings = {r.name: r for r in m.compute()[0]}  # trips a rail a reset cannot hold
+        if any(c.cmd.reset and (r := readings.get(c.rail)) is not None and r.state == "on"
+               for c in cmds):  # answered, in order, once the loads have seen the rail on
+            until = time.monotonic() + RESET_HOLD_S
+            answering.setdefault(rover, []).extend(
+                c._replace(tick_t=newest.get(rover), until=until) for c in cmds)
+            return
+        answer(rover, cmds)
+
+    def answer(rover: str, cmds: list[_Held]) -> None:
+        """Each command's event: the rail's state now, in words the crew can act on."""
+        readings = {r.name: r for r in models[rover].compute()[0]}
         for c in cmds:
             what = ", ".join(w for w in (None if c.cmd.on is None else f"on={c.cmd.on}".lower(),
                                          "reset" if c.cmd.reset else None) if w)
-            now = states.get(c.rail, "?")
-            rt.event(rover, "info", "command", c.key, f"rail {c.rail}: {what}; the rail is now {now}",
+            r = readings.get(c.rail)
+            now, why = (r.state, r.reason) if r is not None else ("?", "")
+            said = f"rail {c.rail}: {what}; the rail is now {now}"
+            if now == "tripped" and c.cmd.reset:  # what the crew must hear: the fault is still there
+                said += f": it tripped again at once ({why}), what draws that current is still there"
+            elif now != "on" and why:
+                said += f" ({why})"
+            rt.event(rover, "info", "command", c.key, said,
                      {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now}, actor=c.actor)
 
     def on_load(s: Sample) -> None:
@@ -173,6 +206,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
     rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_faults)
     def reset(rover: str) -> None:
         held.pop(rover, None)  # a command from before a session reset does not outlive it
+        answering.pop(rover, None)
         models[rover].reset()
 
     rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),

@@ -108,7 +108,7 @@ def test_a_surrogate_pair_is_one_character_and_accepted():
     (b'{"waypoints": [{"x_m": 1, "y_m": 0}]}', DriveTraverse, "z_m is missing in waypoint 1"),
     (b'{"waypoints": 5}', DriveTraverse, "waypoints must be a list (got 5)"),
     (b'{"scenario": "s", "what": "later", "message": "m"}', ScenarioMark,
-     "what must be one of 'end', 'start', 'step' (got 'later')"),
+     "what must be one of 'end', 'expect', 'start', 'step' (got 'later')"),
     (b'{"scenario": "", "what": "start", "message": "m"}', ScenarioMark, "scenario must not be empty"),
     (b'{"time_scale": 0}', ClockControl, "time_scale must be above 0 (got 0)"),
     (b'{"time_scale": "fast"}', ClockControl, "time_scale must be a number (got 'fast')"),

@@ -57,7 +57,8 @@ WORDS = [
     (re.compile(r"Traceback|\bFile \"[^\"]+\", line \d+"), "a Python traceback"),
     (re.compile(r"\bNone\b|\bTrue\b|\bFalse\b"), "a Python value"),
     (re.compile(r"Ctrl-C|\(exit \d+\)|^\[t\+|\w/\*|\blunaris\.[A-Z]\w+", re.M), "raw command-line output"),
-    (re.compile(r"\^\d|\b\d{7,}\b"), "a formula or a number too long to read"),
+    # (a session's id, 20261125-205727, is a name the instructor types, not a number)
+    (re.compile(r"\^\d|\b\d{7,}\b(?!-\d{6}\b)"), "a formula or a number too long to read"),
 ]
 UNIT = re.compile(r"_(w|v|a|s|m|c|j|deg|ohm|n|nm|hz)$")
 

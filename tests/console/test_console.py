@@ -150,7 +150,9 @@ def test_inject_and_clear_a_fault_from_the_page(live, page, artefacts):
     click(page, f'#f-buttons [data-action="fault-inject"][data-rover="{R}"][data-component="battery"]'
                 '[data-kind="heating"]')
     assert "injected battery/heating" in last_answer(page, "accepted")
-    p.wait_value(keys.battery_state(R), lambda b: b["heat_w"] >= 400)  # on the twin's keys
+    heating = keys.fault(R, "battery", "heating")
+    p.wait_value(keys.faults_active(R, "battery"),  # on the twin's keys (telemetry shows no fault)
+                 lambda v: any(f["key"] == heating for f in v["faults"]))
     WebDriverWait(page, 10).until(lambda d: d.find_elements(
         By.CSS_SELECTOR, '#faults-list tr[data-fault="battery/heating"]'))  # on the page
     shoot(page, artefacts, "faults", doc=False)
@@ -158,7 +160,7 @@ def test_inject_and_clear_a_fault_from_the_page(live, page, artefacts):
     wait_text(page, "battery/state", "faults", "none")  # the crew's telemetry never names it
     click(page, '#faults-list [data-action="fault-clear"][data-component="battery"][data-kind="heating"]')
     assert "cleared battery/heating" in last_answer(page, "accepted")
-    p.wait_value(keys.battery_state(R), lambda b: b["heat_w"] < 5)
+    p.wait_value(keys.faults_active(R, "battery"), lambda v: all(f["key"] != heating for f in v["faults"]))
     WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#faults-list .none"))
     wait_text(page, "battery/state", "faults", "none")
 
@@ -360,6 +362,39 @@ def test_the_api_checks_every_write_with_the_twin_s_structs(live):
     status, me = live.console.get("/api/me")
     assert me == {"name": "local user", "role": "instructor", "local": True, "may_act": True,
                   "accounts": False}
+
+
+def test_the_api_shows_instructors_what_the_crew_sees(live):
+    """``/api/rovers/<r>/crew`` (SPEC §12b): a short is an over-current trip on the crew's
+    /diagnostics, with no word of the short; the crew's controls are listed."""
+    p, fault = live.probe, keys.fault(R, "load/nav_camera", "short")
+    rail = keys.rail_state(R, "5V_CH2")
+    p.put(fault, {"resistance_ohm": 0.05})
+    try:
+        p.wait_value(rail, lambda v: v["state"] == "tripped")
+
+        def tripped() -> dict | None:
+            code, body = live.console.get(f"/api/rovers/{R}/crew")
+            st = next((d for d in body["diagnostics"] if d["component"] == "rail/5V_CH2"),
+                      None) if code == 200 else None
+            return body if st is not None and st["message"].startswith("over-current trip") else None
+        body = wait_for(tripped, 10, "the crew's view of the tripped rail")
+        assert body["view"] == "symptoms" and body["rover"] == R
+        diagnostics = json.dumps(body["diagnostics"])
+        for word in ("short", "injected", "0.05", "resistance"):
+            assert word not in diagnostics, word
+        assert "short" not in json.dumps([t["message"] for t in body["topics"]])
+        shown = next(d for d in body["diagnostics"] if d["component"] == "rail/5V_CH2")
+        assert shown["level_name"] == "ERROR"
+        assert {"/pdm/rail_5V_CH2/set_enabled", "/pdm/rail_5V_CH2/reset"} <= {
+            c["service"] for c in body["controls"]}
+        battery = next(t for t in body["topics"] if t["topic"] == "/battery_state")["message"]
+        assert 0 < battery["percentage"] <= 1
+    finally:
+        p.delete(fault)
+        p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
+        p.wait_value(rail, lambda v: v["state"] == "on")
+    assert live.console.get("/api/rovers/no-such-rover/crew")[0] == 404
 
 
 # -- accounts: sign-in, observers refused by the server ------------------------------------------

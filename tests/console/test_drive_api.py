@@ -114,10 +114,10 @@ def test_the_rovers_radios_that_follow_the_drive_from_the_rover_files(live, sess
         assert ltv["drives"] is False
         assert {n: r["follows_drive"] for n, r in _radios(answer, LTV).items()} == {
             "lander": False, "hls_relay": False}
-        assert _radios(answer, LTV)["lander"]["why"] == "the rover does not drive"
+        assert _radios(answer, LTV)["lander"]["why"] == "the radio's telemetry says so"
 
 
-def test_without_rover_files_the_console_says_what_it_cannot_know(live, session):
+def test_without_rover_files_the_console_learns_the_radios_from_their_telemetry(live, session):
     app = make_app(session, None)
     with client(app) as c:
         wait_rover(app)
@@ -126,9 +126,9 @@ def test_without_rover_files_the_console_says_what_it_cannot_know(live, session)
         answer = c.get("/api/rovers").json()
         (mapp,) = [r for r in answer["rovers"] if r["id"] == R]
         assert mapp["drives"] is True and mapp["drives_why"] == "the twin's drive service serves it"
-        lander = _radios(answer, R)["lander"]
-        assert lander["follows_drive"] is None and "lunaris console --rover FILE" in lander["why"]
-        assert "site" not in lander
+        lander = _radios(answer, R)["lander"]  # the radio's telemetry says it all
+        assert lander["follows_drive"] is True and "the radio's telemetry says so" in lander["why"]
+        assert lander["site"] == {"x_m": 0.0, "y_m": 0.0} and (lander["a_m"], lander["b_m"]) == (400.0, 250.0)
         assert {n: r["follows_drive"] for n, r in _radios(answer, LTV).items()} == {
             "lander": False, "hls_relay": False}
 

@@ -39,7 +39,7 @@ from tests.deploy.conftest import (
 ROVER = "mapp-1"
 INSTRUCTOR_KEYS = [keys.fault(ROVER, "battery", "heating"), keys.cmd_rail(ROVER, "12V"),
                    keys.input_sun_angle(ROVER), keys.clock_control(ROVER),
-                   keys.control_reset(ROVER)]
+                   keys.control_reset(ROVER), keys.control_session(ROVER), keys.control_mark(ROVER)]
 # One key of every family a service publishes, and its owner.
 OWNED = [(f.pattern(ROVER).replace("*", "x"), f.owner) for f in keys.FAMILIES
          if f.direction == "out" and f.owner != "*"]

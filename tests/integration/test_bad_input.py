@@ -1,8 +1,14 @@
 """Bad input never stops a service and never changes state: each is rejected with an event.
 
-Every kind of bad payload goes to every kind of key an instructor or dashboard
-may put on; each test checks the rejection event naming the key, that every
-service is still alive and publishing, and that the state is what it was.
+Every kind of bad payload goes to every kind of key an instructor or dashboard may put on
+(:data:`CASES`). Each case is refused at the decoding layer the services decode with (the
+fault catalogue's key and parameters, the input Structs of the key's family), in words, and
+by the tools' own check (:func:`common.writes.plan_write`) the same way: unit tests, all of
+them. Through a live twin go one case per key (and each payload wrong everywhere, once) and
+the cases only the twin can refuse (names of loads, rails, panels, radios and rovers it
+alone knows; commands that decode but ask for nothing): each must come back as a rejection
+event naming the key, in the decoders' words, with every service alive and the state as it
+was.
 """
 
 from __future__ import annotations
@@ -10,6 +16,9 @@ from __future__ import annotations
 import pytest
 
 from common import keys
+from common.faults import parse_fault_key, parse_params
+from common.messages import BARE_FIELD, BadInput, decode_input
+from common.writes import plan_write
 from tests.harness import ALL_SERVICES, Probe
 
 pytestmark = pytest.mark.timeout(60)
@@ -66,6 +75,79 @@ CASES = ([(k, p) for k, ps in KEYS.items() for p in ps]
          + [(k, p) for k in KEYS for p in EVERYWHERE]
          + [(k, b'{"fraction": 0.5}') for k in UNKNOWN])
 
+# Refused by the twin alone: a well-formed key naming what this rover (or this twin) does not
+# have, and commands that decode but ask for nothing. The decoders cannot know either.
+TWIN_ONLY = {
+    *((k, b'{"fraction": 0.5}') for k in UNKNOWN if "no_such" in k or "no-such" in k),
+    (f"{P}/cmd/rail/SOLAR", b'{"fraction": 0.5}'),  # the solar rail exists but is not switched
+    (f"{P}/cmd/rail/12V", b"{}"),
+    (f"{P}/clock/control", b"{}"),
+}
+DECODED = [c for c in CASES if c not in TWIN_ONLY]
+
+
+def decoders_say(key: str, payload: bytes) -> str | None:
+    """Why the services' decoders refuse a put of ``payload`` on ``key`` (None: they accept
+    it): the owner of a fault parses its key and parameters with the catalogue
+    (:mod:`common.faults`), the owner of an input or command decodes the Struct of the key's
+    family (:func:`common.messages.decode_input`), and the gatekeeper refuses a key of no
+    family."""
+    _, parts = keys.split(key)
+    try:
+        if parts[0] == "fault":
+            parse_params(parse_fault_key(parts[1:]), payload)
+            return None
+        family = keys.family_of(parts)
+        if family is None or family.direction != "in":
+            return f"no such input or command {'/'.join(parts)!r}"
+        decode_input(payload, family.payload, bare=BARE_FIELD.get(family.payload))
+    except BadInput as exc:
+        return str(exc)
+    return None
+
+
+# Through the twin: each key with a payload of its own the decoders refuse, each payload wrong
+# everywhere once (on a key of its own), and every case only the twin can refuse.
+LIVE = list(dict.fromkeys(
+    [(k, next((p for p in ps if decoders_say(k, p)), ps[0])) for k, ps in KEYS.items()]
+    + [(k, p) for k, p in zip(KEYS, EVERYWHERE, strict=False)]
+    + sorted(TWIN_ONLY)))
+
+
+def case_id(x: object) -> str:
+    return x if isinstance(x, str) else repr(x)[:24]
+
+
+# -- the decoding layer: every case --------------------------------------------------------------
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize(("key", "payload"), DECODED, ids=case_id)
+def test_the_decoders_refuse_it_in_words_and_so_do_the_tools(key, payload):
+    reason = decoders_say(key, payload)
+    assert reason is not None, "decoded as a valid write"
+    assert len(reason) > 5 and "\n" not in reason and "Traceback" not in reason, reason
+    rover, parts = keys.split(key)
+    with pytest.raises(BadInput) as refused:  # lunaris rail / clock / input / fault, the console
+        plan_write(rover, parts, payload)
+    assert str(refused.value).startswith(reason), (str(refused.value), reason)
+
+
+@pytest.mark.unit
+def test_the_matrix_is_whole():
+    """Every case is refused by the decoders or is the twin's alone: a key of the right shape
+    (what it names, the twin alone knows) or a payload the decoders accept; every key has a
+    live case, and so has every payload wrong everywhere."""
+    assert TWIN_ONLY <= set(CASES) and len(DECODED) == len(CASES) - len(TWIN_ONLY)
+    for key, payload in TWIN_ONLY:
+        _, parts = keys.split(key)
+        shaped = parse_fault_key(parts[1:]) if parts[0] == "fault" else keys.family_of(parts)
+        assert shaped and (payload != b"{}" or decoders_say(key, payload) is None), key
+    assert {k for k, _ in LIVE} >= set(KEYS) and {p for _, p in LIVE} >= set(EVERYWHERE)
+
+
+# -- through a live twin: one case per key, and what only the twin can refuse -----------------
+
 
 def snapshot(p: Probe) -> dict:
     """Everything a bad input could have changed, as last published."""
@@ -102,8 +184,7 @@ def probe(mapp_twin):
     return p
 
 
-@pytest.mark.parametrize(("key", "payload"), CASES, ids=lambda x: x if isinstance(x, str)
-                         else repr(x)[:24])
+@pytest.mark.parametrize(("key", "payload"), LIVE, ids=case_id)
 def test_bad_input_is_rejected_and_changes_nothing(probe, key, payload):
     rover = key.split("/")[1]
     fresh_tick(probe)
@@ -114,6 +195,8 @@ def test_bad_input_is_rejected_and_changes_nothing(probe, key, payload):
                                  and probe.events(rover).index(e) >= seen)
     assert rejection["severity"] == "warning" and rejection["message"].startswith("rejected: ")
     assert len(rejection["message"]) > len("rejected: ") + 5  # a reason, in words
+    if (key, payload) not in TWIN_ONLY:  # the twin refuses it with the decoders' own words
+        assert rejection["message"].startswith(f"rejected: {decoders_say(key, payload)}")
     fresh_tick(probe)
     assert snapshot(probe) == before
     accepted = [e for e in probe.events(rover)[seen:]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import struct
 import subprocess
 import threading
 import time
@@ -44,6 +45,11 @@ RAILS = [r.name for r in MAPP.rails] + [MAPP.solar.rail.name]
 LOADS = [ld.name for ld in MAPP.loads]
 # Published: the REP-2016 type hash of std_msgs/msg/Bool.
 BOOL_HASH = "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9"
+# Published (share/std_srvs/srv/*.json of ros-std-srvs): the hashes of the service types, which
+# rmw_zenoh puts in a service's key and token; the QoS of rclpy's services (keep-last 10).
+SET_BOOL_HASH = "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
+TRIGGER_HASH = "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f"
+SERVICE_QOS = "::,10:,:,:,,"
 RMW_KEY = re.compile(
     r"^0/(?P<topic>.+)/(?P<pkg>\w+)::msg::dds_::(?P<name>\w+)_/(?P<hash>RIHS01_[0-9a-f]{64})$")
 
@@ -54,9 +60,10 @@ FLOAT64, JOINTS = "std_msgs/msg/Float64", "sensor_msgs/msg/JointState"
 DEFAULT_MAPPING = ROOT / "config" / "bridge" / "default.yaml"
 
 
-def every_flavour_mapping(folder: Path) -> Path:
-    """The default mapping with the json flavour on too (the shipped one leaves it off)."""
-    return Path(json_bridge_extra(folder)["bridge"][1])
+def every_flavour_mapping(folder: Path, crew_view: str = "symptoms") -> Path:
+    """The default mapping with the json flavour on too (the shipped one leaves it off), in
+    the crew's view (the default, symptoms) or the full one."""
+    return Path(json_bridge_extra(folder, crew_view)["bridge"][1])
 
 
 def expected_topics() -> dict[str, str]:
@@ -172,13 +179,14 @@ def close(a: float | None, b: float, rel: float = 2e-6, abs_: float = 1e-5) -> b
 
 
 @pytest.fixture
-def dashboard(probe, twin_factory, mapp_file, tmp_path):
+def dashboard(request, probe, twin_factory, mapp_file, tmp_path):
     """The twin and the bridge in every flavour, with a tap that was listening before the
-    bridge started."""
+    bridge started; the crew's view unless the test asks for ``full`` (indirect param)."""
     tap = Tap(probe.session)
     probe.watch(f"lunaris/{R}/**")
-    twin = twin_factory([mapp_file], services=SERVICES,
-                        extra={"bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path))]})
+    view = getattr(request, "param", "symptoms")
+    twin = twin_factory([mapp_file], services=SERVICES, extra={
+        "bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path, view))]})
     probe.wait_services(R, SERVICES)
     return twin, tap
 
@@ -336,7 +344,16 @@ def test_rmw_zenoh_keys_attachments_and_liveliness(dashboard, probe):
     subs = sorted((p[9], p[10]) for p in (t.split("/") for t in tokens if "/MS/" in t))
     assert subs == sorted([("%curr_to_receiving_radio_m", "std_msgs::msg::dds_::Float64MultiArray_")]
                           + [(f"%solar_{p.name}_{what}", "std_msgs::msg::dds_::Float64_")
-                             for p in MAPP.solar.panels for what in ("dust", "sun_angle_deg")])
+                             for p in MAPP.solar.panels for what in ("dust", "sun_angle_deg")]
+                          + [(f"%pdm%rail_{r.name}%enable", "std_msgs::msg::dds_::Bool_")
+                             for r in MAPP.rails])  # the rails that can be switched
+    # the crew's controls: a service server token each, with the service type's hash
+    servers = sorted((p[9], p[10], p[11], p[12]) for p in (t.split("/") for t in tokens if "/SS/" in t))
+    assert servers == sorted(
+        [(f"%pdm%rail_{r.name}%set_enabled", "std_srvs::srv::dds_::SetBool_", SET_BOOL_HASH, SERVICE_QOS)
+         for r in MAPP.rails]
+        + [(f"%pdm%rail_{r.name}%reset", "std_srvs::srv::dds_::Trigger_", TRIGGER_HASH, SERVICE_QOS)
+           for r in MAPP.rails])  # the static MAPP does not drive: no /drive/stop
     # each GID is XXH3-128 of its publisher's token, low then high 64 bits (rmw_zenoh's)
     for t in tokens:
         parts = t.split("/")
@@ -421,14 +438,21 @@ def _first(tap: Tap, flavour: str, topic: str, since: float, predicate,
     return None
 
 
-def test_an_injected_fault_reaches_the_dashboard(dashboard, probe):
+@pytest.mark.parametrize("dashboard", ["symptoms", "full"], indirect=True)
+def test_an_injected_fault_reaches_the_dashboard(dashboard, probe, request):
+    """In the crew's view a dead converter is a rail with no output (ERROR), in the full view
+    the fault itself (WARN, its KeyValue)."""
     twin, tap = dashboard
+    full = request.node.callspec.params["dashboard"] == "full"
     settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
     fault = keys.fault(R, "rail/5V_CH2", "fail")
 
     def failed_rail(msg: dict) -> bool:
         st = next(s for s in msg["status"] if s["name"] == f"{R}/rail/5V_CH2")
-        return st["level"] == 1 and [v["key"] for v in st["values"]] == ["fail"]
+        if full:
+            return st["level"] == 1 and [v["key"] for v in st["values"]] == ["fail"]
+        return (st["level"] == 2 and st["message"].startswith("no output")
+                and "fail" not in json.dumps(st))
 
     t0 = time.monotonic()
     probe.put(fault)
@@ -454,20 +478,80 @@ def test_an_injected_fault_reaches_the_dashboard(dashboard, probe):
            and m["data"] == 5000 else ["5000 mV"], what="the rail back at 5000 mV")
 
 
-def test_a_short_trips_the_rail_to_error(dashboard, probe):
+@pytest.mark.parametrize("dashboard", ["symptoms", "full"], indirect=True)
+def test_a_short_trips_the_rail_to_error(dashboard, probe, request):
+    """The crew sees an over-current trip and no word of the short; the full view names it."""
     twin, tap = dashboard
+    full = request.node.callspec.params["dashboard"] == "full"
     current = "/pdm/rail_5V_CH2_current_ma"
     # the faults reach the bridge apart from the telemetry: both flowing before the short
     settle(lambda: [] if tap.message("ros2dds", "/diagnostics") and tap.message("ros2dds", current)
            else ["diag and PDM"])
+    t0 = time.monotonic()
     probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
     settle(lambda: [] if (st := _status(tap, "rmw_zenoh", "rail/5V_CH2")) is not None and st["level"] == 2
            and "tripped" in [v["key"] for v in st["values"]] else ["ERROR"],
            what="the tripped rail as ERROR")
-    cam = _status(tap, "rmw_zenoh", "load/nav_camera")
-    assert cam["level"] == 1 and cam["message"] == "short"
     settle(lambda: [] if tap.message("ros2dds", current)["data"] == 0 else ["0 mA"],
            what="the tripped rail at 0 mA")
+    if full:
+        cam = _status(tap, "rmw_zenoh", "load/nav_camera")
+        assert cam["level"] == 1 and cam["message"] == "short"
+        return
+    rail = _status(tap, "rmw_zenoh", "rail/5V_CH2")
+    assert rail["message"].startswith("over-current trip"), rail
+    # the rail's own reading once its state has arrived: the trip's current, over the limit
+    settle(lambda: [] if any(v["key"] == "reading" and "A >" in v["value"]
+                             for v in _status(tap, "json", "rail/5V_CH2")["values"]) else ["reading"],
+           what="the trip's current on the rail's status")
+    seen = [raw.payload for flavour in FLAVOURS
+            for raw in tap.history(tap.key(flavour, "/diagnostics") or "") if raw.t_mono >= t0]
+    assert seen and not [p for p in seen if b"short" in p or b"injected" in p or b"0.05" in p]
+
+
+def test_the_crew_sees_symptoms_and_no_injected_fault(dashboard, probe):
+    """SPEC §12b, issue 25: with dust, battery heating below the alarm, a stuck load and a
+    radio degradation injected, no message of the crew's topics (every flavour) and no
+    telemetry payload the observer reads names an injected fault's kind or says "injected";
+    the symptoms are there (less power from the dusty panel, the stuck load's draw)."""
+    twin, tap = dashboard
+    panel = MAPP.solar.panels[0].name
+    settle(lambda: [] if tap.message("json", "/diagnostics") else ["diagnostics"])
+    clean_w = probe.wait_value(keys.solar_power(R, panel))["power_w"]
+    t0 = time.monotonic()
+    faults = {keys.fault(R, f"solar/{panel}", "dust"): {"fraction": 0.4},
+              keys.fault(R, "battery", "heating"): {"heat_w": 0.5},
+              keys.fault(R, "load/imu", "stuck"): {"power_w": 7.25},
+              keys.fault(R, "radio/lander", "degraded"): {"range_scale": 0.5}}
+    for key, params in faults.items():
+        probe.put(key, params)
+    for key in faults:
+        probe.wait_event(R, lambda e, k=key: e["kind"] == "fault_injected" and e["key"] == k)
+    # the symptoms, on the crew's own topics
+    settle(lambda: [] if (m := tap.message("json", "/load_imu_power_w", after=t0)) is not None
+           and math.isclose(m["data"], 7.25, rel_tol=1e-6) else ["imu 7.25 W"], what="the stuck load's draw")
+    dusty = probe.wait_value(keys.solar_power(R, panel), lambda v: v["power_w"] < 0.7 * clean_w)
+    assert dusty["dust"] == 0.0  # the environment's dust, the input: never the fault's
+    t1 = time.monotonic()
+    settle(lambda: [] if tap.message("json", "/diagnostics", after=t1 + 1.0) else ["diagnostics"],
+           what="a /diagnostics after the faults")  # republished every second at the latest
+    words = [b"dust", b"heating", b"stuck", b"degraded", b"injected", b"range_scale", b"heat_w"]
+    crew = {k: [r.payload for r in tap.history(k) if r.t_mono >= t0] for k in tap.keys()
+            if not k.startswith("lunaris/")}
+    assert sum(len(v) for v in crew.values()) > 50, "the crew's topics flowed"
+    named = sorted({(k, w.decode()) for k, ps in crew.items() for p in ps for w in words if w in p})
+    assert named == [], named
+    telemetry = ("battery/state", "load/", "solar/", "radio/", "rail/", "power/summary")
+    seen = {k: [r.payload for r in tap.history(k) if r.t_mono >= t0] for k in tap.keys()
+            if k.startswith(f"lunaris/{R}/") and k.split("/", 2)[2].startswith(telemetry)}
+    assert seen, "telemetry flowed"
+    # (battery/state has a heat_w field, and solar/<panel>/power a dust field: the pack's heat
+    # and the environment's dust, the names of fields and not of faults)
+    named = sorted({(k, w.decode()) for k, ps in seen.items() for p in ps
+                    for w in words if w not in (b"dust", b"heat_w") and w in p})
+    assert named == [], named
+    for key in faults:
+        probe.delete(key)
 
 
 def test_a_silent_component_goes_stale(dashboard, probe):
@@ -481,6 +565,94 @@ def test_a_silent_component_goes_stale(dashboard, probe):
     twin.start("loads")
     settle(lambda: [] if (st := _status(tap, "ros2dds", "load/imu")) is not None and st["level"] == 0
            else ["OK"], what="the loads back to OK")
+
+
+# -- the crew's controls (SPEC §12a) ----------------------------------------------------------------
+
+
+def _call(probe, flavour: str, service: str, srv: str, fields: dict[str, Any],
+          timeout_s: float = 8.0) -> dict[str, Any]:
+    """Call a crew service as that flavour's client does (zenoh-bridge-ros2dds's querier, an
+    rmw_zenoh client, a JSON caller), encoded and decoded independently; the response's fields."""
+    name = service.strip("/")
+    att = None
+    if flavour == "json":
+        key, payload = f"json/{name}", json.dumps(fields).encode()
+    else:
+        payload = rosmsg.encode_service(srv, "Request",
+                                        fields or {"structure_needs_at_least_one_member": 0})
+        key = name
+        if flavour == "rmw_zenoh":
+            pkg, _, typ = srv.split("/")
+            srv_hash = SET_BOOL_HASH if typ == "SetBool" else TRIGGER_HASH
+            key = f"0/{name}/{pkg}::srv::dds_::{typ}_/{srv_hash}"
+            att = struct.pack("<qqB", 7, time.time_ns(), 16) + bytes(range(16))
+    target = zenoh.QueryTarget.ALL_COMPLETE if flavour == "rmw_zenoh" else zenoh.QueryTarget.BEST_MATCHING
+    replies = [r for r in probe.session.get(key, payload=payload, attachment=att, target=target,
+                                            timeout=timeout_s)]
+    assert len(replies) == 1 and replies[0].ok is not None, f"{flavour} {service}: {replies!r}"
+    reply = replies[0].ok
+    raw = reply.payload.to_bytes()
+    if flavour == "json":
+        return json.loads(raw)
+    if flavour == "rmw_zenoh":  # the client matches its request by the sequence number and GID
+        echoed = rosmsg.parse_attachment(reply.attachment.to_bytes())
+        assert (echoed.sequence, echoed.gid) == (7, bytes(range(16)))
+    r = rosmsg.decode_service(srv, "Response", raw)
+    return {"success": r.success, "message": r.message}
+
+
+def _crew_event(probe, since: int, state: str) -> dict:
+    """The power service's answer to a crew's rail command (after the first ``since`` events)."""
+    return probe.wait_event(R, lambda e: e in probe.events(R)[since:] and e["kind"] == "command"
+                            and e["key"] == keys.cmd_rail(R, "5V_CH2") and e.get("actor") == "crew"
+                            and (e.get("params") or {}).get("state") == state)
+
+
+@pytest.mark.parametrize("flavour", FLAVOURS)
+def test_the_crew_switches_and_resets_a_rail_from_its_dashboard(dashboard, probe, flavour):
+    """set_enabled false/true and reset, each answered with the twin's answer (success and its
+    reason), the rail following and the events saying the crew acted; a reset while the short is
+    still there trips the rail again and the answer says so."""
+    twin, tap = dashboard
+    rail = keys.rail_state(R, "5V_CH2")
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+    set_enabled, reset = "/pdm/rail_5V_CH2/set_enabled", "/pdm/rail_5V_CH2/reset"
+    setbool, trigger = "std_srvs/srv/SetBool", "std_srvs/srv/Trigger"
+
+    n = len(probe.events(R))
+    off = _call(probe, flavour, set_enabled, setbool, {"data": False})
+    assert off["success"] is True and "the rail is now off" in off["message"], off
+    probe.wait_value(rail, lambda v: v["state"] == "off")
+    _crew_event(probe, n, "off")
+    on = _call(probe, flavour, set_enabled, setbool, {"data": True})
+    assert on["success"] is True and "the rail is now on" in on["message"], on
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+
+    probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
+    probe.wait_value(rail, lambda v: v["state"] == "tripped")
+    again = _call(probe, flavour, reset, trigger, {})
+    assert again["success"] is True and "tripped again" in again["message"], again
+    assert "short" not in again["message"] and "injected" not in again["message"]
+    probe.delete(keys.fault(R, "load/nav_camera", "short"))
+    n = len(probe.events(R))
+    back = _call(probe, flavour, reset, trigger, {})
+    assert back["success"] is True and "the rail is now on" in back["message"], back
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+    _crew_event(probe, n, "on")
+
+
+def test_a_crew_call_the_twin_refuses_is_answered_with_its_reason(dashboard, probe):
+    """A request the twin cannot take is answered success false with the reason, never left
+    hanging, and nothing changes."""
+    twin, tap = dashboard
+    rail = keys.rail_state(R, "5V_CH2")
+    probe.wait_value(rail, lambda v: v["state"] == "on")
+    bad = _call(probe, "json", "/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {"data": "no"})
+    assert bad["success"] is False and bad["message"].startswith("refused: data: expected true or false"), bad
+    missing = _call(probe, "json", "/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {})
+    assert missing["success"] is False and "no field 'data'" in missing["message"], missing
+    assert probe.value(rail)["state"] == "on"
 
 
 # -- start-up and the PDM view ----------------------------------------------------------------------
@@ -533,35 +705,28 @@ def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, route
     assert list(table)[i:i + 4] == ["12V voltage", "12V current", "12V power", "12V current limit"]
 
 
-def test_rates_hold_continuous_values_and_let_discrete_changes_through(dashboard, probe):
+def test_rated_topics_flow_and_a_discrete_change_arrives(dashboard, probe):
+    """The topics with a rate (the PDM's at 2 Hz, /battery_state at 5 Hz) keep flowing, and the
+    failed rail's 0 mV reaches the dashboard. How a rate holds a stream, sends the first sample
+    after a silence and lets a discrete change through at once, to the timer's step, is tested
+    on a clock of the test's own (tests/services/test_bridge_rates.py)."""
     twin, tap = dashboard
     settle(lambda: [] if tap.message("ros2dds", "/pdm/rail_5V_CH2_voltage_mv") else ["pdm"])
-    t0 = time.monotonic()
-    time.sleep(3.0)  # the twin ticks at 10 Hz: the battery's key ~10/s, the PDM's topics 2/s
-    t1 = time.monotonic()
-
-    def per_s(key: str) -> float:
-        return sum(1 for r in tap.history(key) if t0 <= r.t_mono < t1) / (t1 - t0)
-    assert per_s(keys.battery_state(R)) >= 8.0
-    pdm = per_s("pdm/battery_voltage_mv")
-    assert 1.0 <= pdm <= 2.7, f"{pdm:.2f} PDM samples per second at rate_hz 2"
-    assert 3.0 <= per_s("battery_state") <= 5.7  # rate_hz 5
-    # a discrete change (the rail's state) is not held back by the rate
+    for topic in ("pdm/battery_voltage_mv", "battery_state"):
+        n = len(tap.history(topic))
+        wait_for(lambda t=topic, n=n: len(tap.history(t)) >= n + 3, 10, f"3 more samples on {topic}")
     t2 = time.monotonic()
     probe.put(keys.fault(R, "rail/5V_CH2", "fail"))
     settle(lambda: [] if _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2,
                                 lambda m: m["data"] == 0) else ["0 mV"], what="0 mV")
-    latency = _first(tap, "ros2dds", "/pdm/rail_5V_CH2_voltage_mv", t2, lambda m: m["data"] == 0) - t2
-    assert latency < 0.25, f"the failed rail took {latency * 1e3:.0f} ms at rate_hz 2"
     probe.delete(keys.fault(R, "rail/5V_CH2", "fail"))
 
 
-def test_a_rate_sends_the_first_sample_after_a_silence_at_once_and_holds_the_rest(
+def test_a_rated_topic_of_a_mapping_of_ones_own_sends_what_is_put_by_hand(
         probe, twin_factory, mapp_file, tmp_path):
-    """A topic at ``rate_hz`` 0.5 (a slot every 2 s) fed by hand: the first sample goes at once;
-    one right behind it waits for the next slot; after a silence (no sample at a slot) the
-    next one goes at once again, wherever the grid of slots is; a change of a discrete field
-    (the pack's ``operational``) goes at once."""
+    """A topic at ``rate_hz`` 0.5 of a mapping given to the bridge alone, fed battery states by
+    the test: the first goes out, the one right behind it too (held for its slot), and a
+    change of a discrete field (the pack's ``operational``)."""
     mapping = tmp_path / "slow.yaml"
     mapping.write_text(
         "bridge: {outputs: {ros2dds: {enabled: true}, rmw_zenoh: {enabled: false}}}\n"
@@ -581,20 +746,12 @@ def test_a_rate_sends_the_first_sample_after_a_silence_at_once_and_holds_the_res
         probe.put(keys.battery_state(R), state)
         return t
 
-    def arrival(mv: int, since: float, timeout_s: float = 5.0) -> float:
-        return wait_for(lambda: first(since, lambda m: m["data"] == mv), timeout_s, f"{mv} mV") - since
+    def first(since: float, mv: int) -> float | None:
+        return _first(tap, "ros2dds", "/slow_voltage_mv", since, lambda m: m["data"] == mv, INT32)
 
-    def first(since: float, predicate) -> float | None:
-        return _first(tap, "ros2dds", "/slow_voltage_mv", since, predicate, INT32)
-
-    # the bridge's subscription is in place once a sample gets through: the first goes at once
-    wait_for(lambda: put(15.0) and first(0.0, lambda m: m["data"] == 15000), 10, "the first sample")
-    slot = first(0.0, lambda m: m["data"] == 15000)
-    assert slot is not None
-    held = arrival(15100, put(15.1))  # right behind it: the next slot, 2 s after the first
-    assert 1.5 < held < 2.6, f"the held sample came {held:.2f} s after it was written"
-    # no sample at the slot after that (the outlet goes idle); the next one, 0.5 s after that
-    # silent slot, is sent at once, not at the slot 1.5 s later
-    time.sleep(max(0.0, slot + 4.5 - time.monotonic()))
-    assert arrival(15200, put(15.2)) < 0.5
-    assert arrival(15300, put(15.3, operational=False)) < 0.5  # a discrete change
+    # the bridge's subscription is in place once a sample gets through
+    wait_for(lambda: put(15.0) and first(0.0, 15000), 10, "the first sample")
+    since = put(15.1)
+    wait_for(lambda: first(since, 15100), 10, "the held sample")
+    since = put(15.3, operational=False)
+    wait_for(lambda: first(since, 15300), 10, "the discrete change")

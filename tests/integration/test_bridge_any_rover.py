@@ -123,6 +123,17 @@ def test_a_rover_with_other_names_runs_whole_under_up_with_a_fleet_of_two_bridge
             probe.session.put("crew_scout_7/curr_to_receiving_radio_m", cdr)
             probe.wait_event(SCOUT, lambda e: e["kind"] == "rejected" and e["source"] == "radio"
                              and e["key"] == keys.input_radio_position(SCOUT, "base_station"))
+            # the crew's controls of each rover, served by its own shard: both shards' queryables
+            # match the key (open in the namespace and the rail), the other drops the call
+            request = rosmsg.encode_service("std_srvs/srv/SetBool", "Request", {"data": False})
+            for ns, rail in (("crew_scout_7", "AUX_B"), ("crew_mapp_1", "5V_CH2")):
+                replies = list(probe.session.get(f"{ns}/pdm/rail_{rail}/set_enabled",
+                                                 payload=request, timeout=8.0))
+                answers = [r.ok for r in replies if r.ok is not None]
+                assert len(answers) == 1, (ns, replies)
+                got = rosmsg.decode_service("std_srvs/srv/SetBool", "Response",
+                                            answers[0].payload.to_bytes())
+                assert got.success and f"rail {rail}: on=false" in got.message, (ns, got.message)
             del sub
         started = [x for x in lines if re.search(r"\[up\] bridge-\d started", x)]
         assert len(started) == 2, lines

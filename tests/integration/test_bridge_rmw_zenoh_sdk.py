@@ -4,7 +4,8 @@
 tests/msgdefs and forbidden to fetch any) lists the topics from the bridge's liveliness tokens,
 subscribes to every published one with the type hash it computes itself, decodes each message,
 and publishes the inbound topic. Every attachment's GID must be XXH3-128 of its publisher's
-token (low 64 bits, then high), as rmw_zenoh computes it.
+token (low 64 bits, then high), as rmw_zenoh computes it. Its service client calls the crew's
+controls (SPEC §12a) with the service type hash it computes itself.
 """
 
 from __future__ import annotations
@@ -51,6 +52,17 @@ class Client:
     def find(self, pred) -> list[dict]:
         with self._lock:
             return [i for i in self.items if pred(i)]
+
+    def call(self, service: str, typename: str, request: dict) -> dict:
+        """A service call by the SDK's client: its response's fields (None: no answer)."""
+        assert self.proc.stdin is not None
+        n = len(self.find(lambda i: i.get("call") == service))
+        self.proc.stdin.write(json.dumps({"call": service, "type": typename, "request": request}) + "\n")
+        self.proc.stdin.flush()
+        got = wait_for(lambda: self.find(lambda i: i.get("call") == service)[n:], 30,
+                       f"the SDK's call of {service}")[0]
+        assert got["response"] is not None, f"{service}: no answer to the SDK's call ({got})"
+        return got["response"]
 
     def publish(self, topic: str, typename: str, msg: dict) -> None:
         assert self.proc.stdin is not None
@@ -112,6 +124,21 @@ def test_an_independent_rmw_zenoh_client_reads_every_topic_and_drives_the_radio(
                 lambda i: i.get("topic") == "/final_comms_radio_bool" and "msg" in i)[-1]["msg"]["data"] is r,
                      10, f"the SDK to read /final_comms_radio_bool {in_range}")
             assert time.monotonic() - t0 < 10
+        # the crew's controls through the SDK's service client: a short trips 5V_CH2; the crew
+        # safes the channel, the instructor clears the short, the crew resets and switches on
+        rail = keys.rail_state(R, "5V_CH2")
+        probe.put(keys.fault(R, "load/nav_camera", "short"), {"resistance_ohm": 0.05})
+        probe.wait_value(rail, lambda v: v["state"] == "tripped")
+        off = client.call("/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {"data": False})
+        assert off["success"] is True and off["message"].startswith("rail 5V_CH2: on=false"), off
+        probe.delete(keys.fault(R, "load/nav_camera", "short"))
+        reset = client.call("/pdm/rail_5V_CH2/reset", "std_srvs/srv/Trigger", {})
+        assert reset["success"] is True, reset
+        assert "rail 5V_CH2: reset; the rail is now off" in reset["message"], reset
+        on = client.call("/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {"data": True})
+        assert on["success"] is True and "the rail is now on" in on["message"], on
+        probe.wait_value(rail, lambda v: v["state"] == "on")
+        assert [e["actor"] for e in probe.events(R) if e["kind"] == "command"][-3:] == ["crew"] * 3
     finally:
         if client.proc.stdin:
             client.proc.stdin.close()

@@ -106,6 +106,18 @@ class Dashboard:
             got = [m for t, m in self.messages.get(topic, []) if t >= after]
         return got[-1] if got else None
 
+    def call(self, service: str, typename: str, request: dict, timeout_s: float = 25.0) -> dict:
+        """Call a service from the dashboard; its response's fields."""
+        assert self.proc.stdin is not None
+        sent = time.monotonic()
+        self.proc.stdin.write(json.dumps({"call": service, "type": typename, "request": request}) + "\n")
+        self.proc.stdin.flush()
+        got = wait_for(lambda: (self.latest(service, sent),) if service in self.messages
+                       and any(t >= sent for t, _ in self.messages[service]) else None,
+                       timeout_s, f"the answer to {service}")[0]
+        assert got is not None, f"{service}: no answer within 10 s"
+        return got
+
     def publish(self, topic: str, typename: str, msg: dict) -> None:
         assert self.proc.stdin is not None
         self.proc.stdin.write(json.dumps({"topic": topic, "type": typename, "msg": msg}) + "\n")
@@ -217,6 +229,21 @@ def test_an_rclpy_dashboard_sees_the_twin_and_moves_the_radio(ros2_twin):
     wait_for(tripped, 10, "the tripped rail as ERROR on the dashboard's /diagnostics")
     wait_for(lambda: (m := dash.latest("/pdm/rail_5V_CH2_current_ma", t0)) and m["data"] == 0, 10,
              "the tripped rail at 0 mA on the dashboard")
+
+    # the crew responds from its dashboard (SPEC §12a): the channel safed, then reset once the
+    # instructor has cleared the short; each answered with success and the twin's reason
+    rail = keys.rail_state(R, "5V_CH2")
+    off = dash.call("/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {"data": False})
+    # (a tripped rail stays tripped, its latch held, until it is reset)
+    assert off["success"] is True and off["message"].startswith("rail 5V_CH2: on=false; the rail is now"), off
+    probe.delete(keys.fault(R, "load/nav_camera", "short"))
+    reset = dash.call("/pdm/rail_5V_CH2/reset", "std_srvs/srv/Trigger", {})  # the trip's latch
+    assert reset["success"] is True and "rail 5V_CH2: reset; the rail is now off" in reset["message"], reset
+    probe.wait_event(R, lambda e: e["kind"] == "command" and e.get("actor") == "crew"
+                     and (e.get("params") or {}).get("reset") is True)
+    on = dash.call("/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool", {"data": True})
+    assert on["success"] is True and "the rail is now on" in on["message"], on
+    probe.wait_value(rail, lambda v: v["state"] == "on")
 
     pids = [dash.proc.pid] + [p.pid for p in twin.procs.values()]
     assert udp_sockets(pids) == {}, "a process opened a UDP socket"

@@ -162,6 +162,28 @@ def test_delete_stops_the_rover_where_it_is(probe):
     assert again["kind"] == "rejected" and "no traverse to stop" in again["message"]
 
 
+def test_the_crew_stops_the_rover_from_its_dashboard(probe):
+    """``/drive/stop`` (``std_srvs/srv/Trigger``, SPEC §12a), here by the bridge's json flavour:
+    the traverse stops where the rover is, the call answered success in the drive's words and
+    the event saying the crew acted; called again, the drive's refusal as the answer."""
+    p = probe
+    p.put(keys.clock_control(R), {"time_scale": 50})
+    answer(p, R, TRAVERSE, {"waypoints": waypoints((5, 500, 0))})
+    p.wait_value(STATE, lambda s: s["odometer_m"] > 2.0 and s["moving"])
+
+    def stop() -> dict:
+        replies = [r.ok for r in p.session.get("json/mapp_1/drive/stop", payload=b"{}", timeout=8.0)
+                   if r.ok is not None]
+        assert len(replies) == 1, "one answer to the crew's call"
+        return json.loads(replies[0].payload.to_bytes())
+    got = stop()
+    assert got["success"] is True and "traverse stopped" in got["message"], got
+    assert p.wait_value(STATE, lambda s: s["status"] == "parked")["moving"] is False
+    p.wait_event(R, lambda e: e["kind"] == "input" and e["key"] == TRAVERSE and e.get("actor") == "crew")
+    again = stop()
+    assert again["success"] is False and "no traverse to stop" in again["message"], again
+
+
 BAD = [
     (b'{"waypoints": []}', "at least one waypoint"),
     (b'{"waypoints": [{"x_m": NaN, "y_m": 0, "z_m": 0}]}', "NaN is not a number"),

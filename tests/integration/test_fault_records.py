@@ -88,7 +88,7 @@ def test_a_fault_is_listed_identically_everywhere_and_named_by_no_telemetry(
     p, _ = mapp_twin
     service = OWNER[component.split("/")[0]]
     key = keys.fault(R, component, kind)
-    p.history.clear()
+    p.clear_history()
     p.put(key, payload)
     injected = p.wait_event(R, lambda e: e["key"] == key and e["kind"] in ("fault_injected",
                                                                              "rejected"))

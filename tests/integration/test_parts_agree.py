@@ -94,7 +94,7 @@ def test_a_traverse_does_not_start_plugged_in_to_a_cable_that_does_not_follow(
     assert p.value(keys.drive_state(R))["status"] == "parked"
     p.put(keys.input_umbilical(R), "false")
     p.wait_value(keys.umbilical_state(R), lambda v: not v["connected"])
-    p.history.clear()
+    p.clear_history()
     p.put(keys.input_drive_traverse(R), traverse)
     accepted = p.wait_event(R, lambda e: e["key"] == keys.input_drive_traverse(R))
     assert accepted["kind"] == "input"

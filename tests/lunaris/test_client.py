@@ -153,6 +153,19 @@ def test_a_clock_seen_live_that_never_ticks_is_a_lost_link():
     assert t.state(1.0).state == "unknown" and t.state(2.5).state == "lost"
 
 
+def test_a_rover_asked_for_that_never_ticks_since_the_tool_connected_is_a_lost_link():
+    """A tool started during a partition hears nothing of the rover: it says the link is lost
+    (within the link's 2 s), not "waiting" until its own timeout."""
+    clock = FakeClock()
+    m = Mirror(R, families=["clock"], clock=clock)
+    m.started_at, m.connected = clock.t, True  # what start() and the router's answer set
+    clock.t += 1.5
+    assert m.link(R).state == "unknown"
+    clock.t += 1.0
+    link = m.link(R)
+    assert link.state == "lost" and "since this tool connected" in link.reason, link
+
+
 def test_a_slow_clock_is_not_taken_for_a_cut():
     t = LinkTracker()
     for i in range(10):  # 0.2 Hz
@@ -193,7 +206,7 @@ def test_one_table_says_which_event_answers_a_write_and_who_sends_it(tail, delet
     ("input/sun$*", b"3", "is a wildcard"),
     ("@/input/sun_angle", b"3", "verbatim chunk"),
     ("input/sun angle", b"3", "holds characters no key of the twin has"),
-    ("input/sun_angle", b"1" + b"0" * 5000, "a number with thousands of digits"),
+    ("input/sun_angle", b"1" + b"0" * 5000, "has 5,001 digits: far too long for an input"),
     ("input/sun_angle", b'{"angle_deg": "\\ud800"}', "not valid Unicode"),
     ("input/sun_angle", b"500", "angle_deg must be at most 360"),
 ])

@@ -49,7 +49,8 @@ def test_an_injection_with_a_json_object_and_a_replacement(live):
         again = run_tool("fault", "inject", R, "battery", "heating", "7.5", "--connect", ep)
         assert (first.returncode, again.returncode) == (0, 0), first.stderr + again.stderr
         assert "injected battery/heating" in first.stdout and "replaced battery/heating" in again.stdout
-        live.probe.wait_value(keys.battery_state(R), lambda b: b["heat_w"] >= 7.5)
+        live.probe.wait_value(keys.faults_active(R, "battery"), lambda v: [
+            f["params"] for f in v["faults"] if f["key"].endswith("/battery/heating")] == [{"heat_w": 7.5}])
     finally:
         assert run_tool("fault", "clear", R, "battery", "heating", "--connect", ep).returncode == 0
 
@@ -119,7 +120,8 @@ def test_with_credentials_on_the_deployment_router(tmp_path):
     identity lists it."""
     secrets = make_test_secrets(tmp_path / "secrets")
     with running_router(secrets) as router:
-        services = ("clock", "solar", "faults")
+        # every owner of the rover's faults: `fault list` says which did not answer (exit 2)
+        services = ("clock", "battery", "loads", "power", "solar", "radio", "faults")
         extra = {s: ["--config", str(secrets / f"client-lunaris-{s}.json5")] for s in services}
         with Twin(router.endpoint, [MAPP], tmp_path / "state", services=services, extra=extra):
             def as_(who: str) -> list[str]:
@@ -129,7 +131,7 @@ def test_with_credentials_on_the_deployment_router(tmp_path):
             def services_up() -> bool:
                 done = run_tool("fault", "list", R, "--timeout", "1", *debrief)
                 return done.returncode == 0
-            wait_for(services_up, 30, "the services to log in and answer the debrief")
+            wait_for(services_up, 60, "the services to log in and answer the debrief")
 
             done = run_tool("fault", "inject", R, "solar/right", "disconnect", *instructor)
             assert done.returncode == 0, done.stdout + done.stderr

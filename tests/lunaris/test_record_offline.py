@@ -25,7 +25,7 @@ from common.messages import (
     encode,
 )
 from lunaris.record import ENVELOPE, KeyWrite, Recorder, json_schema, schema_for
-from lunaris.report import add_thresholds, draw, load_session, place_labels
+from lunaris.report import add_thresholds, draw, load_recording, load_session, place_labels
 
 R = "mapp-1"
 
@@ -153,7 +153,9 @@ def test_the_report_draws_a_recording(tmp_path: Path):
     assert s.battery["soc"][1][0] == pytest.approx(0.95) and sorted(s.loads) == ["imu", "nav_camera"]
     assert [e["kind"] for e in s.events] == ["fault_injected"] and s.span_s == (0.0, 4.0)
     fig = draw(s, "test")
-    assert len(fig.axes) == 8  # the timeline, five plots, the radio links and the current's twin axis
+    # the timeline, the score sheet, five plots, the radio links and the current's twin axis
+    assert len(fig.axes) == 9
+    assert fig.axes[1].get_title(loc="left") == "score sheet: 1 fault(s); 0 of 0 expectation(s) met"
     fig.savefig(tmp_path / "out.png")
     assert (tmp_path / "out.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -167,25 +169,27 @@ def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
     s = load_session(path)[R]
     assert s.path == ([5.0] * 5, [0.0, 2.0, 4.0, 6.0, 8.0], [9.5, 10.5, 11.5, 12.5, 13.5])
     fig = draw(s, "test")
-    assert len(fig.axes) == 10  # the timeline, 5 plots, radios, the twin axis, the path and its colour bar
-    path_ax = fig.axes[7]
+    # the timeline, the score sheet, 5 plots, radios, the twin axis, the path and its colour bar
+    assert len(fig.axes) == 11
+    path_ax = fig.axes[8]
     assert path_ax.get_xlabel() == "x, east [m]" and "drive's power" in path_ax.get_title()
     assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last
 
 
-def _event(t: float, kind: str, key: str, message: str, wall: int, params=None):
+def _event(t: float, kind: str, key: str, message: str, wall: int, params=None, session: str = ""):
     ev = Event(t_s=t, severity="info", source="x", kind=kind, key=f"lunaris/{R}/{key}", message=message,
-               params=params, source_id="s", seq=int(t * 10) + len(message))
+               params=params, source_id="s", seq=int(t * 10) + len(message), session=session)
     return (f"lunaris/{R}/event", encode(ev), False, wall)
 
 
 def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: Path):
     wall = 1_700_000_000_000_000_000
     samples = [_event(2.0, "fault_injected", "fault/battery/heating", "replayed", wall)]  # before
-    for i in range(10):  # t 10..19, then a reset: t 0..9 of the next epoch goes on at 10 s
+    one_id, two_id = "20261125-090000", "20261125-100000"
+    for i in range(10):  # t 10..14 of session one, then the next trainee's: t 0..4 of a new epoch
         epoch, t = (0, 10.0 + i) if i < 5 else (1, float(i - 5))
-        cause = "reset" if epoch else ""
-        samples += [(f"lunaris/{R}/clock", encode(Clock(t, 0.1, i, 1.0, False, epoch, cause)), False,
+        cause, sid = ("reset", two_id) if epoch else ("", one_id)
+        samples += [(f"lunaris/{R}/clock", encode(Clock(t, 0.1, i, 1.0, False, epoch, cause, sid)), False,
                      wall + 10 * i),
                     (f"lunaris/{R}/battery/state", encode(BatteryState(
                         t, 5e5, 5.3e5, 0.9, 16.6, 16.5, 2.0, 33.0, 20.0, True, 0, [], 3600.0)), False,
@@ -196,7 +200,9 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
                 _event(12.0, "input", "input/sun_angle", "sun angle 75 deg", wall + 25),
                 _event(13.0, "scenario", "control/scenario", "scenario 'd': step 1/2 dust", wall + 35,
                        {"what": "step"}),
-                _event(0.0, "session", "control/reset", "session reset", wall + 51)]
+                _event(0.0, "session", "control/session", "session of 'Bob' begins", wall + 51, {
+                    "session": two_id, "trainee": "Bob", "from_snapshot": None, "started_wall": 1.7e9,
+                    "start_t_s": 0.0}, session=two_id)]
     path = tmp_path / "s.mcap"
     buf = io.BytesIO()
     rec = Recorder(buf, "test")
@@ -204,19 +210,24 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
         assert rec.write(*sample)
     rec.finish()
     path.write_bytes(buf.getvalue())
-    s = load_session(path)[R]
-    assert s.span_s == (0.0, 8.0)  # the reset goes on from where the recording was
-    assert [(e["kind"], e["at_s"]) for e in s.events] == [
-        ("fault_injected", None), ("command", 1.0), ("input", 2.0), ("scenario", 3.0), ("session", 4.0)]
-    assert "from" in add_thresholds(s, None)
-    assert (60.0, "alarm 60 C") in s.thresholds["temperature"]
-    assert (15.0, "5V_CH2 shed") in s.thresholds["soc"]
-    fig = draw(s, "test")
+    one, two = load_recording(path)[R].sessions.values()  # the clock began a second session
+    assert (one.id, two.id) == (one_id, two_id) and one.span_s == two.span_s == (0.0, 4.0)
+    assert [(e["kind"], e["at_s"]) for e in one.events] == [
+        ("fault_injected", None), ("command", 1.0), ("input", 2.0), ("scenario", 3.0)]
+    assert [(e["kind"], e["at_s"]) for e in two.events] == [("session", 0.0)]  # nothing of the first
+    assert load_session(path)[R].id == two_id and load_session(path, one_id)[R].id == one_id  # the last
+    assert load_session(path, "7") == {}
+    assert "from" in add_thresholds(one, None)
+    assert (60.0, "alarm 60 C") in one.thresholds["temperature"]
+    assert (15.0, "5V_CH2 shed") in one.thresholds["soc"]
+    fig = draw(one, "test")
     assert "1 event(s) from before the recording" in fig._suptitle.get_text()
     timeline = fig.axes[0]
     texts = [t.get_text() for t in timeline.texts]
     assert "rail 12V: on=false; the rail is now off" in texts and "step 1/2 dust" in texts
     assert "replayed" not in " ".join(texts)
+    texts = [t.get_text() for t in draw(two, "test").axes[0].texts]
+    assert texts == ["session of 'Bob' begins"]
 
 
 def test_labels_never_overlap_and_the_rest_are_counted():

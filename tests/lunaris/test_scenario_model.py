@@ -366,3 +366,115 @@ steps:
     ok = ("scenario: {name: x}\nrover: mapp-1\nsteps:\n"
           "  - {at_s: 1, position: {radio: lander, distance_m: 9}}\n")
     assert parse_scenario(ok, rover=STATIC_MAPP).steps[0].position.distance_m == 9
+
+
+# -- expectations of the crew (SPEC 12d) ----------------------------------------------------------
+
+EXPECT = """
+scenario: {name: expectations}
+rover: mapp-1
+steps:
+  - name: short
+    at_s: 2
+    inject: {component: load/nav_camera, kind: short}
+  - expect: {when: "rail.5V_CH2.state == off", within_s: 10, label: isolate the shorted camera}
+  - name: clear it
+    after_s: 1
+    clear: {component: load/nav_camera, kind: short}
+  - at_s: 8
+    expect: {when: "rail.5V_CH2.state == on", within_s: 5}
+  - name: already done
+    at_s: 1
+    expect: {when: "battery.soc > 0.5", within_s: 1}
+"""
+
+
+def test_an_expect_step_is_validated_as_the_rest_of_the_format():
+    sc = parse_scenario(EXPECT, rover=MAPP)
+    assert sc.steps[1].expect.within_s == 10 and sc.steps[1].label == "isolate the shorted camera"
+    assert sc.steps[3].label == "expect rail.5V_CH2.state == on"  # no label, no name: the condition
+    assert sc.steps[4].label == "already done"
+    bad = """
+scenario: {name: x}
+rover: mapp-1
+steps:
+  - at_s: 1
+    expect: {when: "rail.5V_CH9.state == off", within_s: 0, colour: red}
+  - at_s: 1
+    when: battery.soc < 0.5
+    timeout_s: 3
+    expect: {when: "battery.charge < 1", within_s: 5}
+  - expect: {within_s: 5}
+  - at_s: 1
+    rail: {name: 12V, on: false}
+    expect: {when: "battery.soc < 1", within_s: 5}
+"""
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(bad, "bad.yaml", MAPP)
+    for want in ["steps[0].expect.within_s: must be > 0.0, got 0",
+                 "steps[0].expect.colour: unknown field",
+                 "steps[0].expect.when: rover mapp-1 has no rail '5V_CH9'",
+                 "steps[1].when: an expect step's condition is expect.when",
+                 "steps[1].timeout_s: an expect step's condition is expect.when",
+                 "steps[1].expect.when: unknown field 'charge' of battery",
+                 "steps[2].expect.when: missing required field",
+                 "steps[3]: give one action per step, got rail, expect"]:
+        assert any(p.startswith(want) for p in err.value.problems), f"{want!r} not in {err.value.problems}"
+
+
+def test_expectations_are_met_when_their_condition_holds_and_missed_when_their_time_is_up():
+    values: dict = {("battery", "state"): {"soc": 0.9}, ("rail", "5V_CH2", "state"): {"state": "on"}}
+
+    def world(t, v):  # the crew switches the rail off at 7 s, and never back on
+        if t >= 107:
+            v[("rail", "5V_CH2", "state")] = {"state": "off"}
+    values["at"] = world
+    player, writes = _play(EXPECT, [100 + 0.5 * i for i in range(40)], values)
+    r = player.results
+    assert [x.status for x in r] == ["fired", "met", "fired", "missed", "met"]
+    assert [x.met for x in r] == [None, True, None, False, True]
+    # armed when the short fired (2 s), met on the first tick the rail read off (7.5 s)
+    assert (r[1].armed_t_s, r[1].met_t_s, r[1].deadline_t_s) == (2.0, 7.5, 12.0)
+    assert "rail.5V_CH2.state = off" in r[1].detail
+    # the step after it counts from when the expectation was armed, and does not wait for it
+    assert r[2].fired_t_s == 3.0
+    # armed at 8 s with the rail off: the crew never puts it back on within 5 s
+    assert r[3].armed_t_s == 8.0 and r[3].deadline_t_s == 13.0 and "did not hold within 5 s" in r[3].detail
+    assert (r[4].armed_t_s, r[4].met_t_s) == (1.0, 1.0)  # held already when armed
+    assert [w.step for _, w in writes] == [0, 2]  # expectations write nothing
+    assert player.finished and player.end_reason == "every step has played"
+
+
+def test_the_end_of_a_scenario_scores_what_is_pending_as_missed():
+    values = {("battery", "state"): {"soc": 0.1}, ("rail", "5V_CH2", "state"): {"state": "on"}}
+    player, _ = _play(EXPECT + "duration_s: 3\n", [float(t) for t in range(6)], values)
+    r = player.results
+    assert player.end_reason == "duration of 3 s reached"
+    assert (r[1].status, r[1].met) == ("missed", False) and "not met when the scenario ended" in r[1].detail
+    assert (r[3].status, r[3].met) == ("not fired", False) and "never armed" in r[3].detail
+    assert (r[4].status, r[4].met) == ("missed", False)  # soc 0.1: armed at 1 s, out of time at 2 s
+    assert "did not hold within 1 s" in r[4].detail
+
+
+def test_while_an_expectation_is_pending_the_player_says_so():
+    values = {("battery", "state"): {"soc": 0.9}, ("rail", "5V_CH2", "state"): {"state": "on"}}
+    player = Player(parse_scenario(EXPECT))
+    for t in (0.0, 1.0, 2.0, 2.5):
+        player.tick(t, _lookup(values))
+    said = player.waiting(_lookup(values))
+    assert "waiting for step 3 'clear it'" in said
+    assert "expecting 'isolate the shorted camera' for 10 s more" in said
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=[p.name for p in SCENARIOS])
+def test_each_shipped_drill_expects_what_a_crew_can_do_from_its_dashboard(path: Path):
+    """Every drill scores the crew: at least one expectation, on what the crew's own controls
+    change (SPEC 12a: a rail on, off or reset; the drive stopped) or on what follows from them."""
+    rover = {r.id: r for r in (MAPP, LTV)}[load_scenario(path).rover]
+    sc = load_scenario(path, rover)
+    expects = [s.expect for s in sc.steps if s.expect is not None]
+    assert expects, f"{path.name} has no expectation"
+    crew_sources = ("rail.", "drive.", "load.")
+    for e in expects:
+        assert any(c.ref.startswith(crew_sources) for c in parse_condition(e.when).comparisons), e.when
+        assert e.label

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
-import threading
+import sys
 from pathlib import Path
 
 import pytest
@@ -170,40 +170,64 @@ steps:
     assert any(m["state"] == "playing" for m in progress)
 
 
-def test_the_shipped_shorted_camera_drill_with_the_test_as_the_crew(live, tmp_path):
+def test_the_shipped_shorted_camera_drill_played_with_a_scripted_crew_is_scored(live, tmp_path):
+    """The drill, a crew process acting as the bridge does (writes with actor=crew), a recording:
+    the report gives the short's response times and the crew's actions, and both expectations
+    met (SPEC 12d)."""
     p, ep = live.probe, live.endpoint
     p.clear_history()
+    # the trainee's session (SPEC 12c): what the twin did before is none of this crew's score
+    done = run_tool("session", "start", R, "--trainee", "crew 1", "--connect", ep)
+    assert done.returncode == 0, done.stdout + done.stderr
     scenario = ROOT / "config" / "scenarios" / "shorted-camera.yaml"
-    summary_path = tmp_path / "summary.json"
-    proc = subprocess.Popen(lunaris_cmd("scenario", "run", str(scenario), "--time-scale", "30",
-                                        "--connect", ep, "--json-summary", str(summary_path),
-                                        "--clear-at-end"),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT,
-                            env=env_without_zenoh_config())
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-    reader.start()
+    summary_path, recording = tmp_path / "summary.json", tmp_path / "drill.mcap"
+    env = env_without_zenoh_config()
+    rec = subprocess.Popen(lunaris_cmd("record", str(recording), "--connect", ep, "--rover", R),
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    crew = subprocess.Popen([sys.executable, "-m", "tests.lunaris.crew", ep, R, "5V_CH2", "15"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
+    proc = None
     try:
-        # the crew acts on the instructor's notes, as in a session
-        wait_for(lambda: any("step 2/8 5V_CH2 tripped" in line for line in lines), 20, "the trip")
-        p.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "tripped")
-        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": False, "reset": True})  # the crew safes the channel
-        wait_for(lambda: any("step 5/8 camera lost" in line for line in lines), 10, "the camera isolated")
-        p.wait_value(keys.faults_active(R, "loads"), lambda v: any(
-            f["key"] == keys.fault(R, "load/nav_camera", "open") for f in v["faults"]))
-        p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})  # ... and restores it
-        proc.wait(40)
-        reader.join(5)
+        assert rec.stderr.readline().startswith("recording "), "the recorder did not start"
+        assert crew.stdout.readline().startswith("crew: watching"), "the crew did not start"
+        proc = subprocess.Popen(lunaris_cmd("scenario", "run", str(scenario), "--time-scale", "20",
+                                            "--connect", ep, "--json-summary", str(summary_path),
+                                            "--clear-at-end"),
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT,
+                                env=env)
+        out, _ = proc.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            proc.wait(10)
-    out = "".join(lines)
+        for q in (proc, crew, rec):
+            if q is not None and q.poll() is None:
+                q.send_signal(signal.SIGINT)
+                q.wait(20)
     assert proc.returncode == 0, out
     summary = json.loads(summary_path.read_text())
-    assert all(s["status"] == "fired" for s in summary["steps"]), summary
+    statuses = {s["label"]: s["status"] for s in summary["steps"]}
+    assert set(statuses.values()) == {"fired", "met"}, statuses
+    assert "expectations of the crew: 2 of 2 met" in out
     assert p.value(keys.rail_state(R, "5V_CH2"))["state"] == "on"
     wait_for(lambda: not p.value(keys.faults_active(R, "loads"))["faults"], 5, "the camera repaired")
+
+    done = run_tool("report", str(recording), "--json")
+    assert done.returncode == 0, done.stderr
+    drill = json.loads(done.stdout)[-1]  # the last session: the trainee's, the drill in it
+    assert drill["trainee"] == "crew 1"
+    (short,) = [f for f in drill["faults"] if f["key"] == keys.fault(R, "load/nav_camera", "short")]
+    assert short["injected_by"] == "scenario"
+    inj, symptom, acted = short["injected_t_s"], short["first_symptom_t_s"], short["first_crew_action_t_s"]
+    assert 29.0 <= inj <= 40.0  # at_s 30, on the first tick after it (2 s ticks at x20)
+    assert symptom is not None and inj <= symptom <= inj + 4.0  # the trip, within two ticks
+    assert acted is not None and symptom <= acted <= symptom + 60.0
+    actions = [(a["action"], a["target"], a["accepted"]) for a in short["crew_actions"]]
+    assert actions[:2] == [("rail off", "5V_CH2", True), ("rail reset", "5V_CH2", True)], actions
+    assert ("rail on", "5V_CH2", True) in actions  # the channel restored, in the fault's window
+    assert short["resolved_t_s"] is not None and short["resolved_t_s"] >= acted
+    expectations = {e["label"]: e for e in drill["expectations"]}
+    safe = expectations["isolate the shorted camera - 5V_CH2 off and its trip reset"]
+    back = expectations["restore 5V_CH2 for the hazard cameras"]
+    assert safe["met"] and back["met"] and safe["within_s"] == 60 and back["within_s"] == 120
+    assert acted <= safe["at_t_s"] <= acted + 10.0 and back["at_t_s"] > safe["at_t_s"]
 
 
 def test_scenario_check_and_start_errors(live, tmp_path):

@@ -44,10 +44,10 @@ def restart(twin: Twin, probe: Probe, service: str, rover: str = R) -> subproces
 
 @pytest.fixture
 def whole_twin(twin_factory, probe_solo, tmp_path):
-    """(probe, twin): every service of mapp-1, bridge included (its json flavour on), the probe
-    watching every key."""
+    """(probe, twin): every service of mapp-1, bridge included (its json flavour on, its
+    /diagnostics in the full view: every fault in effect), the probe watching every key."""
     probe_solo.watch("lunaris/**")
-    twin = twin_factory([MAPP], services=WITH_BRIDGE, extra=json_bridge_extra(tmp_path))
+    twin = twin_factory([MAPP], services=WITH_BRIDGE, extra=json_bridge_extra(tmp_path, "full"))
     probe_solo.wait_services(R, WITH_BRIDGE)
     probe_solo.wait_value(keys.battery_state(R), lambda b: b["current_a"] > 0)
     return probe_solo, twin

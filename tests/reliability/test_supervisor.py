@@ -76,7 +76,9 @@ def test_kill_9_of_up_leaves_no_orphan_and_the_next_up_runs_one_of_each(tmp_path
             assert len(services) == len(ALL_SERVICES), services
             first.send_signal(signal.SIGKILL)
             first.wait(10)
-            wait_for(lambda: not any(alive(pid) for pid in services), 10,
+            # SIGTERM from the kernel at once (PR_SET_PDEATHSIG); each then saves its state and
+            # closes its session, which took over 10 s with three test workers on two cores
+            wait_for(lambda: not any(alive(pid) for pid in services), 30,
                      lambda: f"the services of the killed up to stop: "
                              f"{[(pid, command(pid)) for pid in services if alive(pid)]}")
         second = start_up(endpoint, tmp_path / "state")

@@ -4,7 +4,10 @@
 transient-local, keep-last 1: it gets the last value when it joins) and prints every message
 as one JSON line ``{"topic": ..., "t": <monotonic s>, "msg": {...fields}}``. Each JSON line
 read on stdin, ``{"topic": ..., "type": "pkg/msg/Type", "msg": {...}}``, is published on that
-topic (reliable, volatile). The ROS 2 environment (``ROS_DOMAIN_ID``,
+topic (reliable, volatile); a line ``{"call": "/service", "type": "pkg/srv/Type", "request":
+{...}}`` calls that service (waiting up to 10 s for it) and prints ``{"topic": "/service",
+"t": ..., "msg": {...response fields}}``, or ``"msg": null`` when no answer came within
+10 s. The ROS 2 environment (``ROS_DOMAIN_ID``,
 ``FASTDDS_BUILTIN_TRANSPORTS``) is the caller's. Prints ``ready`` once its entities exist.
 """
 
@@ -59,6 +62,29 @@ def fill(msg: Any, fields: dict) -> Any:
     return msg
 
 
+def call(node: Node, clients: dict[str, Any], cmd: dict) -> None:
+    """Call a service as a dashboard's button does, and print its response."""
+    name = cmd["call"]
+    cls = message_class(cmd["type"])
+    client = clients.get(name)
+    if client is None:
+        client = clients[name] = node.create_client(cls, name)
+    response = None
+    if not client.wait_for_service(timeout_sec=10.0):
+        print(f"{name}: no such service within 10 s", file=sys.stderr, flush=True)
+    else:
+        future = client.call_async(fill(cls.Request(), cmd.get("request", {})))
+        done = threading.Event()
+        future.add_done_callback(lambda _f: done.set())
+        if done.wait(10.0):
+            response = as_plain(future.result())
+        else:
+            print(f"{name}: no response within 10 s", file=sys.stderr, flush=True)
+    line = json.dumps({"topic": name, "t": time.monotonic(), "msg": response})
+    with _out:
+        print(line, flush=True)
+
+
 def main() -> None:
     rclpy.init()
     node = Node("crew_dashboard")
@@ -71,6 +97,7 @@ def main() -> None:
                 print(line, flush=True)
         node.create_subscription(message_class(typename), topic, show, LATCHED)
     publishers: dict[str, Any] = {}
+    clients: dict[str, Any] = {}
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     threading.Thread(target=executor.spin, daemon=True).start()
@@ -78,6 +105,9 @@ def main() -> None:
         print("ready", flush=True)
     for line in sys.stdin:
         cmd = json.loads(line)
+        if "call" in cmd:
+            call(node, clients, cmd)
+            continue
         cls = message_class(cmd["type"])
         pub = publishers.get(cmd["topic"])
         if pub is None:

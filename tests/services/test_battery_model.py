@@ -198,6 +198,7 @@ def test_overheating_raises_alarm_then_cutoff_then_recovers_below_max():
     pack.set_faults([Heating(heat_w=200.0)])  # T_inf = 20 + 200 / 0.8 = 270 C
     pack.step(1.0)
     assert pack.temperature_c > 20.0 and pack.reading().faults == []  # rising, no alarm yet
+    assert pack.reading().heat_w == 0.0  # idle: no losses; the injected 200 W is not told (12b)
     while pack.temperature_c <= 60.0:
         pack.step(1.0)
     assert "over_temperature" in pack.derived_faults() and pack.operational

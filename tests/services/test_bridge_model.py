@@ -74,6 +74,8 @@ def test_default_mapping_covers_what_the_dashboard_uses():
     assert inbound["/curr_to_receiving_radio_m"].mapping.fields == ["distance_m", "angle_deg"]
     assert out["/battery_state"].mapping.type == "sensor_msgs/msg/BatteryState"
     assert out["/diagnostics"].mapping.type == "diagnostic_msgs/msg/DiagnosticArray"
+    # what the DiagnosticArray is made of: every owner's faults in effect, not the journal
+    assert out["/diagnostics"].mapping.key == "lunaris/{rover}/faults/active/*"
     for load in MAPP.loads:
         assert out[f"/load_{load.name}_power_w"].key == f"lunaris/mapp-1/load/{load.name}/power"
     pdm = {t: b for t, b in out.items() if b.mapping.group == "pdm"}
@@ -86,6 +88,19 @@ def test_default_mapping_covers_what_the_dashboard_uses():
             assert b.key == f"lunaris/mapp-1/rail/{rail}/state"
             assert (b.mapping.type, b.mapping.scale) == ("std_msgs/msg/Int32", 1000.0)
     assert {b.mapping.unit for b in pdm.values()} == {"mV", "mA", "mW"}
+
+
+def test_the_diagnostics_converter_reads_the_faults_in_effect_and_its_old_spelling_still_works():
+    for key in ("lunaris/{rover}/faults/active/*", "lunaris/{rover}/event"):
+        mf = mapping(one(topic="/d", type="diagnostic_msgs/msg/DiagnosticArray", key=f"'{key}'",
+                         field=None, scale=None, convert="diagnostics"))
+        (b,) = bd.expand(mf, [bd.rover_names(MAPP)])
+        assert (b.topic, b.item) == ("/d", None)
+    with pytest.raises(ConfigError, match=r"the diagnostics converter reads "
+                                          r"lunaris/\{rover\}/faults/active/\*"):
+        mapping(one(topic="/d", type="diagnostic_msgs/msg/DiagnosticArray",
+                    key="'lunaris/{rover}/faults/active/battery'", field=None, scale=None,
+                    convert="diagnostics"))
 
 
 def test_a_fleet_keeps_the_plain_topics_one_ros_domain_per_rover():
@@ -635,3 +650,136 @@ def test_one_key_expression_hears_a_topic_of_several_rovers():
     assert bd.open_keyexpr(["fleet/a/x", "fleet/b/x"]) == "fleet/*/x"
     assert bd.open_keyexpr(["mapp_1/x"]) == "mapp_1/x"  # one rover: its own key
     assert bd.open_keyexpr(["a/x", "b/c/x"]) is None
+
+
+# -- the crew's controls: services in the mapping (SPEC §12a) -----------------------------------
+
+# Published: the REP-2016 hashes of the std_srvs service types (share/std_srvs/srv/*.json of
+# ros-std-srvs 5.3.6 Jazzy and 5.5.1 Kilted, and *__description.c).
+SET_BOOL_HASH = "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
+TRIGGER_HASH = "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f"
+EMPTY_HASH = "RIHS01_5888399dedec5ccc85ea6451949fd2c9f97bfdf963f9a588821639fcd31b5d19"
+
+
+def test_service_type_hashes_are_the_published_ones_and_key_the_rmw_zenoh_service():
+    from services.bridge import srv
+
+    for distro in ("jazzy", "humble"):  # rosbags' own ServiceEventInfo gives others (char[16])
+        if distro == "humble":
+            assert srv.service_type_hash("std_srvs/srv/SetBool", distro) == "TypeHashNotSupported"
+            continue
+        assert srv.service_type_hash("std_srvs/srv/SetBool", distro) == SET_BOOL_HASH
+        assert srv.service_type_hash("std_srvs/srv/Trigger", distro) == TRIGGER_HASH
+        assert srv.service_type_hash("std_srvs/srv/Empty", distro) == EMPTY_HASH
+    assert rmw_zenoh.rmw_topic_key(0, "/pdm/rail_5V_CH2/set_enabled", "std_srvs/srv/SetBool") == (
+        f"0/pdm/rail_5V_CH2/set_enabled/std_srvs::srv::dds_::SetBool_/{SET_BOOL_HASH}")
+    # rmw_zenoh's service server token (research notes §2.2, worked example)
+    token = rmw_zenoh.entity_token(0, "0123456789abcdef0123456789abcdef", 0, 41, "SS", "/",
+                                   "lunaris_bridge", "/pdm/rail_5V_CH2/reset", "std_srvs/srv/Trigger",
+                                   rmw_zenoh.qos_keyexpr(False, 10))
+    assert token == ("@ros2_lv/0/0123456789abcdef0123456789abcdef/0/41/SS/%/%/lunaris_bridge/"
+                     f"%pdm%rail_5V_CH2%reset/std_srvs::srv::dds_::Trigger_/{TRIGGER_HASH}/::,10:,:,:,,")
+    # the standard type store is left as it was (its ServiceEventInfo is rosbags' own)
+    assert cdr.typestore("jazzy").fielddefs["service_msgs/msg/ServiceEventInfo"]
+
+
+def test_service_requests_and_responses_as_an_independent_codec_has_them():
+    from services.bridge import srv
+
+    for data in (True, False):
+        raw = rosmsg.encode_service("std_srvs/srv/SetBool", "Request", {"data": data})
+        assert raw == b"\x00\x01\x00\x00" + bytes([data])  # rmw_zenoh's bytes (research §2.3)
+        assert srv.decode_request("std_srvs/srv/SetBool", raw) == {"data": data}
+    # a request without fields: whatever a client sends for it (the dummy byte, or nothing)
+    for raw in (b"\x00\x01\x00\x00\x00", b"\x00\x01\x00\x00", b""):
+        assert srv.decode_request("std_srvs/srv/Trigger", raw) == {}
+    with pytest.raises(BadInput, match="not a CDR std_srvs/srv/SetBool request"):
+        srv.decode_request("std_srvs/srv/SetBool", b"\x00\x01")
+    words = "rail 5V_CH2: reset; the rail is now tripped (over-current 50.53 A > 3 A)"
+    for typename in ("std_srvs/srv/SetBool", "std_srvs/srv/Trigger"):
+        raw = srv.encode_response(typename, {"success": True, "message": words})
+        back = rosmsg.decode_service(typename, "Response", raw)
+        assert (back.success, back.message) == (True, words) and raw[:4] == b"\x00\x01\x00\x00"
+    assert srv.encode_response("std_srvs/srv/Empty", {}) == b"\x00\x01\x00\x00\x00"
+
+
+def test_the_default_mapping_offers_the_crews_controls_for_every_rover():
+    mf = mp.load_mapping(DEFAULT)
+    for rover in (MAPP, LTV, load_rover(static_rover("mapp.yaml"))):
+        bindings = bd.expand(mf, [bd.rover_names(rover)])
+        services = {b.topic: b for b in bindings if b.mapping.kind == "service"}
+        switched = [r.name for r in rover.rails]  # not the solar rail: it cannot be switched
+        want = {f"/pdm/rail_{r}/{s}" for r in switched for s in ("set_enabled", "reset")}
+        if rover.drive is not None:
+            want.add("/drive/stop")
+        assert set(services) == want, rover.id
+        for r in switched:
+            on = services[f"/pdm/rail_{r}/set_enabled"]
+            assert (on.key, on.mapping.type, on.mapping.request) == (
+                f"lunaris/{rover.id}/cmd/rail/{r}", "std_srvs/srv/SetBool", {"on": "data"})
+            reset = services[f"/pdm/rail_{r}/reset"]
+            assert (reset.mapping.type, reset.mapping.payload) == ("std_srvs/srv/Trigger", {"reset": True})
+            assert mp.service_response(on.mapping) == {"success": "accepted", "message": "reason"}
+        if rover.drive is not None:
+            stop = services["/drive/stop"]
+            assert (stop.key, stop.mapping.write) == (f"lunaris/{rover.id}/input/drive/traverse", "delete")
+        # the same switch as a topic, for a dashboard that publishes instead of calling
+        enable = {b.topic: b for b in bindings if b.mapping.kind == "topic" and b.mapping.direction == "in"}
+        assert {t for t in enable if t.endswith("/enable")} == {f"/pdm/rail_{r}/enable" for r in switched}
+        from services.bridge import convert
+        b = enable[f"/pdm/rail_{switched[0]}/enable"]
+        assert convert.in_payload(b.mapping, {"data": False}) == {"on": False}
+    assert mf.bridge.crew_view == "symptoms"
+
+
+def test_every_problem_of_a_bad_service_entry_is_named():
+    text = """
+bridge: {crew_view: everything}
+mappings:
+  - {topic: /a, kind: service, type: std_srvs/srv/Nope, key: "lunaris/{rover}/cmd/rail/{rail}",
+     request: {on: data}}
+  - {topic: /b, kind: service, type: std_srvs/srv/SetBool, key: "lunaris/{rover}/battery/state"}
+  - {topic: "/c/{rail}", kind: service, type: std_srvs/srv/SetBool, key: "lunaris/{rover}/cmd/rail/{rail}",
+     request: {on: value, colour: data}, field: on}
+  - {topic: /d, kind: service, type: std_srvs/srv/Trigger, key: "lunaris/{rover}/cmd/rail/{rail}",
+     payload: {reset: true}}
+  - {topic: "/e/{rail}", kind: service, type: std_srvs/srv/Trigger, key: "lunaris/{rover}/cmd/rail/{rail}",
+     write: delete}
+  - {topic: /f, kind: service, type: std_srvs/srv/Trigger, key: "lunaris/{rover}/input/drive/traverse"}
+  - {topic: "/g/{rail}", kind: service, type: std_srvs/srv/Trigger, key: "lunaris/{rover}/cmd/rail/{rail}",
+     payload: {reset: 1}, response: {success: reason, status: accepted}}
+  - {topic: /h, kind: gadget, type: std_msgs/msg/Bool, key: "lunaris/{rover}/battery/state",
+     field: operational}
+  - {topic: /i, type: std_msgs/msg/Bool, key: "lunaris/{rover}/battery/state", field: operational,
+     request: {on: data}, payload: {reset: true}}
+  - {topic: "/j/{rail}", type: std_msgs/msg/Bool, key: "lunaris/{rover}/cmd/rail/{rail}", direction: in,
+     field: on, payload: {on: true, volts: 3}}
+  - {topic: /i, kind: service, type: std_srvs/srv/Trigger, key: "lunaris/{rover}/input/drive/traverse",
+     write: delete}
+"""
+    with pytest.raises(ConfigError) as err:
+        mapping(text)
+    problems = err.value.problems
+    expected = [
+        "bridge.crew_view: expected symptoms or full, got 'everything'",
+        "mappings[0].type: unknown ROS 2 service type 'std_srvs/srv/Nope'",
+        "mappings[0].topic: must contain {rail} like the key",
+        "mappings[1].key: a service writes a key the twin reads",
+        "mappings[2].field: not used by a service",
+        "mappings[2].request.on: the std_srvs/srv/SetBool request has no field 'value'",
+        "mappings[2].request.colour: RailCommand has no field 'colour'",
+        "mappings[3].topic: must contain {rail} like the key",
+        "mappings[4].write: cmd/rail/* takes a put, not a delete",
+        "mappings[5].request: the write DriveTraverse needs waypoints",
+        "mappings[6].payload.reset: RailCommand.reset is a bool, not 1",
+        "mappings[6].response.success: reason is a string, the response's success a bool",
+        "mappings[6].response.status: the std_srvs/srv/Trigger response has no field 'status'",
+        "mappings[7].kind: expected topic or service, got 'gadget'",
+        "mappings[8].request: only a service (kind: service) has a request",
+        "mappings[8].payload: only an inbound topic or a service writes a payload",
+        "mappings[9].payload.on: also taken from the message",
+        "mappings[9].payload.volts: RailCommand has no field 'volts'",
+        "mappings[10].topic: the service /i has the name of the topic of mappings[8]",
+    ]
+    for want in expected:
+        assert any(p.startswith(want) for p in problems), f"{want!r} not in {problems}"

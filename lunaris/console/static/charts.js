@@ -64,8 +64,16 @@ const labels = (write) => (u, splits, axisIdx, _space, step) => {
 /** @param {number} step @returns {number} the decimals a value needs at this step */
 const decimals = (step) => Math.max(0, Math.min(3, -Math.floor(Math.log10(step) + 1e-9)));
 
+/**
+ * Room for each time label: 84 px where the plot is wide, down to the 64 px an hh:mm:ss label
+ * and its gap need, so that a narrow plot still shows several (at 84 px, 384 px of 570 s
+ * showed only 00:05:00).
+ * @type {uPlot.Axis.Space}
+ */
+const timeSpace = (_u, _axis, _min, _max, dim) => Math.max(64, Math.min(84, dim / 5));
+
 /** @type {uPlot.Axis} */
-const timeAxis = {stroke: INK, grid: {stroke: GRID}, size: 26, font: FONT, space: 84, incrs: TIME_STEPS,
+const timeAxis = {stroke: INK, grid: {stroke: GRID}, size: 26, font: FONT, space: timeSpace, incrs: TIME_STEPS,
                   values: labels((v) => clockText(v))};
 
 /** @param {string} label @param {string} scale @param {number} side */

@@ -19,6 +19,7 @@
  * @property {string} service
  * @property {Array<ActiveFault>} faults
  * @property {number} [epoch]
+ * @property {string} [session]
  */
 /**
  * @typedef {Object} BatteryState
@@ -35,7 +36,7 @@
  * @property {number} fault_code
  * @property {Array<string>} faults
  * @property {number | null} time_to_empty_s
- * @property {number} [heat_w]
+ * @property {number} [heat_w] - the heat of the pack's own electrical losses (I^2 R) [W]; an injected heating fault is not in it: it shows only as the temperature it raises
  * @property {Array<number>} [polarisation_v]
  * @property {number} [depleted_soc] - the state of charge at which the pack counts as empty and goes off line (0..1, the rover file's depleted_soc): time_to_empty_s is the time to reach it at the present draw
  * @property {number | null} [cutoff_v] - the BMS cut-off [V] (cells_series * cutoff_cell_v): when the terminal voltage under load falls below it the pack stops supplying, which a heavy draw can bring before depleted_soc; null when the rover file sets none
@@ -49,6 +50,7 @@
  * @property {boolean} paused
  * @property {number} [epoch]
  * @property {string} [cause]
+ * @property {string} [session]
  */
 /**
  * ``drive/route``: the traverse the rover follows, for a map. Published when it changes
@@ -91,13 +93,24 @@
  * @property {number} t_s
  * @property {"critical" | "info" | "warning"} severity
  * @property {string} source
- * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "journal_gap" | "rejected" | "scenario" | "session" | "state_damaged"} kind
+ * @property {"clock" | "command" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "journal_gap" | "mark" | "rejected" | "scenario" | "session" | "state_damaged"} kind
  * @property {string} key
  * @property {string} message
  * @property {Record<string, unknown> | null} [params]
  * @property {string} [source_id]
  * @property {number} [seq]
  * @property {string} [actor]
+ * @property {string} [session]
+ */
+/**
+ * An expect step's score as it stands: met (true), missed (false), or not yet (null).
+ * @typedef {Object} ExpectProgress
+ * @property {string} label
+ * @property {string} condition
+ * @property {number} within_s
+ * @property {boolean | null} [met]
+ * @property {number | null} [met_t_s]
+ * @property {number | null} [deadline_t_s]
  */
 /**
  * @typedef {Object} LoadPower
@@ -230,6 +243,7 @@
  * @property {string} [detail]
  * @property {number | null} [armed_t_s]
  * @property {number | null} [fired_t_s]
+ * @property {ExpectProgress | null} [expect]
  */
 /**
  * ``umbilical/state``: whether the umbilical supplies the rover, and where its cable was

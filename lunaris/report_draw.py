@@ -1,0 +1,367 @@
+"""The debrief's figure and page for one session (``lunaris report``): drawn with matplotlib's
+Agg backend (no display needed).
+
+One figure against the time since the session's start (simulated time; a restore within the
+session goes on from where it was): what happened (the session's events in lanes: faults, crew
+and instructor actions - rail commands, inputs, clock changes -, resets, restores and
+snapshots, the scenario's steps), **the score sheet** under it (each fault injected: from its
+injection to its resolution, its first symptom, the crew's actions, accepted or refused, and
+its resolution; each expectation of the scenario from when it was armed to its deadline, met or
+missed: :mod:`common.response`), state of charge, battery voltage and current, battery
+temperature, the power of each load, generation against the load, and each radio link in and
+out of range. Alarm thresholds are drawn where the rover file defines them. Every event is a
+mark across the plots; labels are placed so that they never overlap, and those that find no
+room are counted (the HTML table has them all). Events replayed from before the recording
+started are listed as such, not drawn. A rover that drove also gets its path in the site
+frame, coloured by the drive's power.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+
+from common import keys
+from common.response import SessionResponse
+from lunaris.report_session import Session
+
+__all__ = ["draw", "html_page", "place_labels", "score_rows"]
+
+MARK_KINDS = {"fault_injected": "+", "fault_cleared": "-", "fault_raised": "!",
+              "fault_resolved": "ok ", "rejected": "x ", "command": "", "input": "", "clock": "",
+              "session": "", "scenario": ""}
+# The timeline's lanes, top to bottom: which event kinds each shows.
+LANES = (("scenario", ("scenario",)), ("session", ("session",)),
+         ("actions", ("command", "input", "clock")),
+         ("faults", ("fault_injected", "fault_cleared", "fault_raised", "fault_resolved", "rejected")))
+LANE_COLOUR = {"scenario": "tab:purple", "session": "black", "actions": "tab:green"}
+SEVERITY_COLOUR = {"info": "tab:blue", "warning": "tab:orange", "critical": "tab:red"}
+
+
+
+def _marks(s: Session) -> list[dict]:
+    """The events drawn: those of the recording (not replayed from before it), of a mark kind."""
+    return [e for e in s.events if e.get("kind") in MARK_KINDS and e.get("at_s") is not None]
+
+
+def _short(s: Session, e: dict) -> str:
+    kind = e.get("kind", "")
+    if kind == "scenario":
+        return str(e.get("message", "")).split(": ", 1)[-1][:48]
+    if kind in ("command", "input", "clock", "session"):
+        return str(e.get("message", ""))[:40]
+    name = e.get("key", "").removeprefix(keys.rover_prefix(s.rover) + "/").removeprefix("fault/")
+    return f"{MARK_KINDS.get(kind, '')}{name}"
+
+
+def place_labels(marks: list[tuple[float, str]], span_s: float, width_chars: float,
+                 rows: int) -> tuple[list[tuple[float, str, int]], int]:
+    """Labels that do not overlap: ``(time, text)`` marks on an axis ``span_s`` wide that holds
+    ``width_chars`` characters, each put on the first of ``rows`` rows where it fits; the
+    labels placed ``(time, text, row)`` and how many found no room."""
+    per_char = span_s / max(1.0, width_chars)
+    ends = [float("-inf")] * rows
+    placed, dropped = [], 0
+    for t, text in sorted(marks):
+        for row in range(rows):
+            if t >= ends[row]:
+                ends[row] = t + (len(text) + 2) * per_char
+                placed.append((t, text, row))
+                break
+        else:
+            dropped += 1
+    return placed, dropped
+
+
+def draw(s: Session, title: str):
+    """The debrief figure of one rover (a matplotlib Figure, Agg backend)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    drove = len(s.path[0]) > 0
+    radios = sorted(s.radios)
+    rows = score_rows(s.score)
+    ratios = ([1.3, 0.3 + 0.22 * max(1, len(rows)), 1, 1, 1, 1, 1]
+              + ([0.25 + 0.2 * len(radios)] if radios else []) + ([2.2] if drove else []))
+    fig, all_axes = plt.subplots(len(ratios), 1, figsize=(13, 4 * sum(ratios) + 1),
+                                 constrained_layout=True, gridspec_kw={"height_ratios": ratios})
+    n_time = 7 + (1 if radios else 0)
+    axes = list(all_axes[:n_time])  # against time
+    for ax in axes[1:]:
+        ax.sharex(axes[0])
+    ax_tl, ax_score, ax_soc, ax_vi, ax_temp, ax_loads, ax_gen = axes[:7]
+    b = s.battery
+    ax_soc.plot(b["soc"][0], [x * 100 for x in b["soc"][1]], color="tab:green")
+    ax_soc.set_ylabel("state of charge [%]")
+    ax_vi.plot(*b["voltage_v"], color="tab:blue", label="voltage")
+    ax_vi.set_ylabel("battery voltage [V]", color="tab:blue")
+    ax_i = ax_vi.twinx()
+    ax_i.plot(*b["current_a"], color="tab:red", label="current", linewidth=0.8)
+    ax_i.set_ylabel("battery current [A]", color="tab:red")
+    ax_temp.plot(*b["temperature_c"], color="tab:purple")
+    ax_temp.set_ylabel("battery temperature [C]")
+    for ax, name in ((ax_soc, "soc"), (ax_temp, "temperature")):
+        for value, label in s.thresholds.get(name, []):
+            ax.axhline(value, color="tab:red" if "cut" in label or "depleted" in label else "tab:orange",
+                       linewidth=1.0, linestyle="--", alpha=0.8)
+            ax.annotate(label, xy=(1.0, value), xycoords=("axes fraction", "data"), xytext=(-4, 2),
+                        textcoords="offset points", ha="right", fontsize="x-small", color="tab:red")
+    for name, series in sorted(s.loads.items()):
+        ax_loads.plot(*series, label=name, linewidth=0.8)
+    ax_loads.set_ylabel("load power [W]")
+    if s.loads:
+        ax_loads.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    for name, series in sorted(s.panels.items()):
+        ax_gen.plot(*series, label=f"solar {name}", linewidth=0.8)
+    if s.umbilical[0]:
+        ax_gen.plot(*s.umbilical, label="umbilical", linewidth=0.8)
+    ax_gen.plot(*s.summary["generation_w"], label="generation (total)", color="black")
+    ax_gen.plot(*s.summary["load_power_w"], label="loads (total)", color="tab:gray", linestyle="--")
+    ax_gen.set_ylabel("power [W]")
+    ax_gen.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="small")
+    if radios:
+        _draw_radios(axes[7], s, radios)
+    axes[-1].set_xlabel("time since the start of the session [s of simulated time]")
+    t0, t1 = s.span_s
+    t1 = max(t1, t0 + 1e-3)
+    marks = [e for e in _marks(s) if t0 <= e["at_s"] <= t1 + 1.0]
+    for ax in (*axes[2:7], ax_i):
+        ax.ticklabel_format(axis="y", useOffset=False)
+    axes[0].set_xlim(t0, t1)
+    _draw_score(ax_score, s, rows)
+    for ax in axes[2:]:
+        ax.grid(True, alpha=0.3)
+        for e in marks:
+            ax.axvline(e["at_s"], color=_colour(e), alpha=0.5, linewidth=1.0,
+                       linestyle=":" if e.get("kind") in ("rejected", "scenario") else "-")
+    _draw_timeline(ax_tl, s, marks, t1 - t0)
+    if drove:
+        _draw_path(fig, all_axes[-1], s)
+    before = sum(1 for e in s.events if e.get("at_s") is None)
+    fig.suptitle(title + (f" ({before} event(s) from before the recording: in the table)" if before else ""))
+    return fig
+
+
+def score_rows(score: SessionResponse | None) -> list[tuple[str, object]]:
+    """The rows of the score sheet: ``("fault", FaultResponse)`` then ``("expect", Expectation)``."""
+    if score is None:
+        return []
+    return [("fault", f) for f in score.faults] + [("expect", e) for e in score.expectations]
+
+
+def _since(a: float | None, b: float | None) -> str:
+    return "-" if a is None or b is None else f"+{a - b:.1f} s"
+
+
+def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
+    """The score sheet under the timeline: a row per fault (its life from injection to
+    resolution, its first symptom, each crew action, its resolution) and per expectation
+    (armed to its deadline, met or missed)."""
+    from matplotlib.lines import Line2D
+
+    from common.response import Expectation, FaultResponse
+
+    n = max(1, len(rows))
+    ax.set_ylim(-0.5, n - 0.5)
+    ax.invert_yaxis()
+    ax.grid(True, axis="x", alpha=0.3)
+    t_end = s.span_s[1]
+    labels = []
+    for y, (what, item) in enumerate(rows):
+        if what == "fault":
+            assert isinstance(item, FaultResponse)
+            f = item
+            labels.append(f.fault[:34] or f.key[-34:])
+            x0 = s.x(f.injected_t_s)
+            x1 = s.x(f.resolved_t_s) if f.resolved_t_s is not None else t_end
+            ax.broken_barh([(x0, max(1e-3, x1 - x0))], (y - 0.18, 0.36),
+                           color="#c8e6c9" if f.resolved_t_s is not None else "#ffcdd2")
+            ax.plot([x0], [y], marker="|", color="black", markersize=14)
+            if f.first_symptom_t_s is not None:
+                ax.plot([s.x(f.first_symptom_t_s)], [y], marker="D", color="tab:orange", markersize=6)
+            for a in f.crew_actions:
+                ax.plot([s.x(a.t_s)], [y], marker="^" if a.accepted else "x", markersize=7,
+                        color="tab:green" if a.accepted else "tab:red")
+            if f.resolved_t_s is not None:
+                ax.plot([x1], [y], marker="s", color="tab:green", markersize=6)
+            text = (f"symptom {_since(f.first_symptom_t_s, f.injected_t_s)}, first crew action "
+                    f"{_since(f.first_crew_action_t_s, f.first_symptom_t_s or f.injected_t_s)}, "
+                    f"resolved {_since(f.resolved_t_s, f.injected_t_s)}; "
+                    f"{len(f.crew_actions)} crew action(s)")
+            ax.text(x0, y - 0.26, text, fontsize="x-small", va="bottom", clip_on=True)
+        else:
+            assert isinstance(item, Expectation)
+            e = item
+            labels.append(("expect: " + e.label)[:34])
+            if e.armed_t_s is not None and e.deadline_t_s is not None:
+                a0, a1 = s.x(e.armed_t_s), s.x(e.deadline_t_s)
+                ax.broken_barh([(a0, max(1e-3, a1 - a0))], (y - 0.18, 0.36), color="#e1d5f0")
+            if e.met and e.at_t_s is not None:
+                at = s.x(e.at_t_s)
+                ax.plot([at], [y], marker="o", color="tab:green", markersize=8)
+                took = "" if e.armed_t_s is None else f" in {e.at_t_s - e.armed_t_s:.1f} s"
+                ax.text(at, y - 0.26, f"met{took} (within {e.within_s:g} s)", fontsize="x-small",
+                        va="bottom", color="tab:green", clip_on=True)
+            else:
+                at = s.x(e.deadline_t_s) if e.deadline_t_s is not None else t_end
+                word = "missed" if e.met is False else "pending"
+                ax.plot([at], [y], marker="X", color="tab:red", markersize=8)
+                ax.text(at, y - 0.26, f"{word} (within {e.within_s:g} s)", fontsize="x-small",
+                        va="bottom", ha="right", color="tab:red", clip_on=True)
+    ax.set_yticks(range(len(rows)), labels, fontsize="small")
+    faults = sum(1 for w, _ in rows if w == "fault")
+    expects = [item for w, item in rows if w == "expect"]
+    met = sum(1 for e in expects if getattr(e, "met", False))
+    ax.set_title(f"score sheet: {faults} fault(s); {met} of {len(expects)} expectation(s) met"
+                 if rows else "score sheet: no fault injected, no expectation in this session",
+                 fontsize="medium", loc="left")
+    if rows:
+        ax.legend(handles=[
+            Line2D([], [], marker="D", color="tab:orange", linestyle="", label="first symptom"),
+            Line2D([], [], marker="^", color="tab:green", linestyle="", label="crew action"),
+            Line2D([], [], marker="x", color="tab:red", linestyle="", label="refused"),
+            Line2D([], [], marker="s", color="tab:green", linestyle="", label="resolved"),
+            Line2D([], [], marker="o", color="tab:green", linestyle="", label="met"),
+            Line2D([], [], marker="X", color="tab:red", linestyle="", label="missed")],
+            loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize="x-small")
+
+
+def _colour(e: dict) -> str:
+    kind = e.get("kind", "")
+    lane = next((name for name, kinds in LANES if kind in kinds), "faults")
+    return LANE_COLOUR.get(lane) or SEVERITY_COLOUR.get(e.get("severity", ""), "gray")
+
+
+def _draw_timeline(ax, s: Session, marks: list[dict], span_s: float) -> None:
+    """The session's events in lanes, each label on a row where it overlaps no other."""
+    rows = 3
+    ax.set_ylim(0, len(LANES) * rows)
+    ax.set_yticks([(len(LANES) - 1 - i) * rows + rows / 2 for i in range(len(LANES))],
+                  [name for name, _ in LANES])
+    ax.tick_params(axis="y", length=0)
+    ax.grid(True, axis="x", alpha=0.3)
+    dropped = 0
+    for i, (_name, kinds) in enumerate(LANES):
+        base = (len(LANES) - 1 - i) * rows
+        ax.axhline(base, color="#dddddd", linewidth=0.8)
+        lane = [e for e in marks if e.get("kind") in kinds]
+        for e in lane:
+            ax.plot([e["at_s"]], [base + 0.35], marker="|", color=_colour(e), markersize=8)
+        placed, lost = place_labels([(e["at_s"], _short(s, e)) for e in lane], span_s, 150, rows)
+        dropped += lost
+        colours = {(e["at_s"], _short(s, e)): _colour(e) for e in lane}
+        for t, text, row in placed:
+            ax.text(t, base + rows - 0.6 - row * 0.95, text, fontsize="x-small", va="center",
+                    color=colours[(t, text)], clip_on=True)
+    ax.set_title("what happened" + (f" ({dropped} more label(s) without room: see the event table)"
+                                    if dropped else ""), fontsize="medium", loc="left")
+
+
+def _draw_radios(ax, s: Session, radios: list[str]) -> None:
+    """Each radio link in range (green) or out (red), as bars over time."""
+    for i, name in enumerate(radios):
+        ts, vs = s.radios[name]
+        spans: dict[bool, list[tuple[float, float]]] = {True: [], False: []}
+        for k in range(len(ts)):
+            end = ts[k + 1] if k + 1 < len(ts) else ts[k] + 0.5
+            spans[vs[k] > 0.5].append((ts[k], max(1e-3, end - ts[k])))
+        ax.broken_barh(spans[True], (i + 0.15, 0.7), color="tab:green", alpha=0.7)
+        ax.broken_barh(spans[False], (i + 0.15, 0.7), color="tab:red", alpha=0.8)
+    ax.set_yticks([i + 0.5 for i in range(len(radios))], [f"{r} link" for r in radios])
+    ax.set_ylim(0, len(radios))
+    ax.set_title("radio links: green in range, red out of range", fontsize="small", loc="left")
+
+
+def _draw_path(fig, ax, s: Session) -> None:
+    """The path in the site frame, each position coloured by the drive's power then (the
+    hottest drawn last, so a grade driven both ways shows the climb)."""
+    xs, ys, power = s.path
+    order = sorted(range(len(xs)), key=power.__getitem__)
+    dots = ax.scatter([xs[i] for i in order], [ys[i] for i in order], c=[power[i] for i in order],
+                      cmap="plasma", s=10, linewidths=0)
+    fig.colorbar(dots, ax=ax, label="drive power [W]")
+    ax.plot(xs[:1], ys[:1], marker="o", color="tab:green", linestyle="", label="first position")
+    ax.plot(xs[-1:], ys[-1:], marker="s", color="black", linestyle="", label="last position")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x, east [m]")
+    ax.set_ylabel("y, north [m]")
+    ax.set_title("path in the site frame, coloured by the drive's power", fontsize="medium")
+    ax.legend(loc="upper left", fontsize="small")
+    ax.grid(True, alpha=0.3)
+
+
+def _t(t: float | None) -> str:
+    return "-" if t is None else f"{t:.1f}"
+
+
+def _score_html(score: SessionResponse | None) -> str:
+    """The score sheet as tables: the faults with their times and actions, the expectations."""
+    if score is None:
+        return ""
+    e = html.escape
+    faults = "\n".join(
+        f"<tr class='{'resolved' if f.resolved_t_s is not None else 'open'}'>"
+        f"<td>{e(f.fault)}</td><td>{e(json_params(f.params))}</td><td>{e(f.injected_by)}</td>"
+        f"<td>{_t(f.injected_t_s)}</td>"
+        f"<td>{_t(f.first_symptom_t_s)} ({_since(f.first_symptom_t_s, f.injected_t_s)})<br>"
+        f"<small>{e(f.symptom)}</small></td>"
+        f"<td>{_t(f.first_crew_action_t_s)}</td>"
+        f"<td>{_t(f.resolved_t_s)} ({_since(f.resolved_t_s, f.injected_t_s)})<br>"
+        f"<small>{e(f.resolved_by)}</small></td>"
+        f"<td>{'<br>'.join(f'{a.t_s:.1f} {e(a.action)} {e(a.target)}' + ('' if a.accepted else ' <b>refused</b>: ' + e(a.message)) for a in f.crew_actions) or '-'}</td></tr>"  # noqa: E501
+        for f in score.faults)
+    expects = "\n".join(
+        f"<tr class='{'met' if x.met else 'missed'}'><td>{e(x.label)}</td><td>{e(x.condition)}</td>"
+        f"<td>{x.within_s:g}</td><td>{_t(x.armed_t_s)}</td>"
+        f"<td>{'met at ' + _t(x.at_t_s) if x.met else ('missed' if x.met is False else 'pending')}"
+        f"</td><td>{e(x.detail)}</td></tr>" for x in score.expectations)
+    trainee = f" - trainee {e(score.trainee)}" if score.trainee else ""
+    return f"""<h2>Score sheet: session {e(score.session)}{trainee}</h2>
+<h3>Faults ({len(score.faults)})</h3>
+<table><tr><th>fault</th><th>parameters</th><th>injected by</th><th>injected [sim s]</th>
+<th>first symptom</th><th>first crew action</th><th>resolved</th><th>crew actions</th></tr>
+{faults}
+</table>
+<h3>Expectations ({sum(1 for x in score.expectations if x.met)} of {len(score.expectations)} met)</h3>
+<table><tr><th>expectation</th><th>condition</th><th>within [s]</th><th>armed [sim s]</th><th>outcome</th>
+<th>detail</th></tr>
+{expects}
+</table>
+"""
+
+
+def json_params(params: dict) -> str:
+    return ", ".join(f"{k}={v}" for k, v in params.items())
+
+
+def html_page(s: Session, title: str, png: bytes) -> str:
+    def when(e: dict) -> str:
+        return "before the recording" if e.get("at_s") is None else f"{e['at_s']:.1f}"
+    rows = "\n".join(
+        f"<tr class='{html.escape(e.get('severity', ''))}{' before' if e.get('at_s') is None else ''}'>"
+        f"<td>{when(e)}</td><td>{e.get('t_s', 0.0):.1f}</td>"
+        f"<td>{html.escape(e.get('severity', ''))}</td><td>{html.escape(e.get('source', ''))}</td>"
+        f"<td>{html.escape(e.get('kind', ''))}</td><td>{html.escape(e.get('message', ''))}</td></tr>"
+        for e in s.events)
+    return f"""<!doctype html>
+<html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 2em; }}
+table {{ border-collapse: collapse; }} td, th {{ padding: 2px 8px; border-bottom: 1px solid #ddd; }}
+tr.warning td {{ color: #b36b00; }} tr.critical td {{ color: #c00; font-weight: bold; }}
+tr.before td {{ color: #888; font-style: italic; }}
+tr.met td, tr.resolved td {{ color: #1b5e20; }} tr.missed td, tr.open td {{ color: #b71c1c; }}
+</style></head>
+<body>
+<h1>{html.escape(title)}</h1>
+<img alt="session plots" src="data:image/png;base64,{base64.b64encode(png).decode()}">
+{_score_html(s.score)}
+<h2>Events ({len(s.events)})</h2>
+<table><tr><th>t [s since the start]</th><th>sim t [s]</th><th>severity</th><th>source</th><th>kind</th>
+<th>message</th></tr>
+{rows}
+</table>
+</body></html>
+"""
