@@ -5,10 +5,15 @@ rover of the list, the (K+N)-th, and so on (the bridge shares a large fleet so).
 still knows the whole fleet: each rover keeps its own ROS 2 domain and topic names whichever
 process serves it.
 
-A service module may define ``serves(rover) -> bool``: the rovers it has nothing to do for
-are left out (the drive serves only rovers with a ``drive`` section). When that leaves no
-rover, the service says so and exits 0 at once: ``lunaris up`` does not start it then, and a
-container of it stops cleanly instead of serving nothing.
+A service module (``services/<name>/service.py``) holds a node, ``NODE``: a
+:class:`common.node.Node` class, made with the rovers it serves and attached to the runtime,
+which declares its ports. (The clock, the faults service and the bridge still define
+``serve(rt, rovers, ...)``, which declares what they need on the runtime itself.)
+
+A node's ``serves(rover)`` (or a module's ``serves``) leaves out the rovers a service has
+nothing to do for (the drive serves only rovers with a ``drive`` section). When that leaves
+no rover, the service says so and exits 0 at once: ``lunaris up`` does not start it then,
+and a container of it stops cleanly instead of serving nothing.
 """
 
 from __future__ import annotations
@@ -67,7 +72,9 @@ def load_rovers(paths: list[str]) -> list[Rover]:
 
 def served(service: str, rovers: list[Rover]) -> list[Rover]:
     """The rovers a service has something to do for (see the module's docstring)."""
-    serves = getattr(importlib.import_module(f"services.{service}.service"), "serves", None)
+    module = importlib.import_module(f"services.{service}.service")
+    node = getattr(module, "NODE", None)
+    serves = node.serves if node is not None else getattr(module, "serves", None)
     return [r for r in rovers if serves is None or serves(r)]
 
 
@@ -111,7 +118,11 @@ def main(args: argparse.Namespace) -> int:
         supervisor = os.environ.get(SUPERVISOR_ENV)
         if supervisor and supervisor.isdigit():
             rt.watch_parent(int(supervisor))
-        module.serve(rt, rovers, **options)
+        node = getattr(module, "NODE", None)
+        if node is not None:
+            node(rovers, seed=args.seed).attach(rt)
+        else:
+            module.serve(rt, rovers, **options)
         print(f"lunaris {args.service}: serving {', '.join(r.id for r in rovers)}", flush=True)
         rt.run()
     return 0

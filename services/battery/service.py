@@ -15,19 +15,23 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from typing import Any, NamedTuple
+
+import zenoh
 
 from common import keys
 from common.config import Battery as BatteryConfig
 from common.config import Rover
 from common.faults import Fault, battery_fault_code
-from common.messages import BatteryState, Clock, PowerSummary, decode
+from common.messages import BatteryState, Clock, PowerSummary, Prediction
+from common.node import Answers, Every, Node, Owns, PerRover, Publishes, Reads
 from common.runtime import Runtime, Sample
 from services.battery.circuit import circuit_tables
 from services.battery.model import BatteryModel
 from services.battery.query import PredictionQueries
 
-__all__ = ["Limits", "limits", "serve"]
+__all__ = ["NODE", "BatteryNode", "Limits", "Pack", "limits"]
 
 PERSIST_S = 0.2  # wall time between saves: what a killed battery service can lose
 HOLD_S = 0.04  # the longest a tick's state waits for the PDM's summary [s of wall time]
@@ -47,81 +51,103 @@ def limits(cfg: BatteryConfig) -> Limits:
     return Limits(cfg.depleted_soc, circuit_tables(cfg).cutoff_v)
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    config = {r.id: r.battery for r in rovers}
-    empty = {r.id: limits(r.battery) for r in rovers}
-    packs = {r.id: BatteryModel(r.battery) for r in rovers}
-    stepped_t: dict[str, float] = dict.fromkeys(packs, 0.0)  # sim time each pack has reached
-    generation: dict[str, float] = {}  # the last generation each rover's PDM reported
+@dataclass
+class Pack(PerRover):
+    """One rover's pack and what the service remembers beside it."""
 
-    def publish(rover: str, t_s: float | None = None) -> None:
-        pack = packs[rover]
-        r = pack.reading()
-        rt.faults.sync_derived(rover, "battery", pack.derived_faults())
-        rt.publish(keys.battery_state(rover), BatteryState(
-            t_s=rt.t_s[rover] if t_s is None else t_s, fault_code=battery_fault_code(r.faults),
-            depleted_soc=empty[rover].depleted_soc, cutoff_v=empty[rover].cutoff_v,
-            **r._asdict()))
+    cfg: BatteryConfig
+    model: BatteryModel
+    limits: Limits
+    stepped_t: float = 0.0  # the sim time the pack has reached [s]
+    generation_w: float | None = None  # the last generation the PDM reported (None: not yet)
+    held_until: float | None = None  # monotonic time this tick's state goes out anyway
+    heard_at: float = -math.inf  # monotonic time of the PDM's last summary
+    summary_t: float | None = None  # sim time of the PDM's last summary
+
+
+class BatteryNode(Node[Pack]):
+    """The packs of the rovers served: stepped with the clock, their demand from the PDM."""
+
+    name = "battery"
+    reads = (Reads("power/summary", PowerSummary, "on_summary", deletes="reject"),)
+    publishes = (Publishes("battery/state", BatteryState),)
+    owns = (Owns("battery", "apply_faults"),)
+    answers = (Answers("prediction", Prediction, "on_prediction"),)
+    timers = (Every(HOLD_S / 4, "release_held"),)
+    persist_every_s = PERSIST_S
+
+    def rover_state(self, rover: Rover) -> Pack:
+        return Pack(rover.id, rover.battery, BatteryModel(rover.battery), limits(rover.battery))
+
+    def attach(self, rt: Runtime) -> None:
+        self.queries = PredictionQueries(rt.zenoh_session, self.configs, self.snapshot)
+        rt.on_exit(self.queries.close)
+        super().attach(rt)
+
+    def publish_state(self, pack: Pack, t_s: float | None = None) -> None:
+        r = pack.model.reading()
+        self.rt.faults.sync_derived(pack.id, "battery", pack.model.derived_faults())
+        self.publish(keys.battery_state(pack.id), BatteryState(
+            t_s=self.rt.t_s[pack.id] if t_s is None else t_s,
+            fault_code=battery_fault_code(r.faults), depleted_soc=pack.limits.depleted_soc,
+            cutoff_v=pack.limits.cutoff_v, **r._asdict()))
 
     # One sample per tick: while the PDM is heard from, a tick's state waits for the PDM's
     # summary of that tick (the demand its loads just set), up to HOLD_S; a summary that
     # changes the demand between ticks (a fault) is published at once.
-    held: dict[str, float] = {}  # rover -> monotonic time its tick's state goes out anyway
-    heard: dict[str, float] = {}  # rover -> monotonic time of its last summary
 
-    def on_tick(rover: str, tick: Clock) -> None:
-        if held.pop(rover, None) is not None:  # the last tick's summary never came: its state
-            publish(rover, stepped_t[rover])   # goes out now, with its own time
-        dt = tick.t_s - stepped_t[rover]
+    def on_tick(self, pack: Pack, tick: Clock) -> None:
+        if pack.held_until is not None:  # the last tick's summary never came: its state goes
+            pack.held_until = None        # out now, with its own time
+            self.publish_state(pack, pack.stepped_t)
+        dt = tick.t_s - pack.stepped_t
         if dt > 0.0:
-            packs[rover].step(dt)
-            stepped_t[rover] = tick.t_s
+            pack.model.step(dt)
+            pack.stepped_t = tick.t_s
         now = time.monotonic()
-        if now - heard.get(rover, -math.inf) < PDM_HEARD_S:
-            held[rover] = now + HOLD_S
+        if now - pack.heard_at < PDM_HEARD_S:
+            pack.held_until = now + HOLD_S
         else:
-            publish(rover)
+            self.publish_state(pack)
 
-    def release_held() -> None:
+    def release_held(self) -> None:
         now = time.monotonic()
-        for rover in [r for r, due in held.items() if now >= due]:
-            del held[rover]
-            publish(rover)
+        for pack in self.rovers.values():
+            if pack.held_until is not None and now >= pack.held_until:
+                pack.held_until = None
+                self.publish_state(pack)
 
-    summary_t: dict[str, float] = {}  # rover -> sim time of its last summary
-
-    def on_summary(s: Sample) -> None:
-        summary = decode(s.payload, PowerSummary)
-        pack = packs[s.rover]
-        generation[s.rover] = summary.generation_w
-        heard[s.rover] = time.monotonic()
-        changed = summary.net_battery_power_w != pack.demand_w
+    def on_summary(self, pack: Pack, summary: PowerSummary, s: Sample) -> None:
+        pack.generation_w = summary.generation_w
+        pack.heard_at = time.monotonic()
+        changed = summary.net_battery_power_w != pack.model.demand_w
         if changed:
-            pack.set_demand(summary.net_battery_power_w)
+            pack.model.set_demand(summary.net_battery_power_w)
         # The tick's state waits for this (held); a later summary of the same tick is news
         # between ticks (a fault, a command): the bus voltage and current move at once. The
         # first summary of a tick arriving after its state went out anyway (a PDM lagging
         # under load) sets the demand for the next tick: never two states for one tick.
-        again = summary_t.get(s.rover) == summary.t_s
-        summary_t[s.rover] = summary.t_s
-        if s.rover in held or (changed and again):
-            held.pop(s.rover, None)
-            publish(s.rover)
+        again = pack.summary_t == summary.t_s
+        pack.summary_t = summary.t_s
+        if pack.held_until is not None or (changed and again):
+            pack.held_until = None
+            self.publish_state(pack)
 
-    def apply_faults(rover: str, _: str | None, faults: tuple[Fault, ...]) -> None:
-        packs[rover].set_faults(faults)
-        publish(rover)
+    def apply_faults(self, pack: Pack, _: str | None, faults: tuple[Fault, ...]) -> None:
+        pack.model.set_faults(faults)
+        self.publish_state(pack)
 
-    def get_state(rover: str) -> dict[str, Any]:
-        return {**packs[rover].state(), "t_s": stepped_t[rover]}
+    # -- state ------------------------------------------------------------------------------
 
-    def set_state(rover: str, state: dict[str, Any]) -> None:
-        packs[rover].set_state(state)
-        stepped_t[rover] = float(state.get("t_s", 0.0))
+    def get_state(self, pack: Pack) -> dict[str, Any]:
+        return {**pack.model.state(), "t_s": pack.stepped_t}
 
-    def check_state(rover: str, state: dict[str, Any]) -> None:
-        """The ranges of a saved state (the keeper checks the types and finite numbers)."""
-        capacity = config[rover].capacity_j
+    def set_state(self, pack: Pack, state: dict[str, Any]) -> None:
+        pack.model.set_state(state)
+        pack.stepped_t = float(state.get("t_s", 0.0))
+
+    def check_state(self, pack: Pack, state: dict[str, Any]) -> None:
+        capacity = pack.cfg.capacity_j
         if not 0.0 <= state.get("energy_j", 0.0) <= capacity:
             raise ValueError(f"energy_j {state['energy_j']} J is outside 0 .. {capacity} J")
         if not state.get("temperature_c", 0.0) > -273.15:
@@ -129,25 +155,29 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
         if not state.get("t_s", 0.0) >= 0.0:
             raise ValueError(f"t_s {state['t_s']} s is negative")
 
-    def reset(rover: str) -> None:
-        packs[rover] = BatteryModel(config[rover])
-        stepped_t[rover] = 0.0
+    def reset(self, pack: Pack) -> None:
+        pack.model = BatteryModel(pack.cfg)
+        pack.stepped_t = 0.0
 
-    def snapshot(rover: str) -> tuple[BatteryModel, float, float | None]:
-        return packs[rover].clone(), stepped_t[rover], generation.get(rover)
+    def republish(self, pack: Pack) -> None:
+        self.publish_state(pack)
 
-    queries = PredictionQueries(rt.zenoh_session, {r.id: r for r in rovers}, snapshot)
-    rt.queryable(keys.prediction("*"), queries.on_query)
-    rt.on_exit(queries.close)
-    rt.on_tick(on_tick)
-    rt.every(HOLD_S / 4, release_held)
-    rt.subscribe(keys.power_summary("*"), on_summary, telemetry=True)
-    rt.faults.own("battery", None, apply_faults)
-    rt.own_state(get_state, set_state, reset, after=publish, persist_every_s=PERSIST_S,
-                 check=check_state)
-    for rover in rt.keeper.damaged:  # reset to the rover file from now: no past to integrate
-        stepped_t[rover] = rt.t_s[rover]
-    rt.faults.restore()
-    for rover in packs:
-        if stepped_t[rover] == 0.0:  # a fresh start; after a restart the first tick publishes,
-            publish(rover)           # with its own time, never the older saved one
+    def start(self) -> None:
+        for rover in self.rt.keeper.damaged:  # reset to the rover file from now: no past to
+            self.rovers[rover].stepped_t = self.rt.t_s[rover]  # integrate
+        for pack in self.rovers.values():
+            if pack.stepped_t == 0.0:  # a fresh start; after a restart the first tick
+                self.publish_state(pack)  # publishes, with its own time, never the saved one
+
+    # -- prediction -------------------------------------------------------------------------
+
+    def snapshot(self, rover: str) -> tuple[BatteryModel, float, float | None]:
+        """A copy of a rover's pack, the sim time it has reached and the last generation."""
+        pack = self.rovers[rover]
+        return pack.model.clone(), pack.stepped_t, pack.generation_w
+
+    def on_prediction(self, q: zenoh.Query) -> None:
+        self.queries.on_query(q)
+
+
+NODE = BatteryNode

@@ -1,7 +1,7 @@
 """Drive service: follows ``input/drive/traverse`` and publishes ``drive/state`` every tick.
 
 It serves the rovers that have a ``drive`` section (``lunaris run drive`` leaves the others
-out, see :func:`serves`). A traverse is planned from where the rover is when it arrives
+out, see :meth:`DriveNode.serves`). A traverse is planned from where the rover is when it arrives
 (:func:`common.traverse.plan`) and refused, with the reason, when it is malformed, has no
 waypoint, asks for more than the rover's maximum speed or a leg steeper than its
 ``max_grade_deg``; an accepted one replaces the traverse being driven and is journalled as an
@@ -19,10 +19,12 @@ late joiners, never with every tick.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 from common import keys
 from common.config import Rover
+from common.config import Umbilical as UmbilicalConfig
 from common.faults import injected, supplies_device
 from common.messages import (
     ActiveFault,
@@ -36,63 +38,82 @@ from common.messages import (
     RouteWaypoint,
     SiteXYZ,
     UmbilicalState,
-    decode,
-    decode_input,
 )
-from common.runtime import Runtime, Sample
+from common.node import Node, PerRover, Publishes, Reads
+from common.runtime import Sample
 from common.traverse import length_and_duration, plan
 from services.drive.model import DriveModel, umbilical_holds
 
-__all__ = ["serve", "serves"]
+__all__ = ["NODE", "Drive", "DriveNode"]
 
 
-def serves(rover: Rover) -> bool:
-    """The drive service has something to do for this rover."""
-    return rover.drive is not None
+@dataclass
+class Drive(PerRover):
+    """One rover's drive and what this service follows of the rest of the rover."""
+
+    model: DriveModel
+    load: str  # the drive load
+    umbilical: UmbilicalConfig
+    plugged: bool  # umbilical/state says it is plugged in (the rover file's until then)
+    load_on: bool = True  # the drive load's rail is on (load/<load>/power)
+    load_faults: list[ActiveFault] = field(default_factory=list)  # the loads' in effect
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    configs = {r.id: r for r in rovers if serves(r)}
-    models: dict[str, DriveModel] = {}
-    for rover_id, r in configs.items():
-        assert r.drive is not None  # serves()
-        max_w = next(ld.max_w for ld in r.loads if ld.name == r.drive.load)
-        models[rover_id] = DriveModel(r.drive, max_w)
-    load_on = dict.fromkeys(models, True)  # the drive load's rail is on (load/<load>/power)
-    load_faults: dict[str, list[ActiveFault]] = {}  # the loads' faults in effect, per rover
-    plugged = {r: configs[r].umbilical.connected for r in models}  # umbilical/state
+class DriveNode(Node[Drive]):
+    """The drive of each rover served: traverses followed, stepped each tick."""
 
-    def publish(rover: str) -> None:
-        if rover in models:
-            rt.publish(keys.drive_state(rover), DriveState(rt.t_s[rover], *models[rover].reading()))
+    name = "drive"
+    reads = (
+        Reads("input/drive/traverse", DriveTraverse, "on_traverse", kind="input"),
+        # each rover's drive load only, not every load's samples
+        Reads("load/*/power", LoadPower, "on_load", only="drive_loads"),
+        Reads("faults/active/loads", ActiveFaults, "on_load_faults", kind="record",
+              only="any_load_faults"),
+        Reads("umbilical/state", UmbilicalState, "on_umbilical", only="any_umbilical"),
+    )
+    publishes = (
+        Publishes("drive/state", DriveState),
+        Publishes("drive/route", DriveRoute, reliable=True),  # rare: never dropped
+    )
 
-    def publish_route(rover: str) -> None:
-        if rover in models:
-            route = models[rover].route()
-            rt.publish(keys.drive_route(rover), DriveRoute(
-                t_s=rt.t_s[rover], start=None if route.start is None else SiteXYZ(*route.start),
-                waypoints=[RouteWaypoint(w.x_m, w.y_m, w.z_m, w.speed_m_per_s)
-                           for w in route.waypoints],
-                return_to_start=route.return_to_start), reliable=True)  # rare: never dropped
+    @classmethod
+    def serves(cls, rover: Rover) -> bool:
+        """The drive service has something to do for this rover."""
+        return rover.drive is not None
 
-    def on_tick(rover: str, tick: Clock) -> None:
-        if rover in models:
-            models[rover].step(tick.dt_s)
-            publish(rover)
+    def rover_state(self, rover: Rover) -> Drive:
+        assert rover.drive is not None  # serves()
+        max_w = next(ld.max_w for ld in rover.loads if ld.name == rover.drive.load)
+        return Drive(rover.id, DriveModel(rover.drive, max_w), rover.drive.load, rover.umbilical,
+                     rover.umbilical.connected)
 
-    def on_traverse(s: Sample) -> None:
-        m = models[s.rover]
-        if s.deleted:
+    def publish_state(self, st: Drive) -> None:
+        self.publish(keys.drive_state(st.id), DriveState(self.rt.t_s[st.id], *st.model.reading()))
+
+    def publish_route(self, st: Drive) -> None:
+        route = st.model.route()
+        self.publish(keys.drive_route(st.id), DriveRoute(
+            t_s=self.rt.t_s[st.id], start=None if route.start is None else SiteXYZ(*route.start),
+            waypoints=[RouteWaypoint(w.x_m, w.y_m, w.z_m, w.speed_m_per_s)
+                       for w in route.waypoints],
+            return_to_start=route.return_to_start))
+
+    def on_tick(self, st: Drive, tick: Clock) -> None:
+        st.model.step(tick.dt_s)
+        self.publish_state(st)
+
+    def on_traverse(self, st: Drive, cmd: DriveTraverse | None, s: Sample) -> None:
+        m = st.model
+        if cmd is None:
             where = f"({m.x_m:.1f}, {m.y_m:.1f}, {m.z_m:.1f}) m"
             if not m.stop():
                 raise BadInput(f"no traverse to stop: the rover is {m.status} at {where}")
-            publish(s.rover)
-            publish_route(s.rover)
-            rt.event(s.rover, "info", "input", s.key, f"traverse stopped at {where}, "
-                     f"odometer {m.odometer_m:.1f} m")
+            self.publish_state(st)
+            self.publish_route(st)
+            self.rt.event(st.id, "info", "input", s.key, f"traverse stopped at {where}, "
+                          f"odometer {m.odometer_m:.1f} m")
             return
-        cmd = decode_input(s.payload, DriveTraverse)
-        held = umbilical_holds(configs[s.rover].umbilical, plugged[s.rover])
+        held = umbilical_holds(st.umbilical, st.plugged)
         if held is not None:
             raise BadInput(held)
         start = (m.x_m, m.y_m, m.z_m)
@@ -101,59 +122,61 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             raise BadInput("; ".join(problems))
         replaced = m.active
         m.start(legs, cmd.return_to_start)
-        publish(s.rover)
-        publish_route(s.rover)
+        self.publish_state(st)
+        self.publish_route(st)
         length, duration = length_and_duration(start, legs)
-        rt.event(s.rover, "info", "input", s.key,
-                 f"{'traverse replaced' if replaced else 'traverse'}: {len(legs)} waypoint(s), "
-                 f"{length:.1f} m, {duration / 60:.1f} min at the commanded speed"
-                 f"{' (returning to the start)' if cmd.return_to_start else ''}",
-                 {"waypoints": len(legs), "length_m": length, "duration_s": duration})
+        self.rt.event(st.id, "info", "input", s.key,
+                      f"{'traverse replaced' if replaced else 'traverse'}: {len(legs)} waypoint(s), "
+                      f"{length:.1f} m, {duration / 60:.1f} min at the commanded speed"
+                      f"{' (returning to the start)' if cmd.return_to_start else ''}",
+                      {"waypoints": len(legs), "length_m": length, "duration_s": duration})
 
-    def power(rover: str) -> None:
-        load = configs[rover].drive.load  # type: ignore[union-attr]  # serves(): has a drive
-        if models[rover].set_powered(supplies_device(
-                load_on[rover], injected(load_faults.get(rover, []), "load", load))):
-            publish(rover)
+    # -- what moves it or holds it ----------------------------------------------------------
 
-    def on_load(s: Sample) -> None:
-        if not s.deleted:
-            load_on[s.rover] = decode(s.payload, LoadPower).on
-            power(s.rover)
+    def power(self, st: Drive) -> None:
+        if st.model.set_powered(supplies_device(st.load_on,
+                                                injected(st.load_faults, "load", st.load))):
+            self.publish_state(st)
 
-    def on_load_faults(s: Sample) -> None:
-        if not s.deleted and s.rover in models:
-            load_faults[s.rover] = decode(s.payload, ActiveFaults).faults
-            power(s.rover)
+    def drive_loads(self) -> list[str]:
+        return [keys.load_power(st.id, st.load) for st in self.rovers.values()]
 
-    def on_umbilical(s: Sample) -> None:
-        if not s.deleted and s.rover in models:
-            plugged[s.rover] = decode(s.payload, UmbilicalState).connected
+    def on_load(self, st: Drive, power: LoadPower, s: Sample) -> None:
+        st.load_on = power.on
+        self.power(st)
 
-    def get_state(rover: str) -> dict[str, Any]:
-        return models[rover].state() if rover in models else {}
+    def any_load_faults(self) -> list[str]:
+        return [keys.faults_active("*", "loads")] if self.rovers else []
 
-    def set_state(rover: str, state: dict[str, Any]) -> None:
-        if rover in models:
-            models[rover].set_state(state)
+    def any_umbilical(self) -> list[str]:
+        return [keys.umbilical_state("*")] if self.rovers else []
 
-    def reset(rover: str) -> None:
-        if rover in models:
-            models[rover].reset()
-            plugged[rover] = configs[rover].umbilical.connected
+    def on_load_faults(self, st: Drive, active: ActiveFaults, s: Sample) -> None:
+        st.load_faults = active.faults
+        self.power(st)
 
-    rt.on_tick(on_tick)
-    rt.subscribe(keys.input_drive_traverse("*"), on_traverse)
-    for rover_id, r in configs.items():  # each rover's drive load only, not every load's samples
-        assert r.drive is not None
-        rt.subscribe(keys.load_power(rover_id, r.drive.load), on_load, telemetry=True)
-    if models:
-        rt.subscribe(keys.faults_active("*", "loads"), on_load_faults, history=True)
-        rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
-    def republish(rover: str) -> None:
-        publish(rover)
-        publish_route(rover)
+    def on_umbilical(self, st: Drive, umbilical: UmbilicalState, s: Sample) -> None:
+        st.plugged = umbilical.connected
 
-    rt.own_state(get_state, set_state, reset, after=republish)
-    for rover in models:
-        republish(rover)
+    # -- state ------------------------------------------------------------------------------
+
+    def get_state(self, st: Drive) -> dict[str, Any]:
+        return st.model.state()
+
+    def set_state(self, st: Drive, state: dict[str, Any]) -> None:
+        st.model.set_state(state)
+
+    def reset(self, st: Drive) -> None:
+        st.model.reset()
+        st.plugged = st.umbilical.connected
+
+    def republish(self, st: Drive) -> None:
+        self.publish_state(st)
+        self.publish_route(st)
+
+    def start(self) -> None:
+        for st in self.rovers.values():
+            self.republish(st)
+
+
+NODE = DriveNode

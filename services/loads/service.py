@@ -7,69 +7,102 @@ republished as soon as that changes. The fleet's samples are drawn together
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
 from common import keys
 from common.config import Rover
 from common.faults import Fault
-from common.messages import Clock, DriveState, LoadPower, RailState, decode
-from common.runtime import Runtime, Sample
-from services.loads.model import LoadsFleet
+from common.messages import Clock, DriveState, LoadPower, RailState
+from common.node import Node, Owns, PerRover, Publishes, Reads
+from common.runtime import Sample
+from services.loads.model import LoadsFleet, LoadsModel
 
-__all__ = ["serve"]
+__all__ = ["NODE", "Loads", "LoadsNode"]
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    fleet = LoadsFleet(rovers, seed)
-    models = fleet.models
-    load_keys = {r.id: [keys.load_power(r.id, ld.name) for ld in r.loads] for r in rovers}
-    alarmed: dict[str, set[str]] = {r.id: set() for r in rovers}  # loads with an alarm up
+@dataclass
+class Loads(PerRover):
+    """One rover's loads (its model is a row of the fleet's draws)."""
 
-    def publish(rover: str, only: set[str] | None = None) -> None:
-        m = models[rover]
-        t_s = rt.t_s[rover]
-        for key, (name, power_w, rail, on) in zip(load_keys[rover], m.powers(), strict=True):
+    model: LoadsModel
+    keys: list[str]  # load/<name>/power of each load, in the model's order
+    drive_load: str | None  # the load the drive sets, for a rover that drives
+    alarmed: set[str] = field(default_factory=set)  # loads with an alarm up
+
+
+class LoadsNode(Node[Loads]):
+    """Every load of the rovers served: sampled each tick, on or off with its rail."""
+
+    name = "loads"
+    reads = (
+        Reads("rail/*/state", RailState, "on_rail", check="feeds_loads", deletes="reject"),
+        Reads("drive/state", DriveState, "on_drive", check="drives"),
+    )
+    publishes = (Publishes("load/*/power", LoadPower),)
+    owns = (Owns("load", "apply_faults", names="load_names"),)
+    # No state of its own (rail_on mirrors the PDM, the drive load follows drive/state), but
+    # its faults follow resets and snapshots.
+    persist_every_s = None
+
+    def __init__(self, rovers: Iterable[Rover], seed: int | None = None):
+        rovers = list(rovers)
+        self.fleet = LoadsFleet(rovers, seed)
+        super().__init__(rovers, seed)
+
+    def rover_state(self, rover: Rover) -> Loads:
+        return Loads(rover.id, self.fleet.models[rover.id],
+                     [keys.load_power(rover.id, ld.name) for ld in rover.loads],
+                     rover.drive.load if rover.drive is not None else None)
+
+    def publish_loads(self, st: Loads, only: set[str] | None = None) -> None:
+        m = st.model
+        t_s = self.rt.t_s[st.id]
+        for key, (name, power_w, rail, on) in zip(st.keys, m.powers(), strict=True):
             if only is None or name in only:
                 alarms = m.alarms(name, power_w)
-                rt.publish(key, LoadPower(t_s=t_s, power_w=power_w, rail=rail, on=on,
-                                          faults=alarms))
-                if bool(alarms) != (name in alarmed[rover]):  # raised or resolved: the book's
-                    alarmed[rover].symmetric_difference_update({name})
-                    rt.faults.sync_derived(rover, f"load/{name}", {a: (
+                self.publish(key, LoadPower(t_s=t_s, power_w=power_w, rail=rail, on=on,
+                                            faults=alarms))
+                if bool(alarms) != (name in st.alarmed):  # raised or resolved: the book's
+                    st.alarmed.symmetric_difference_update({name})
+                    self.rt.faults.sync_derived(st.id, f"load/{name}", {a: (
                         "critical", f"load {name} draws {power_w:.1f} W, above its max_w "
                         f"{m.max_w_of[name]:g} W") for a in alarms})
 
-    def on_tick(rover: str, tick: Clock) -> None:
+    def on_tick(self, st: Loads, tick: Clock) -> None:
         if tick.dt_s > 0.0:  # a paused clock holds every load where it is
-            fleet.sample(rover)
-        publish(rover)
+            self.fleet.sample(st.id)
+        self.publish_loads(st)
 
-    def on_rail(s: Sample) -> None:
-        rail = s.parts[1]
-        m = models[s.rover]
-        if rail in m.rail_on and m.set_rail(rail, decode(s.payload, RailState).state == "on"):
-            publish(s.rover, {n for n, r in zip(m.names, m.rails, strict=True) if r == rail})
+    def feeds_loads(self, st: Loads, s: Sample) -> bool:
+        return s.parts[1] in st.model.rail_on
 
-    drive_load = {r.id: r.drive.load for r in rovers if r.drive is not None}
+    def on_rail(self, st: Loads, state: RailState, s: Sample) -> None:
+        rail, m = s.parts[1], st.model
+        if m.set_rail(rail, state.state == "on"):
+            self.publish_loads(st, {n for n, r in zip(m.names, m.rails, strict=True) if r == rail})
 
-    def on_drive(s: Sample) -> None:
-        load = drive_load.get(s.rover)
-        if load is not None and not s.deleted and models[s.rover].set_driven(
-                load, decode(s.payload, DriveState).power_w):
-            publish(s.rover, {load})
+    def drives(self, st: Loads, s: Sample) -> bool:
+        return st.drive_load is not None
 
-    def reset(rover: str) -> None:
-        models[rover].reset_driven()
+    def on_drive(self, st: Loads, drive: DriveState, s: Sample) -> None:
+        assert st.drive_load is not None  # drives()
+        if st.model.set_driven(st.drive_load, drive.power_w):
+            self.publish_loads(st, {st.drive_load})
 
-    def apply_faults(rover: str, name: str | None, faults: tuple[Fault, ...]) -> None:
+    def load_names(self, st: Loads) -> list[str]:
+        return st.model.names
+
+    def apply_faults(self, st: Loads, name: str | None, faults: tuple[Fault, ...]) -> None:
         assert name is not None  # a load fault names its load
-        models[rover].set_faults(name, faults)
-        publish(rover, {name})
+        st.model.set_faults(name, faults)
+        self.publish_loads(st, {name})
 
-    rt.on_tick(on_tick)
-    rt.subscribe(keys.rail_state("*", "*"), on_rail, telemetry=True)
-    rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
-    rt.faults.own("load", lambda rover: models[rover].names, apply_faults)
-    # No state of its own (rail_on mirrors the PDM, the drive load follows drive/state), but
-    # its faults follow resets and snapshots.
-    rt.own_state(lambda rover: {}, lambda rover, st: None, reset, after=publish,
-                 persist_every_s=None)
-    rt.faults.restore()
+    def reset(self, st: Loads) -> None:
+        st.model.reset_driven()
+
+    def republish(self, st: Loads) -> None:
+        self.publish_loads(st)
+
+
+NODE = LoadsNode

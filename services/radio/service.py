@@ -22,10 +22,11 @@ without power the radio is out of range, with the alarm ``unpowered``.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 from typing import Any
 
 from common import keys
-from common.config import Rover
+from common.config import Radio, Rover
 from common.faults import Fault, injected, supplies_device
 from common.messages import (
     ActiveFault,
@@ -36,156 +37,192 @@ from common.messages import (
     RadioLink,
     RadioPosition,
     SiteXY,
-    decode,
-    decode_input,
 )
-from common.runtime import Runtime, Sample
+from common.node import Every, Node, Owns, PerRover, Publishes, Reads
+from common.runtime import Sample
 from services.radio.model import RadioModel, relative_to_site
 
-__all__ = ["serve"]
+__all__ = ["NODE", "RadioNode", "Radios"]
 
 HEARTBEAT_S = 1.0
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    radios = {r.id: {c.name: RadioModel(c) for c in r.radios} for r in rovers}
-    last: dict[tuple[str, str], tuple[bool, float]] = {}  # -> (in_range, wall time published)
-    # rover -> the radios that follow its drive, and where the rover starts
-    following = {r.id: [c for c in r.radios if c.site is not None] for r in rovers if r.drive is not None}
-    starts = {r.id: (r.drive.start.x_m, r.drive.start.y_m) for r in rovers if r.drive is not None}
-    # (rover, radio) -> where a map draws it, and whether the drive moves the rover for it
-    placed = {(r.id, c.name): (None if c.site is None else SiteXY(c.site.x_m, c.site.y_m),
-                               any(f.name == c.name for f in following.get(r.id, [])))
-              for r in rovers for c in r.radios}
-    # rover -> load -> the radios it powers; whether each load's rail is on (as the file
-    # starts it until the loads service says); the loads' faults in effect
-    powering: dict[str, dict[str, list[str]]] = {}
-    load_on: dict[tuple[str, str], bool] = {}
-    for r in rovers:
-        rail_of = {ld.name: ld.rail for ld in r.loads}
-        initially_on = {rl.name: rl.initially_on for rl in r.rails}
-        for c in r.radios:
+@dataclass
+class Radios(PerRover):
+    """One rover's radios and what the service remembers beside them."""
+
+    models: dict[str, RadioModel]  # by radio
+    following: list[Radio]  # the radios that follow the rover's drive (a site, a drive)
+    start: tuple[float, float] | None  # where the rover starts (None: it does not drive)
+    placed: dict[str, tuple[SiteXY | None, bool]]  # radio -> where a map draws it, follows
+    powering: dict[str, list[str]]  # load -> the radios it powers
+    load_on: dict[str, bool]  # load -> its rail is on (as the file starts it until told)
+    load_faults: list[ActiveFault] = field(default_factory=list)  # the loads' in effect
+    # radio -> (in_range, wall time published); radio -> its alarms up
+    last: dict[str, tuple[bool, float]] = field(default_factory=dict)
+    alarmed: dict[str, list[str]] = field(default_factory=dict)
+
+
+class RadioNode(Node[Radios]):
+    """The radios of the rovers served: in range or not, with their power and position."""
+
+    name = "radio"
+    reads = (
+        Reads("input/radio/*/position", RadioPosition, "on_position", kind="input",
+              check="positionable"),
+        Reads("drive/state", DriveState, "on_drive", check="drives"),
+        # each radio's load only, not every load's samples
+        Reads("load/*/power", LoadPower, "on_load", check="powers_radios", only="radio_loads"),
+        Reads("faults/active/loads", ActiveFaults, "on_load_faults", kind="record",
+              check="has_powered", only="if_powered"),
+    )
+    publishes = (Publishes("radio/*/link", RadioLink, reliable=True),)
+    owns = (Owns("radio", "apply_faults", names="radio_names"),)
+    timers = (Every(0.2, "heartbeat"),)
+
+    def rover_state(self, rover: Rover) -> Radios:
+        rail_of = {ld.name: ld.rail for ld in rover.loads}
+        initially_on = {rl.name: rl.initially_on for rl in rover.rails}
+        following = [c for c in rover.radios if c.site is not None] if rover.drive else []
+        powering: dict[str, list[str]] = {}
+        load_on: dict[str, bool] = {}
+        for c in rover.radios:
             if c.load is not None:
-                powering.setdefault(r.id, {}).setdefault(c.load, []).append(c.name)
-                load_on[(r.id, c.load)] = initially_on.get(rail_of[c.load], False)
-    load_faults: dict[str, list[ActiveFault]] = {}
-    alarmed: dict[tuple[str, str], list[str]] = {}
+                powering.setdefault(c.load, []).append(c.name)
+                load_on[c.load] = initially_on.get(rail_of[c.load], False)
+        st = Radios(
+            rover.id, {c.name: RadioModel(c) for c in rover.radios}, following,
+            None if rover.drive is None else (rover.drive.start.x_m, rover.drive.start.y_m),
+            {c.name: (None if c.site is None else SiteXY(c.site.x_m, c.site.y_m),
+                      any(f.name == c.name for f in following)) for c in rover.radios},
+            powering, load_on)
+        if st.start is not None:
+            self.follow(st, *st.start)
+        return st
 
-    def power_radios(rover: str, load: str) -> None:
-        powered = supplies_device(load_on[(rover, load)],
-                                  injected(load_faults.get(rover, []), "load", load))
-        for name in powering[rover][load]:
-            if radios[rover][name].set_powered(powered):
-                publish(rover, name, force=True)
+    def power_radios(self, st: Radios, load: str) -> None:
+        powered = supplies_device(st.load_on[load], injected(st.load_faults, "load", load))
+        for name in st.powering[load]:
+            if st.models[name].set_powered(powered):
+                self.publish_link(st, name, force=True)
 
-    def follow(rover: str, x_m: float, y_m: float) -> list[str]:
+    def follow(self, st: Radios, x_m: float, y_m: float) -> list[str]:
         """Move the radios that follow the drive to the rover at (x, y); their names."""
         names = []
-        for c in following.get(rover, []):
+        for c in st.following:
             assert c.site is not None  # following holds radios with a site
-            radios[rover][c.name].set_position(*relative_to_site(c.site.x_m, c.site.y_m, x_m, y_m))
+            st.models[c.name].set_position(*relative_to_site(c.site.x_m, c.site.y_m, x_m, y_m))
             names.append(c.name)
         return names
 
-    def publish(rover: str, name: str, force: bool = False) -> None:
-        m = radios[rover][name]
+    def publish_link(self, st: Radios, name: str, force: bool = False) -> None:
+        m = st.models[name]
         link = m.link()
-        prev = last.get((rover, name))
+        prev = st.last.get(name)
         now = time.monotonic()
         if force or prev is None or prev[0] != link.in_range or now - prev[1] >= HEARTBEAT_S:
-            last[(rover, name)] = (link.in_range, now)
+            st.last[name] = (link.in_range, now)
             alarms = m.alarms()
-            site, follows = placed[(rover, name)]
-            rt.publish(keys.radio_link(rover, name), RadioLink(
-                t_s=rt.t_s[rover], faults=alarms, **link._asdict(), site=site,
-                follows_drive=follows, **m.footprint._asdict()), reliable=True)
-            if alarmed.get((rover, name), []) != alarms:
-                alarmed[(rover, name)] = alarms
-                rt.faults.sync_derived(rover, f"radio/{name}", {a: (
+            site, follows = st.placed[name]
+            self.publish(keys.radio_link(st.id, name), RadioLink(
+                t_s=self.rt.t_s[st.id], faults=alarms, **link._asdict(), site=site,
+                follows_drive=follows, **m.footprint._asdict()))
+            if st.alarmed.get(name, []) != alarms:
+                st.alarmed[name] = alarms
+                self.rt.faults.sync_derived(st.id, f"radio/{name}", {a: (
                     "warning", f"radio {name}: its load {m.cfg.load} has no power") for a in alarms})
 
-    def heartbeat() -> None:
-        for rover, named in radios.items():
-            for name in named:
-                publish(rover, name)
+    def heartbeat(self) -> None:
+        for st in self.rovers.values():
+            for name in st.models:
+                self.publish_link(st, name)
 
-    def on_position(s: Sample) -> None:
+    # -- inputs and streams -----------------------------------------------------------------
+
+    def positionable(self, st: Radios, s: Sample) -> bool:
         name = s.parts[2]
-        if name not in radios[s.rover]:
-            known = ", ".join(radios[s.rover]) or "none"
-            raise BadInput(f"rover {s.rover} has no radio {name!r} (radios: {known})")
-        if any(c.name == name for c in following.get(s.rover, [])):
-            raise BadInput(f"radio {name} of {s.rover} follows the rover's drive (its site and "
+        if name not in st.models:
+            known = ", ".join(st.models) or "none"
+            raise BadInput(f"rover {st.id} has no radio {name!r} (radios: {known})")
+        if any(c.name == name for c in st.following):
+            raise BadInput(f"radio {name} of {st.id} follows the rover's drive (its site and "
                            "drive/state give the position); move the rover with a traverse on "
                            "input/drive/traverse")
-        if s.deleted:
+        return True
+
+    def on_position(self, st: Radios, pos: RadioPosition | None, s: Sample) -> None:
+        if pos is None:
             raise BadInput("a radio position is a put: {\"distance_m\": D, \"angle_deg\": A}")
-        pos = decode_input(s.payload, RadioPosition)
-        radios[s.rover][name].set_position(pos.distance_m, pos.angle_deg)
-        publish(s.rover, name, force=True)
-        link = radios[s.rover][name].link()
-        rt.accepted_input(s.rover, s.key, f"position to radio {name}: {pos.distance_m:g} m at "
-                          f"{pos.angle_deg:g} deg ({'in range' if link.in_range else 'out of range'})",
-                          {"distance_m": pos.distance_m, "angle_deg": pos.angle_deg})
+        name = s.parts[2]
+        st.models[name].set_position(pos.distance_m, pos.angle_deg)
+        self.publish_link(st, name, force=True)
+        link = st.models[name].link()
+        self.rt.accepted_input(st.id, s.key, f"position to radio {name}: {pos.distance_m:g} m at "
+                               f"{pos.angle_deg:g} deg ({'in range' if link.in_range else 'out of range'})",
+                               {"distance_m": pos.distance_m, "angle_deg": pos.angle_deg})
 
-    def on_drive(s: Sample) -> None:
-        if s.deleted or s.rover not in following:
-            return
-        state = decode(s.payload, DriveState)
-        for name in follow(s.rover, state.x_m, state.y_m):
-            publish(s.rover, name)  # on a change of in_range at once, else with the heartbeat
+    def drives(self, st: Radios, s: Sample) -> bool:
+        return st.start is not None
 
-    def apply_faults(rover: str, name: str | None, faults: tuple[Fault, ...]) -> None:
-        assert name is not None  # a radio fault names its radio
-        radios[rover][name].set_faults(faults)
-        publish(rover, name, force=True)
+    def on_drive(self, st: Radios, state: DriveState, s: Sample) -> None:
+        for name in self.follow(st, state.x_m, state.y_m):
+            self.publish_link(st, name)  # on a change of in_range at once, else with the heartbeat
 
-    def on_load(s: Sample) -> None:
+    def radio_loads(self) -> list[str]:
+        return [keys.load_power(st.id, load) for st in self.rovers.values() for load in st.powering]
+
+    def powers_radios(self, st: Radios, s: Sample) -> bool:
+        return s.parts[1] in st.powering
+
+    def on_load(self, st: Radios, power: LoadPower, s: Sample) -> None:
         load = s.parts[1]
-        if s.deleted or load not in powering.get(s.rover, {}):
-            return
-        on = decode(s.payload, LoadPower).on
-        if load_on[(s.rover, load)] != on:
-            load_on[(s.rover, load)] = on
-            power_radios(s.rover, load)
+        if st.load_on[load] != power.on:
+            st.load_on[load] = power.on
+            self.power_radios(st, load)
 
-    def on_load_faults(s: Sample) -> None:
-        if s.deleted or s.rover not in powering:
-            return
-        load_faults[s.rover] = decode(s.payload, ActiveFaults).faults
-        for load in powering[s.rover]:
-            power_radios(s.rover, load)
+    def if_powered(self) -> list[str]:
+        return [keys.faults_active("*", "loads")] if any(
+            st.powering for st in self.rovers.values()) else []
 
-    def get_state(rover: str) -> dict[str, Any]:
-        return {name: m.state() for name, m in radios[rover].items()}
+    def has_powered(self, st: Radios, s: Sample) -> bool:
+        return bool(st.powering)
 
-    def set_state(rover: str, state: dict[str, Any]) -> None:
-        for name, m in radios[rover].items():
+    def on_load_faults(self, st: Radios, active: ActiveFaults, s: Sample) -> None:
+        st.load_faults = active.faults
+        for load in st.powering:
+            self.power_radios(st, load)
+
+    # -- faults and state -------------------------------------------------------------------
+
+    def radio_names(self, st: Radios) -> list[str]:
+        return list(st.models)
+
+    def apply_faults(self, st: Radios, name: str | None, faults: tuple[Fault, ...]) -> None:
+        assert name is not None  # a radio fault names its radio
+        st.models[name].set_faults(faults)
+        self.publish_link(st, name, force=True)
+
+    def get_state(self, st: Radios) -> dict[str, Any]:
+        return {name: m.state() for name, m in st.models.items()}
+
+    def set_state(self, st: Radios, state: dict[str, Any]) -> None:
+        for name, m in st.models.items():
             m.set_state(state.get(name, {}))
 
-    def reset(rover: str) -> None:
-        set_state(rover, {})
-        if rover in starts:
-            follow(rover, *starts[rover])
+    def reset(self, st: Radios) -> None:
+        self.set_state(st, {})
+        if st.start is not None:
+            self.follow(st, *st.start)
 
-    def republish(rover: str) -> None:
-        for name in radios[rover]:
-            publish(rover, name, force=True)
+    def republish(self, st: Radios) -> None:
+        for name in st.models:
+            self.publish_link(st, name, force=True)
 
-    rt.subscribe(keys.input_radio_position("*", "*"), on_position)
-    rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
-    for rover, loads in powering.items():  # each radio's load only, not every load's samples
-        for load in loads:
-            rt.subscribe(keys.load_power(rover, load), on_load, telemetry=True)
-    if powering:
-        rt.subscribe(keys.faults_active("*", "loads"), on_load_faults, history=True)
-    rt.faults.own("radio", lambda rover: radios[rover], apply_faults)
-    for rover in starts:
-        follow(rover, *starts[rover])
-    rt.own_state(get_state, set_state, reset, after=republish)
-    rt.faults.restore()
-    for rover, loads in powering.items():  # as the rover file starts the loads' rails
-        for load in loads:
-            power_radios(rover, load)
-    rt.every(0.2, heartbeat)
-    heartbeat()
+    def start(self) -> None:
+        for st in self.rovers.values():  # as the rover file starts the loads' rails
+            for load in st.powering:
+                self.power_radios(st, load)
+        self.heartbeat()
+
+
+NODE = RadioNode

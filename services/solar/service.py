@@ -11,11 +11,13 @@ plugged in pulls it out, which the twin journals as an ``input`` event of its ow
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 from common import keys
 from common.config import Rover
 from common.faults import Fault
 from common.messages import (
-    BARE_FIELD,
     BadInput,
     Clock,
     DriveState,
@@ -25,104 +27,147 @@ from common.messages import (
     SunAngle,
     UmbilicalInput,
     UmbilicalState,
-    decode,
-    decode_input,
 )
-from common.runtime import Runtime, Sample
+from common.node import Node, Owns, PerRover, Publishes, Reads
+from common.runtime import Sample
 from services.solar.model import SolarModel
 
-__all__ = ["serve"]
+__all__ = ["NODE", "Solar", "SolarNode"]
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    models = {r.id: SolarModel(r) for r in rovers}
+@dataclass
+class Solar(PerRover):
+    """One rover's panels and umbilical (the model keeps all there is of them)."""
 
-    def publish(rover: str) -> None:
-        m = models[rover]
-        t = rt.t_s[rover]
+    model: SolarModel
+
+
+class SolarNode(Node[Solar]):
+    """The panels and the umbilical of the rovers served: published each tick and on a change."""
+
+    name = "solar"
+    reads = (
+        Reads("input/sun_angle", SunAngle, "on_sun", kind="input"),
+        Reads("input/solar/*/sun_angle", SunAngle, "on_panel_angle", kind="input",
+              check="known_panel"),
+        Reads("input/umbilical", UmbilicalInput, "on_umbilical", kind="input"),
+        Reads("input/solar/*/dust", DustInput, "on_dust", kind="input", check="known_panel"),
+        Reads("drive/state", DriveState, "on_drive", only="if_driving"),
+    )
+    publishes = (Publishes("solar/*/power", SolarPower), Publishes("umbilical/state", UmbilicalState))
+    owns = (Owns("solar", "apply_panel_faults", names="panel_names"),
+            Owns("umbilical", "apply_umbilical_faults"))
+
+    def rover_state(self, rover: Rover) -> Solar:
+        return Solar(rover.id, SolarModel(rover))
+
+    def publish_power(self, st: Solar) -> None:
+        m = st.model
+        t = self.rt.t_s[st.id]
         for name, power_w, dust in m.panels():
-            rt.publish(keys.solar_power(rover, name), SolarPower(
+            self.publish(keys.solar_power(st.id, name), SolarPower(
                 t_s=t, power_w=power_w, sun_angle_deg=m.angle_of(name), dust=dust))
         at = m.umbilical_plugged_at
-        rt.publish(keys.umbilical_state(rover), UmbilicalState(
+        self.publish(keys.umbilical_state(st.id), UmbilicalState(
             t_s=t, connected=m.umbilical_connected, power_w=m.umbilical_power_w,
             plugged_at=None if at is None else SiteXYZ(*at), cable_m=m.umbilical_cfg.cable_m))
 
-    def on_tick(rover: str, tick: Clock) -> None:
-        publish(rover)
+    def on_tick(self, st: Solar, tick: Clock) -> None:
+        self.publish_power(st)
 
-    def on_sun(s: Sample) -> None:
-        if s.deleted:
+    # -- inputs -----------------------------------------------------------------------------
+
+    def on_sun(self, st: Solar, sun: SunAngle | None, s: Sample) -> None:
+        if sun is None:
             raise BadInput("the rover's sun angle cannot be deleted: put another angle")
-        angle = decode_input(s.payload, SunAngle, bare=BARE_FIELD[SunAngle]).angle_deg
-        models[s.rover].sun_angle_deg = angle
-        publish(s.rover)
-        rt.accepted_input(s.rover, s.key, f"sun angle {angle:g} deg", {"angle_deg": angle})
+        st.model.sun_angle_deg = sun.angle_deg
+        self.publish_power(st)
+        self.rt.accepted_input(st.id, s.key, f"sun angle {sun.angle_deg:g} deg",
+                               {"angle_deg": sun.angle_deg})
 
-    def panel_input(s: Sample, what: str) -> None:
-        """``input/solar/<panel>/sun_angle`` or ``/dust``: set for one panel, or deleted."""
-        m, panel = models[s.rover], s.parts[2]
-        if panel not in m.panel_names():
-            raise BadInput(f"rover {s.rover} has no panel {panel!r} "
-                           f"(panels: {', '.join(m.panel_names()) or 'none'})")
-        if what == "sun_angle":
-            angle = None if s.deleted else decode_input(
-                s.payload, SunAngle, bare=BARE_FIELD[SunAngle]).angle_deg
-            m.set_panel_angle(panel, angle)
-            message = (f"panel {panel} back to the rover's sun angle ({m.sun_angle_deg:g} deg)"
-                       if angle is None else f"sun angle {angle:g} deg on panel {panel}")
-        else:
-            fraction = None if s.deleted else decode_input(
-                s.payload, DustInput, bare=BARE_FIELD[DustInput]).fraction
-            m.set_input_dust(panel, fraction)
-            message = (f"no dust input on panel {panel}" if fraction is None
-                       else f"dust {fraction:g} on panel {panel}")
-        publish(s.rover)
-        rt.accepted_input(s.rover, s.key, message)
+    def known_panel(self, st: Solar, s: Sample) -> bool:
+        """``input/solar/<panel>/...`` names a panel of the rover (whatever the payload)."""
+        names = st.model.panel_names()
+        if s.parts[2] not in names:
+            raise BadInput(f"rover {st.id} has no panel {s.parts[2]!r} "
+                           f"(panels: {', '.join(names) or 'none'})")
+        return True
 
-    def on_umbilical(s: Sample) -> None:
-        if s.deleted:
+    def on_panel_angle(self, st: Solar, sun: SunAngle | None, s: Sample) -> None:
+        """Set for one panel, or deleted: back to the rover's sun angle."""
+        m, panel = st.model, s.parts[2]
+        angle = None if sun is None else sun.angle_deg
+        m.set_panel_angle(panel, angle)
+        self.publish_power(st)
+        self.rt.accepted_input(st.id, s.key, (
+            f"panel {panel} back to the rover's sun angle ({m.sun_angle_deg:g} deg)"
+            if angle is None else f"sun angle {angle:g} deg on panel {panel}"))
+
+    def on_dust(self, st: Solar, dust: DustInput | None, s: Sample) -> None:
+        """Laid on one panel, or deleted: no dust input there."""
+        panel = s.parts[2]
+        fraction = None if dust is None else dust.fraction
+        st.model.set_input_dust(panel, fraction)
+        self.publish_power(st)
+        self.rt.accepted_input(st.id, s.key, f"no dust input on panel {panel}" if fraction is None
+                               else f"dust {fraction:g} on panel {panel}")
+
+    def on_umbilical(self, st: Solar, umbilical: UmbilicalInput | None, s: Sample) -> None:
+        if umbilical is None:
             raise BadInput('the umbilical input is a put: {"connected": true|false}')
-        plugged = decode_input(s.payload, UmbilicalInput, bare=BARE_FIELD[UmbilicalInput]).connected
-        models[s.rover].plug(plugged)
-        publish(s.rover)
-        rt.accepted_input(s.rover, s.key, "umbilical " + ("plugged in" if plugged else "unplugged"),
-                          {"connected": plugged})
+        plugged = umbilical.connected
+        st.model.plug(plugged)
+        self.publish_power(st)
+        self.rt.accepted_input(st.id, s.key,
+                               "umbilical " + ("plugged in" if plugged else "unplugged"),
+                               {"connected": plugged})
 
-    def apply_panel_faults(rover: str, panel: str | None, faults: tuple[Fault, ...]) -> None:
-        assert panel is not None  # a solar fault names its panel
-        models[rover].set_panel_faults(panel, faults)
-        publish(rover)
+    # -- the drive pulls the cable ----------------------------------------------------------
 
-    def apply_umbilical_faults(rover: str, _: str | None, faults: tuple[Fault, ...]) -> None:
-        models[rover].set_umbilical_faults(faults)
-        publish(rover)
+    def if_driving(self) -> list[str]:
+        return [keys.drive_state("*")] if any(
+            c.drive is not None for c in self.configs.values()) else []
 
-    def on_drive(s: Sample) -> None:
-        if s.deleted:
-            return
-        m = models[s.rover]
-        state = decode(s.payload, DriveState)
+    def on_drive(self, st: Solar, state: DriveState, s: Sample) -> None:
+        m = st.model
         distance_m = m.move_rover(state.x_m, state.y_m, state.z_m)
         if distance_m is not None:
-            publish(s.rover)
-            rt.event(s.rover, "warning", "input", keys.input_umbilical(s.rover),
-                     f"umbilical unplugged: the rover drove {distance_m:.1f} m from where it was "
-                     f"plugged in, past its {m.cable_m:g} m cable",
-                     {"connected": False, "distance_m": distance_m, "cable_m": m.cable_m},
-                     actor="twin")
+            self.publish_power(st)
+            self.rt.event(st.id, "warning", "input", keys.input_umbilical(st.id),
+                          f"umbilical unplugged: the rover drove {distance_m:.1f} m from where "
+                          f"it was plugged in, past its {m.cable_m:g} m cable",
+                          {"connected": False, "distance_m": distance_m, "cable_m": m.cable_m},
+                          actor="twin")
 
-    rt.on_tick(on_tick)
-    rt.subscribe(keys.input_sun_angle("*"), on_sun)
-    rt.subscribe(keys.input_panel_sun_angle("*", "*"), lambda s: panel_input(s, "sun_angle"))
-    rt.subscribe(keys.input_umbilical("*"), on_umbilical)
-    rt.subscribe(keys.input_solar_dust("*", "*"), lambda s: panel_input(s, "dust"))
-    if any(r.drive is not None for r in rovers):
-        rt.subscribe(keys.drive_state("*"), on_drive, telemetry=True)
-    rt.faults.own("solar", lambda rover: models[rover].panel_names(), apply_panel_faults)
-    rt.faults.own("umbilical", None, apply_umbilical_faults)
-    rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),
-                 lambda rover: models[rover].reset(), after=publish)
-    rt.faults.restore()
-    for rover in models:
-        publish(rover)
+    # -- faults and state -------------------------------------------------------------------
+
+    def panel_names(self, st: Solar) -> list[str]:
+        return st.model.panel_names()
+
+    def apply_panel_faults(self, st: Solar, panel: str | None, faults: tuple[Fault, ...]) -> None:
+        assert panel is not None  # a solar fault names its panel
+        st.model.set_panel_faults(panel, faults)
+        self.publish_power(st)
+
+    def apply_umbilical_faults(self, st: Solar, _: str | None, faults: tuple[Fault, ...]) -> None:
+        st.model.set_umbilical_faults(faults)
+        self.publish_power(st)
+
+    def get_state(self, st: Solar) -> dict[str, Any]:
+        return st.model.state()
+
+    def set_state(self, st: Solar, state: dict[str, Any]) -> None:
+        st.model.set_state(state)
+
+    def reset(self, st: Solar) -> None:
+        st.model.reset()
+
+    def republish(self, st: Solar) -> None:
+        self.publish_power(st)
+
+    def start(self) -> None:
+        for st in self.rovers.values():
+            self.publish_power(st)
+
+
+NODE = SolarNode
