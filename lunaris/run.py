@@ -7,7 +7,7 @@ process serves it.
 
 A service module (``services/<name>/service.py``) holds a node, ``NODE``: a
 :class:`common.node.Node` class, made with the rovers it serves and attached to the runtime,
-which declares its ports. (The clock, the faults service and the bridge still define
+which declares its ports. (The clock, the faults service, the power service and the bridge still define
 ``serve(rt, rovers, ...)``, which declares what they need on the runtime itself.)
 
 A node's ``serves(rover)`` (or a module's ``serves``) leaves out the rovers a service has
