@@ -19,9 +19,9 @@ Cases (``--only`` picks some, by these names):
 - ``burst``, ``journal``, ``unknown``, ``restarts``, ``router``: 5,000 injections as fast as
   possible; 20,000 fault events and the journal's size; 3,000 unknown rover ids and RSS;
   kill -9 of each service under ``lunaris up``; router restarts;
-- slots the other branches fill (the lead joins them): ``damaged`` and ``kill9all``
-  (harden-state: damaged state files, kill -9 of every service at once), ``console``
-  (clients: DNS rebinding, stored XSS, sign-in brute force, slow requests).
+- ``damaged`` and ``kill9all``: the damaged state files and kill -9 of every service at once
+  (the cases of ``bench/reliability_state.py``), ``console``: DNS rebinding, stored XSS,
+  sign-in brute force and weak passwords, slow requests (``bench/reliability_console.py``).
 
 Figures, not assertions: the verdict column compares with the target and says ``ok`` or
 ``NO``. Events are read from each service's own key and from the journal's stream (either
@@ -46,6 +46,8 @@ from pathlib import Path
 from typing import NamedTuple
 
 import msgspec
+import reliability_console
+import reliability_state
 import zenoh
 from benchlib import ROOT, machine
 
@@ -462,28 +464,38 @@ def router_restart(tmp: Path) -> list[Row]:
                 "every service back by itself", True)]
 
 
-# -- slots of the other branches (the lead joins them) ------------------------------------------
+# -- damaged state, kill -9 of everything (bench/reliability_state.py), the console ---------------
+
+
+def _state_rows(names: list[str]) -> list[Row]:
+    """The cases of :mod:`reliability_state`, each a row here: up (s), said, kept."""
+    out = []
+    for r in reliability_state.run(names):
+        up = "not a restart" if r.up_s is None and "kill" in r.case else (
+            "never back" if r.up_s is None else f"up in {r.up_s:.1f} s")
+        out.append(Row(r.case, f"{up}; said: {r.said}; kept: {r.kept}",
+                       "up within 10 s, the damage said, the intact part kept", r.ok))
+    return out
 
 
 def damaged_state(tmp: Path) -> list[Row]:
-    """harden-state: each damaged-state case of issue 23.2-3 (a torn journal line, wrong-typed
-    and out-of-range state, a folder for a file, garbage fault and clock files, a corrupted
-    snapshot): service up within 10 s, an event naming the damage, intact state kept."""
-    return [Row("damaged state files (harden-state branch)", "not measured here",
-                "up within 10 s, an event naming the damage, intact state kept", None)]
+    """Each damaged-state case of issue 23.2-3 (a torn journal line, wrong-typed, NaN, cut
+    short and folder state, an out-of-range fault, garbage fault and clock files, a restore
+    with a damaged part, two clocks started together)."""
+    return _state_rows([*(n for n in reliability_state.CASES if not n.startswith("kill")),
+                        "battery_other_rover_kept"])
 
 
 def kill9_all(tmp: Path) -> list[Row]:
-    """harden-state: kill -9 of every service at once, then `t_s` never goes back."""
-    return [Row("kill -9 of all services at once (harden-state branch)", "not measured here",
-                "no t_s back within an epoch", None)]
+    """kill -9 of every service at once (and of the clock and the battery), then ``t_s``
+    never goes back."""
+    return _state_rows([n for n in reliability_state.CASES if n.startswith("kill")])
 
 
 def console_cases(tmp: Path) -> list[Row]:
-    """clients: DNS rebinding (Host), stored XSS in names, sign-in brute force and weak
-    passwords, slow requests, a removed user's open stream."""
-    return [Row("console: rebinding, XSS, brute force, slow requests (clients branch)",
-                "not measured here", "each refused or bounded", None)]
+    """DNS rebinding (Host), stored XSS in names, sign-in brute force and weak passwords, slow
+    requests, a removed user's open stream (:mod:`reliability_console`)."""
+    return [Row(*row) for row in reliability_console.console_cases(tmp)]
 
 
 # -- the table ---------------------------------------------------------------------------------

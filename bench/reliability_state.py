@@ -12,8 +12,9 @@ temporary state folder), damages what it says, and measures:
   faults, the journal's good lines, the time reached), or, for a restore, whether nothing
   changed; for kill -9 of every service, how many keys sent ``t_s`` back.
 
-The functions ``case_*`` each return a :class:`Row` and can be run on their own (the lead
-joins them to ``bench/reliability.py``); :func:`run` runs a list of them and prints the table.
+The functions ``case_*`` each return a :class:`Row` and can be run on their own
+(``bench/reliability.py`` runs them as its ``damaged`` and ``kill9all`` cases); :func:`run` runs
+a list of them and prints the table.
 Figures, not assertions: a case that goes wrong prints what it saw.
 """
 

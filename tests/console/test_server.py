@@ -9,6 +9,7 @@ import socket
 import threading
 import time
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -266,6 +267,16 @@ def test_sign_ins_are_limited_per_user_and_per_address(session, accounts, monkey
             assert _sign_in(c, f"guess{i}", "a wrong guess").status_code == 401
         locked = _sign_in(c, "obi", "lander-side-observer")
         assert locked.status_code == 429 and "from this computer" in locked.text
+
+
+def test_a_burst_of_guesses_sent_at_once_is_counted_before_it_is_checked(session, accounts, monkeypatch):
+    """20 wrong passwords sent together: at most FREE are checked, the rest wait (429); before,
+    every one was checked, the failures counted only after the checks."""
+    monkeypatch.setattr(server, "WRONG_S", 0.5)
+    app = make_app(session, Accounts(accounts))
+    with client(app) as c, ThreadPoolExecutor(20) as pool:
+        codes = list(pool.map(lambda _: _sign_in(c, "ana", "a wrong guess").status_code, range(20)))
+    assert codes.count(401) <= Attempts.FREE and codes.count(429) >= 20 - Attempts.FREE, codes
 
 
 def test_lockouts_double_up_to_a_limit_and_the_table_is_bounded():
