@@ -73,7 +73,16 @@ from typing import Any
 import msgspec
 
 from common.events import session_opened
-from common.symptoms import SMOOTH_POWER, SYMPTOMS, TOLERANCE, Band, Direction, Series, SymptomSpec
+from common.symptoms import (
+    SMOOTH_POWER,
+    SYMPTOMS,
+    TOLERANCE,
+    Band,
+    Direction,
+    Series,
+    SymptomSpec,
+    quantity,
+)
 
 __all__ = [
     "CrewAction",
@@ -440,7 +449,9 @@ class Response:
         elif f.band is not None and not isinstance(v, bool):
             way = f.band.outside(t, v, f.direction)
             if way:
-                words = f"{tail.rsplit('/', 1)[0]} {fld} {v:.4g}, {way} {f.band.words()} before"
+                name, unit = quantity(fld)
+                words = (f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit}, {way} "
+                         f"{f.band.words(unit)} before").replace(" ,", ",")
         if words and f.found(t, words):
             self._unwatch(f)
             self.version += 1

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
 __all__ = ["BUCKET_S", "RECENT", "SMOOTH_POWER", "SYMPTOMS", "TOLERANCE", "TREND_MIN_S", "WINDOW_S",
-           "Band", "Direction", "Series", "SymptomSpec"]
+           "Band", "Direction", "Series", "SymptomSpec", "quantity"]
 
 WINDOW_S = 60.0  # the band a value kept before a fault: over this much sim time
 BUCKET_S = 1.0  # ... kept as the range of each such slice (bounded, whatever the rate)
@@ -180,5 +180,20 @@ class Band:
             return "below"
         return None
 
-    def words(self) -> str:
-        return f"{self.lo:.4g}..{self.hi:.4g}"
+    def words(self, unit: str = "") -> str:
+        """``2.7 to 4.78 W``; one value when the band is one."""
+        unit = f" {unit}" if unit else ""
+        if f"{self.lo:.3g}" == f"{self.hi:.3g}":
+            return f"{self.lo:.3g}{unit}"
+        return f"{self.lo:.3g} to {self.hi:.3g}{unit}"
+
+
+_UNITS = (("_w", "W"), ("_v", "V"), ("_c", "°C"), ("_j", "J"), ("_a", "A"))
+
+
+def quantity(field: str) -> tuple[str, str]:
+    """A payload field as words and its unit: ``power_w`` -> ("power", "W")."""
+    for suffix, unit in _UNITS:
+        if field.endswith(suffix):
+            return field[: -len(suffix)].replace("_", " "), unit
+    return field.replace("_", " "), ""

@@ -153,7 +153,7 @@ def test_heating_shows_when_the_temperature_rises_beyond_the_trend_it_had():
         _battery(r, t, temperature_c=20.0 + 0.002 * t + 0.03 * (t - 60.0))
     f = fault_of(r, "battery/heating")
     assert f.first_symptom_t_s == pytest.approx(66.8, abs=0.15)
-    assert "temperature_c" in f.symptom and "above" in f.symptom
+    assert "temperature" in f.symptom and "°C" in f.symptom and "above" in f.symptom
 
 
 def test_heating_that_changes_nothing_the_crew_sees_has_no_symptom():
