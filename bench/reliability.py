@@ -471,8 +471,8 @@ def _state_rows(names: list[str]) -> list[Row]:
     """The cases of :mod:`reliability_state`, each a row here: up (s), said, kept."""
     out = []
     for r in reliability_state.run(names):
-        up = "not a restart" if r.up_s is None and "kill" in r.case else (
-            "never back" if r.up_s is None else f"up in {r.up_s:.1f} s")
+        # (no up time: a case that restarts nothing, or one that never came back: its verdict says)
+        up = "no restart timed" if r.up_s is None else f"up in {r.up_s:.1f} s"
         out.append(Row(r.case, f"{up}; said: {r.said}; kept: {r.kept}",
                        "up within 10 s, the damage said, the intact part kept", r.ok))
     return out
