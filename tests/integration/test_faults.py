@@ -294,9 +294,10 @@ def test_a_restarted_service_keeps_its_injected_faults(twin_factory, probe_solo,
     p.clear_history()
     twin.start("loads")  # same state folder, as lunaris up restarts it
     p.wait_services(R, ("loads",))  # a process's start (imports, coverage) is slow on a busy machine
-    wait_for(lambda: [s["power_w"] for s in p.samples(keys.load_power(R, "drive_motors"))][-3:]
-             == [77.5] * 3, timeout_s=30, what=lambda: "the restarted loads service to keep drive_motors stuck (its last "
-             f"samples: {[s['power_w'] for s in p.samples(keys.load_power(R, 'drive_motors'))][-5:]})")
+    def drawn() -> list[float]:
+        return [s["power_w"] for s in p.samples(keys.load_power(R, "drive_motors"))]
+    wait_for(lambda: drawn()[-3:] == [77.5] * 3, timeout_s=30,
+             what=lambda: f"the restarted loads service to keep drive_motors stuck (last: {drawn()[-5:]})")
     (faults,) = p.get_json(keys.faults(R))
     assert [f["key"] for f in faults] == [fault_key("load/drive_motors", "stuck")]
     p.delete(fault_key("load/drive_motors", "stuck"))  # and it can still be cleared
