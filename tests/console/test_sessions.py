@@ -114,10 +114,12 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
     name = page.find_element(By.ID, "snap-name")
     name.clear()
     name.send_keys("late")
+    # the sim time before the save: the snapshot's is at least this (read after it, on a busy
+    # machine the clock had gone on more than a second past the snapshot)
+    late_t = p.wait_value(keys.clock(R))["t_s"]
     click(page, f'[data-action="snapshot-save"][data-rover="{R}"]')
     WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, '[data-snapshot="late"]')
                                   or d.find_element(By.ID, "snap-refresh").click())
-    late_t = p.wait_value(keys.clock(R))["t_s"]
 
     # A bad name: refused in the server's words, nothing sent, the session goes on.
     seen = len(p.events(R))
