@@ -362,6 +362,23 @@ def _option_problems(o: BridgeOptions) -> list[str]:
     return problems
 
 
+def _placeholder_problems(key: str, topic: str, key_item: str | None, clash: str) -> list[str]:
+    """What is wrong with the placeholders of a mapping's key and topic (or service name):
+    unknown ones, ones in the topic the key lacks, and the key's component missing from the
+    topic (every component would then ``clash``: share one topic or one service)."""
+    problems = []
+    unknown = (set(_placeholders(key)) | set(_placeholders(topic))) - {"rover", *PLACEHOLDERS}
+    if unknown:
+        problems.append(f"key: unknown placeholder(s) {', '.join(sorted(unknown))}")
+    extra = set(_placeholders(topic)) - {"rover"} - ({key_item} if key_item else set())
+    if extra:
+        problems.append(f"topic: {', '.join('{' + e + '}' for e in sorted(extra))} "
+                        "does not appear in the key")
+    if key_item and f"{{{key_item}}}" not in topic:
+        problems.append(f"topic: must contain {{{key_item}}} like the key, or every {key_item} {clash}")
+    return problems
+
+
 def _placeholders(template: str) -> list[str]:
     return _PLACEHOLDER.findall(template)
 
@@ -425,20 +442,10 @@ def _mapping_problems(m: Mapping, distro: str) -> list[str]:
                         f"...: {', '.join(f.name for f in keys.FAMILIES)})")
         return problems
     shape, item = found
-    unknown = set(_placeholders(m.key)) - {"rover", *PLACEHOLDERS}
-    unknown |= set(_placeholders(m.topic)) - {"rover", *PLACEHOLDERS}
-    if unknown:
-        problems.append(f"key: unknown placeholder(s) {', '.join(sorted(unknown))}")
     key_item = shape.placeholder if item is not None and item.startswith("{") else None
+    problems += _placeholder_problems(m.key, m.topic, key_item, "would publish on the same topic")
     if m.otherwise != "error" and (item is None or key_item is not None):
         problems.append("otherwise: only for a key that names one component (radio/lander)")
-    extra = set(_placeholders(m.topic)) - {"rover"} - ({key_item} if key_item else set())
-    if extra:
-        problems.append(f"topic: {', '.join('{' + e + '}' for e in sorted(extra))} "
-                        "does not appear in the key")
-    if key_item and f"{{{key_item}}}" not in m.topic:
-        problems.append(f"topic: must contain {{{key_item}}} like the key, or every {key_item} "
-                        "would publish on the same topic")
     if m.direction in ("out", "in") and shape.direction != m.direction:
         problems.append(f"direction: {m.key} is {'an input' if shape.direction == 'in' else 'telemetry'}"
                         f", so the direction is {shape.direction}")
@@ -563,17 +570,7 @@ def _service_problems(m: Mapping) -> list[str]:
         return problems
     shape, item = found
     key_item = shape.placeholder if item is not None and item.startswith("{") else None
-    unknown = set(_placeholders(m.key)) | set(_placeholders(m.topic))
-    unknown -= {"rover", *PLACEHOLDERS}
-    if unknown:
-        problems.append(f"key: unknown placeholder(s) {', '.join(sorted(unknown))}")
-    extra = set(_placeholders(m.topic)) - {"rover"} - ({key_item} if key_item else set())
-    if extra:
-        problems.append(f"topic: {', '.join('{' + e + '}' for e in sorted(extra))} "
-                        "does not appear in the key")
-    if key_item and f"{{{key_item}}}" not in m.topic:
-        problems.append(f"topic: must contain {{{key_item}}} like the key, or every {key_item} "
-                        "would have the same service")
+    problems += _placeholder_problems(m.key, m.topic, key_item, "would have the same service")
     if m.otherwise not in OTHERWISE:
         problems.append(f"otherwise: expected {', '.join(OTHERWISE)}, got {m.otherwise!r}")
     elif m.otherwise != "error" and (item is None or key_item is not None):
