@@ -19,9 +19,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import zenoh
 from selenium.webdriver.support.ui import WebDriverWait
 
 from common import keys
+from common.connection import make_config
 from testbed.browser import available, open_browser, size_viewport
 from tests.harness import (
     ALL_SERVICES,
@@ -142,6 +144,16 @@ def console_page(site: Live, ready: str = SOC_SHOWN) -> Iterator:
         yield driver
     finally:
         driver.quit()
+
+
+@pytest.fixture
+def session(router) -> Iterator[zenoh.Session]:
+    """A Zenoh client of the test's router (a module may give its own)."""
+    s = zenoh.open(make_config("client", connect=[router]))
+    try:
+        yield s
+    finally:
+        s.close()
 
 
 @pytest.fixture(scope="module")

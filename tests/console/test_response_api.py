@@ -6,7 +6,6 @@ it came, the scenario's expectation as it is met, nothing of the session before.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
 
 import msgspec
 import pytest
@@ -22,15 +21,6 @@ from tests.harness import wait_for
 pytestmark = pytest.mark.timeout(90)
 R = "mapp-1"
 ONE, TWO = "20261125-090000", "20261125-100000"  # the clock's session ids
-
-
-@pytest.fixture
-def session(router) -> Iterator[zenoh.Session]:
-    s = zenoh.open(make_config("client", connect=[router]))
-    try:
-        yield s
-    finally:
-        s.close()
 
 
 class Twin:

@@ -63,15 +63,6 @@ class FakeRover:
 
 
 @pytest.fixture
-def session(router) -> Iterator[zenoh.Session]:
-    s = zenoh.open(make_config("client", connect=[router]))
-    try:
-        yield s
-    finally:
-        s.close()
-
-
-@pytest.fixture
 def rover(router) -> Iterator[FakeRover]:
     fake = FakeRover(router)
     try:
