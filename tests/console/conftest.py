@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import urllib.request
 from collections.abc import Callable, Iterator
@@ -25,6 +24,7 @@ from selenium.webdriver.support.ui import WebDriverWait
 from common import keys
 from common.connection import make_config
 from testbed.browser import available, open_browser, size_viewport
+from testbed.twin import free_port
 from tests.harness import (
     ALL_SERVICES,
     ROOT,
@@ -46,12 +46,6 @@ DOC_IMAGES = ROOT / "docs" / "images"
 if not available():
     pytest.skip("Debian's chromium and chromium-driver are not installed (make system-deps as root)",
                 allow_module_level=True)
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @dataclass
