@@ -5,9 +5,11 @@ BIN      = $(VENV)/bin
 ROVER   ?= config/rovers/mapp.yaml
 PORT    ?= 8080
 STATE   ?= var/state
-# Test workers: one per core. Measured from a fresh clone on the 2-core machine: 3 workers
-# 12 min 59 s, 2 workers 14 min 21 s; at 3, the twins' timing waits failed now and then
-# under the extra load (each was made to wait on its condition, but 2 leaves the margin).
+# Test workers: one per core. Measured from a fresh clone on the 2-core machine: 2 workers
+# 12 min 56 s to 13 min 20 s (14 min 21 s before services started in one wait), 3 workers
+# 12 min 59 s; at 3, the twins' timing waits failed now and then under the extra load (each
+# was made to wait on its condition, but 2 leaves the margin). README.md, Tests, says where
+# the time goes.
 WORKERS ?= 2
 # what running needs: the package and its dependencies, no extra
 RUN_STAMP  = $(VENV)/.installed-run

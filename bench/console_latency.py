@@ -78,32 +78,29 @@ def main() -> int:
                                                endpoint), cwd=ROOT, stdout=subprocess.DEVNULL,
                                    stderr=subprocess.DEVNULL)
         url = f"http://127.0.0.1:{port}"
-        driver = None
         try:
             wait_for(lambda: _up(url), 30, "the console")
-            driver = open_browser(1280, 800)
-            driver.get(url + "/")
-            wait_for(lambda: driver.execute_script(
-                "const el = document.querySelector('#main [data-key=\"rail/5V_CH2/state\"]"
-                "[data-field=\"state\"]'); return !!el && el.textContent === 'on'"), 30, "the page")
-            driver.execute_script(OBSERVE)
-            latencies = []
-            for _ in range(args.faults):
-                driver.execute_script("window.__seen = {}")
-                t0 = time.time()
-                p.put(SHORT, b"")
-                seen = wait_for(lambda: driver.execute_script("return window.__seen.tripped || null"), 10,
-                                "the page to show the trip")
-                latencies.append(seen - t0 * 1000.0)
-                n = len(p.events(R))
-                p.delete(SHORT)
-                wait_for(lambda n=n: any(e["kind"] == "fault_cleared" and e["key"] == SHORT
-                                         for e in p.events(R)[n:]), 10, "the clearing")
-                p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
-                wait_for(lambda: driver.execute_script("return window.__seen.on || null"), 10, "back on")
-            print(f"fault put by another client -> the page shows the trip: {percentiles(latencies)}")
-            driver.quit()
-            driver = None
+            with open_browser(1280, 800) as driver:
+                driver.get(url + "/")
+                wait_for(lambda: driver.execute_script(
+                    "const el = document.querySelector('#main [data-key=\"rail/5V_CH2/state\"]"
+                    "[data-field=\"state\"]'); return !!el && el.textContent === 'on'"), 30, "the page")
+                driver.execute_script(OBSERVE)
+                latencies = []
+                for _ in range(args.faults):
+                    driver.execute_script("window.__seen = {}")
+                    t0 = time.time()
+                    p.put(SHORT, b"")
+                    seen = wait_for(lambda: driver.execute_script("return window.__seen.tripped || null"), 10,
+                                    "the page to show the trip")
+                    latencies.append(seen - t0 * 1000.0)
+                    n = len(p.events(R))
+                    p.delete(SHORT)
+                    wait_for(lambda n=n: any(e["kind"] == "fault_cleared" and e["key"] == SHORT
+                                             for e in p.events(R)[n:]), 10, "the clearing")
+                    p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
+                    wait_for(lambda: driver.execute_script("return window.__seen.on || null"), 10, "back on")
+                print(f"fault put by another client -> the page shows the trip: {percentiles(latencies)}")
             for clients in (0, args.clients):
                 stop, got = threading.Event(), [0]
                 threads = [threading.Thread(target=reader, args=(url + "/api/live", stop, got), daemon=True)
@@ -119,8 +116,6 @@ def main() -> int:
                       f"one core; {(b1 - b0) / (w1 - w0) / 1e3:7.1f} kB/s sent to them "
                       f"(twin at 10 Hz, {len(p.latest)} keys of {R})")
         finally:
-            if driver is not None:
-                driver.quit()
             console.send_signal(signal.SIGINT)
             console.wait(15)
     return 0

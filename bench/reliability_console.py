@@ -25,12 +25,11 @@ from benchlib import ROOT
 from common import keys
 from lunaris.console.auth import Accounts, Attempts
 from lunaris.console.server import ACCOUNTS_S, REQUEST_S
+from testbed.console import Console, start_console
 from testbed.twin import (
     Probe,
     Twin,
-    env_without_zenoh_config,
     free_endpoint,
-    free_port,
     lunaris_cmd,
     open_router,
     static_rover,
@@ -222,14 +221,6 @@ def weak_passwords(tmp: Path) -> Case:
             "every weak one refused, a strong one added", refused == len(WEAK) and codes[-1] == 0)
 
 
-def _answers(port: int, console: subprocess.Popen) -> bool:
-    assert console.poll() is None, f"the console ended: exit {console.returncode}"
-    try:
-        return ask(port, "GET", "/favicon.ico")[0] == 204
-    except OSError:
-        return False
-
-
 def console_cases(tmp: Path) -> list[Case]:
     tmp.mkdir(parents=True, exist_ok=True)
     accounts, scenarios, recordings = tmp / "users.json", tmp / "scenarios", tmp / "recordings"
@@ -237,21 +228,17 @@ def console_cases(tmp: Path) -> list[Case]:
         Accounts.add(accounts, user, "instructor" if user == "ana" else "observer", password, replace=True)
     scenarios.mkdir(exist_ok=True)
     (scenarios / "evil.yaml").write_text(SCENARIO)
-    endpoint, port = free_endpoint(), free_port()
+    endpoint = free_endpoint()
     router = open_router(endpoint)
-    console: subprocess.Popen | None = None
+    console: Console | None = None
     try:
         with Twin(endpoint, [static_rover("mapp.yaml")], tmp / "state", services=("clock", "battery")), \
                 Probe(endpoint) as p:
             p.watch(keys.under(R, "**"))
             p.wait_services(R, ("clock", "battery"))
-            with open(tmp / "console.log", "ab") as out:
-                console = subprocess.Popen(lunaris_cmd(
-                    "console", "--http", f"127.0.0.1:{port}", "--connect", endpoint, "--accounts",
-                    str(accounts), "--scenarios", str(scenarios), "--recordings", str(recordings)),
-                    stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=ROOT,
-                    env=env_without_zenoh_config())
-            wait_for(lambda: _answers(port, console), 30, "the console to answer", poll_s=0.2)
+            console = start_console(endpoint, tmp, "--accounts", str(accounts), "--scenarios",
+                                    str(scenarios))
+            port = console.port
             ana = cookie(port, "ana")
             wait_for(lambda: b"mapp-1" in ask(port, "GET", "/api/about", headers={"Cookie": ana})[2],
                      20, "the console to see the twin", poll_s=0.3)
@@ -272,7 +259,7 @@ def console_cases(tmp: Path) -> list[Case]:
             return rows
     finally:
         if console is not None:
-            stop_process(console, 10)
+            stop_process(console.proc, 10)
         router.close()
 
 

@@ -15,6 +15,7 @@ the reference is generated from.
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -54,7 +55,6 @@ __all__ = [
     "Thermal",
     "Umbilical",
     "Uncertainty",
-    "budget_warnings",
     "load_rover",
     "parse_rover",
 ]
@@ -300,29 +300,6 @@ class Rover(Strict, frozen=True):
         return self.rover.id
 
 
-def budget_warnings(rover: Rover) -> list[str]:
-    """What is valid but likely wrong: a rail whose loads, all at ``max_w``, draw more than its
-    current limit, so it can trip in normal operation."""
-    warnings = []
-    for rail in rover.rails:
-        peak_w = sum(ld.max_w for ld in rover.loads if ld.rail == rail.name)
-        if peak_w / rail.voltage_v > rail.current_limit_a:
-            warnings.append(
-                f"rails.{rail.name}: its loads can draw {peak_w / rail.voltage_v:.1f} A "
-                f"(sum of max_w {peak_w:g} W at {rail.voltage_v:g} V), above current_limit_a "
-                f"{rail.current_limit_a:g} A: it may trip in normal operation")
-    d = rover.drive
-    load = next((ld for ld in rover.loads if d is not None and ld.name == d.load), None)
-    if d is not None and load is not None:
-        force_n = d.mass_kg * d.gravity_m_per_s2 * d.rolling_resistance
-        need_w = force_n * d.max_speed_m_per_s / d.drivetrain_efficiency + d.idle_w
-        if need_w > load.max_w:
-            warnings.append(
-                f"drive: on the flat at max_speed_m_per_s the drive needs {need_w:.1f} W, above "
-                f"the max_w {load.max_w:g} W of load {load.name}: the rover never reaches full speed")
-    return warnings
-
-
 def load_rover(path: str | Path) -> Rover:
     """Read and validate a rover YAML file; raise :class:`ConfigError` listing every problem."""
     return parse_rover(read_text(path), source=str(path))
@@ -334,7 +311,7 @@ def parse_rover(text: str, source: str = "<rover>") -> Rover:
     if isinstance(data, dict):
         problems.extend(_semantic_problems(data))
     if problems:
-        raise ConfigError(source, problems)
+        raise ConfigError(source, problems, data)
     return msgspec.convert(data, Rover)
 
 
@@ -512,3 +489,10 @@ def _unique(path: str, names: list[str], problems: list[str]) -> None:
         if name in seen:
             problems.append(f"{path}: name {name!r} is used more than once")
         seen.add(name)
+
+
+def fingerprint(rover: Rover) -> str:
+    """What a rover file says, in 16 hex digits: saved beside a service's state, so that a
+    state saved with another version of the file is not resumed against this one (a pack's
+    energy against another capacity, an input the file no longer sets)."""
+    return hashlib.sha256(msgspec.json.encode(rover)).hexdigest()[:16]

@@ -120,32 +120,35 @@ class FaultBook:
         # rail it trips) finds the fault listed, and the dashboard hears of the fault first.
         active[fk.path] = (ActiveFault(key, as_dict, since, "injected"), params)
         self._publish(rover)
-        try:
-            self._apply(rover, fk)
-        except BaseException:
-            if previous is None:
-                del active[fk.path]
-            else:
-                active[fk.path] = previous
-            self._publish(rover)
-            raise
+        with self.rt.events_after() as first:  # the injection before the alarms its effect raised
+            try:
+                self._apply(rover, fk)
+            except BaseException:
+                if previous is None:
+                    del active[fk.path]
+                else:
+                    active[fk.path] = previous
+                self._publish(rover)
+                raise
+            verb = "replaced" if previous else "injected"
+            first.append(((rover, "warning", "fault_injected", key,
+                           f"{verb} {fk.path} {json.dumps(as_dict)}", as_dict), {}))
         self._save()
-        verb = "replaced" if previous else "injected"
-        self.rt.event(rover, "warning", "fault_injected", key,
-                      f"{verb} {fk.path} {json.dumps(as_dict)}", as_dict)
 
     def _clear(self, rover: str, key: str, fk: FaultKey) -> None:
         active = self.injected[rover]
         if fk.path not in active:
             raise BadInput(f"no active fault {fk.path} to clear")
         cleared = active.pop(fk.path)
-        try:
-            self._apply(rover, fk)
-        except BaseException:
-            active[fk.path] = cleared
-            raise
-        self._changed(rover)
-        self.rt.event(rover, "info", "fault_cleared", key, f"cleared {fk.path}")
+        with self.rt.events_after() as first:  # cleared, then the alarms it ends resolved
+            try:
+                self._apply(rover, fk)
+            except BaseException:
+                active[fk.path] = cleared
+                raise
+            self._publish(rover)
+            first.append(((rover, "info", "fault_cleared", key, f"cleared {fk.path}"), {}))
+        self._save()
 
     def clear_all(self, rover: str) -> None:
         """Clear every injected fault of a rover (a session reset), each journalled."""
@@ -255,10 +258,6 @@ class FaultBook:
     def active(self, rover: str) -> list[ActiveFault]:
         faults = [f for f, _ in self.injected[rover].values()] + list(self.derived[rover].values())
         return sorted(faults, key=lambda f: (f.since_t_s, f.key))
-
-    def _changed(self, rover: str) -> None:
-        self._save()
-        self._publish(rover)
 
     def _save(self) -> None:
         self.rt.save_state("faults", {

@@ -531,7 +531,7 @@ def trainee_problem(name: str) -> str | None:
         return "give the trainee's name (or the crew's)"
     bad = [c for c in dict.fromkeys(name) if not (c.isalnum() or c in _TRAINEE_PUNCTUATION)]
     if bad:
-        said = ", ".join(repr(c) if c.isprintable() else "a control character" for c in bad[:3])
+        said = ", ".join(dict.fromkeys(repr(c) if c.isprintable() else "a control character" for c in bad))
         return f"{TRAINEE_WORDS}; this one has {said}"
     if name != name.strip():
         return f"{TRAINEE_WORDS}, without spaces before or after"

@@ -53,9 +53,18 @@ rover's (a radio's own load only, not every load of the fleet). A bad payload, a
 :class:`~common.messages.BadInput` raised by a callback: a ``rejected`` event naming the key
 and why (the runtime's, as for every service); nothing changes.
 
-**Publishes** (:class:`Publishes`): what the node puts, and whether it must never be dropped
-(``reliable``). :meth:`Node.publish` refuses a key no port declares. Every node also
-publishes its events (``event/<service>``) and, when it owns faults, the faults in effect
+**Hears** (:class:`Hears`): a key expression no family of the table describes (a session
+control, ``control/reset``; every service's events, ``event/*``; the gatekeeper's every
+write, ``fault/**``), handed over as it came: the callback is ``on_x(self, sample)``, with no
+rover's state (the sample names its rover; ``any_rover`` keeps the samples of rovers the node
+does not serve) and it reads the payload itself. Its options are those of
+:meth:`~common.runtime.Runtime.subscribe` (``history``, ``telemetry``, ``urgent``,
+``any_rover``, ``writes``). A shape of the family table is refused: declare it with ``Reads``.
+
+**Publishes** (:class:`Publishes`): what the node puts, whether it must never be dropped
+(``reliable``) and how many of its latest samples a late joiner is given (``cache``).
+:meth:`Node.publish` refuses a key no port declares. Every node also publishes its events
+(``event/<service>``) and, when it owns faults, the faults in effect
 (``faults/active/<service>``).
 
 **Owns** (:class:`Owns`): the fault components whose faults the node's fault book keeps
@@ -68,7 +77,12 @@ recomputation). **Answers** (:class:`Answers`): a ``get`` the node answers.
 :class:`PerRover`); :attr:`Node.rovers` holds them. A node that keeps state across restarts,
 resets and snapshots (``keeps_state``) says what it is and how to set it (``get_state``,
 ``set_state``, ``reset``, ``check_state``; ``republish`` once a control changed it); the
-runtime's session keeper does the rest. :meth:`Node.on_tick` is called with every clock tick
+runtime's session keeper does the rest. A rover whose saved state is found damaged is reset,
+or given to ``recover(state)`` when the node defines it (it puts the rover right and returns
+what it did, in words). The clock says that it makes the time (``makes_time``: it publishes
+the ticks, waits for none and judges none against its own time); the gatekeeper (the faults
+service) defines ``on_wildcard(sample)``: the writes whose key holds a wildcard, which every
+other service drops. :meth:`Node.on_tick` is called with every clock tick
 of a rover (when a node defines it), :meth:`Node.start` once every port is declared and the
 saved faults re-applied (first publications).
 
@@ -85,11 +99,11 @@ from typing import Any, ClassVar, Generic, Literal, TypeVar
 import msgspec
 
 from common import keys
-from common.config import Rover
+from common.config import Rover, fingerprint
 from common.messages import BARE_FIELD, Clock, decode, decode_input
-from common.runtime import Runtime, Sample
+from common.runtime import Runtime, Sample, WriteRole
 
-__all__ = ["Answers", "Every", "Kind", "Node", "Owns", "PerRover", "Publishes", "Reads",
+__all__ = ["Answers", "Every", "Hears", "Kind", "Node", "Owns", "PerRover", "Publishes", "Reads",
            "port_table"]
 
 Kind = Literal["telemetry", "record", "input", "command"]
@@ -139,13 +153,39 @@ class Reads:
 
 
 @dataclass(frozen=True)
+class Hears:
+    """A key expression outside the family table (``shape`` after ``lunaris/<rover>/``, with
+    ``*`` and ``**``), its samples handed as they came to ``on(sample)``; the options as
+    :meth:`~common.runtime.Runtime.subscribe`'s (see the module)."""
+
+    shape: str
+    on: str
+    history: bool = False
+    telemetry: bool = False
+    urgent: bool = False
+    any_rover: bool = False
+    writes: WriteRole = "own"
+
+    def __post_init__(self) -> None:
+        fam = keys.family_of(self.shape.split("/"))
+        if fam is not None:
+            raise TypeError(f"{self.shape!r} is the family {fam.name} of common.keys.FAMILIES: "
+                            "declare it with Reads")
+
+    def pattern(self) -> str:
+        """The key expression of every rover's keys of this port."""
+        return keys.under("*", self.shape)
+
+
+@dataclass(frozen=True)
 class Publishes:
     """A key the node publishes (``shape`` as for :class:`Reads`) and its payload;
-    ``reliable``: never dropped under congestion (it waits instead)."""
+    ``reliable``: never dropped under congestion (it waits instead); ``cache``: see the module."""
 
     shape: str
     payload: type[msgspec.Struct]
     reliable: bool = False
+    cache: int = 1  # the publisher's cache: the latest so many samples, for late joiners
 
     def __post_init__(self) -> None:
         _family(self.shape, self.payload, "out")
@@ -203,19 +243,22 @@ class Node(Generic[S]):
 
     name: ClassVar[str]
     reads: ClassVar[tuple[Reads, ...]] = ()
+    hears: ClassVar[tuple[Hears, ...]] = ()
     publishes: ClassVar[tuple[Publishes, ...]] = ()
     owns: ClassVar[tuple[Owns, ...]] = ()
     answers: ClassVar[tuple[Answers, ...]] = ()
     timers: ClassVar[tuple[Every, ...]] = ()
     after_batch: ClassVar[str | None] = None
     keeps_state: ClassVar[bool] = True
+    makes_time: ClassVar[bool] = False  # the clock: it publishes the ticks (Runtime.makes_time)
     persist_every_s: ClassVar[float | None] = 1.0  # wall time between saves of the state
 
     rt: Runtime
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
-        named = [p.on for p in cls.reads] + [a.on for a in cls.answers] + [t.call for t in cls.timers]
+        named = [p.on for p in cls.reads] + [h.on for h in cls.hears] + [a.on for a in cls.answers]
+        named += [t.call for t in cls.timers]
         named += [n for p in cls.reads for n in (p.check, p.only) if n]
         named += [n for o in cls.owns for n in (o.apply, o.names) if n]
         named += [cls.after_batch] if cls.after_batch else []
@@ -227,7 +270,7 @@ class Node(Generic[S]):
         self.seed = seed
         self.configs = {r.id: r for r in rovers}
         self.rovers: dict[str, S] = {r.id: self.rover_state(r) for r in self.configs.values()}
-        self._reliable: dict[str, bool] = {}  # key published -> its port's reliable
+        self._ports: dict[str, Publishes] = {}  # key published -> its port
 
     @classmethod
     def serves(cls, rover: Rover) -> bool:
@@ -259,6 +302,16 @@ class Node(Generic[S]):
         """The ranges of a saved state: raise ValueError naming what is out of range (the
         keeper has checked the shape, the types and that every number is finite)."""
 
+    def recover(self, st: S) -> str:
+        """A rover whose saved state was found damaged: put it right and say what was done, in
+        words (not called for a node that does not define it: the keeper resets the rover)."""
+        raise NotImplementedError
+
+    def on_wildcard(self, sample: Sample) -> None:
+        """A write whose key holds a wildcard, which every service drops: the gatekeeper's
+        (:meth:`~common.runtime.Runtime.on_wildcard`; not declared for a node that does not
+        define it)."""
+
     def republish(self, st: S) -> None:
         """Publish a rover's state again once a control (reset, restore) changed it."""
 
@@ -271,6 +324,10 @@ class Node(Generic[S]):
         """Declare the node's ports on the runtime: subscriptions, ticks, fault components,
         state, timers, queries; then :meth:`start`."""
         self.rt = rt
+        if self.makes_time:
+            rt.makes_time()
+        if type(self).on_wildcard is not Node.on_wildcard:
+            rt.on_wildcard(self.on_wildcard)
         if type(self).on_tick is not Node.on_tick:
             rt.on_tick(_PerRoverCall(self, self.on_tick))
         for port in self.reads:
@@ -278,6 +335,10 @@ class Node(Generic[S]):
             for keyexpr in targets:
                 rt.subscribe(keyexpr, _Delivery(self, port), telemetry=port.kind == "telemetry",
                              history=port.kind == "record", urgent=port.urgent)
+        for heard in self.hears:
+            rt.subscribe(heard.pattern(), getattr(self, heard.on), any_rover=heard.any_rover,
+                         history=heard.history, telemetry=heard.telemetry, urgent=heard.urgent,
+                         writes=heard.writes)
         for answer in self.answers:
             rt.queryable(keys.under("*", answer.shape), getattr(self, answer.on))
         for owned in self.owns:
@@ -288,7 +349,10 @@ class Node(Generic[S]):
             rt.own_state(_PerRoverCall(self, self.get_state), _PerRoverCall(self, self.set_state),
                          _PerRoverCall(self, self.reset), after=_PerRoverCall(self, self.republish),
                          persist_every_s=self.persist_every_s,
-                         check=_PerRoverCall(self, self.check_state))
+                         check=_PerRoverCall(self, self.check_state),
+                         damaged=(_PerRoverCall(self, self.recover)
+                                  if type(self).recover is not Node.recover else None),
+                         files={rid: fingerprint(cfg) for rid, cfg in self.configs.items()})
         if self.owns:
             rt.faults.restore()
         if self.after_batch:
@@ -299,11 +363,11 @@ class Node(Generic[S]):
 
     def publish(self, key: str, msg: msgspec.Struct) -> None:
         """Publish on a key a :class:`Publishes` port declares (ValueError for another: a bug),
-        reliably if the port says so."""
-        reliable = self._reliable.get(key)
-        if reliable is None:
-            reliable = self._reliable[key] = self._port_of(key, msg).reliable
-        self.rt.publish(key, msg, reliable=reliable)
+        reliably and with the cache the port says."""
+        port = self._ports.get(key)
+        if port is None:
+            port = self._ports[key] = self._port_of(key, msg)
+        self.rt.publish(key, msg, reliable=port.reliable, cache=port.cache)
 
     def _port_of(self, key: str, msg: msgspec.Struct) -> Publishes:
         _, parts = keys.split(key)
@@ -360,6 +424,7 @@ class _Delivery:
 def port_table(node: type[Node]) -> list[tuple[str, str, str, str]]:
     """A node's ports as rows ``(direction, key, payload, what)``, for a reader or a test."""
     rows = [("reads", p.pattern(), p.payload.__name__, f"{p.kind} -> {p.on}") for p in node.reads]
+    rows += [("hears", h.pattern(), "-", h.on) for h in node.hears]
     rows += [("publishes", keys.under("*", p.shape), p.payload.__name__,
               "reliable" if p.reliable else "telemetry") for p in node.publishes]
     rows += [("answers", keys.under("*", a.shape), a.payload.__name__, a.on) for a in node.answers]

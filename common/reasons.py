@@ -98,7 +98,10 @@ def _kinds(types: str) -> str:
     return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " or " + words[-1]
 
 
-def humane(message: str, raw: Any = None, fields: list[str] | None = None,
+_UNSEEN = object()  # humane's raw when the value the message is about is not at hand
+
+
+def humane(message: str, raw: Any = _UNSEEN, fields: list[str] | None = None,
            choices: dict[str, list[Any]] | None = None) -> str:
     """A msgspec validation message in plain words.
 
@@ -110,7 +113,7 @@ def humane(message: str, raw: Any = None, fields: list[str] | None = None,
     m = re.fullmatch(r"(.*?) - at `\$(.*)`", message, re.S)
     text, tokens = (m.group(1), _path(m.group(2))) if m else (message, [])
     where = field_name(tokens)
-    known, value = _lookup(raw, tokens)
+    known, value = _lookup(raw, tokens) if raw is not _UNSEEN else (False, None)
     got = f" (got {shown(value)})" if known else ""
 
     if mm := re.fullmatch(r"Expected `(\w+)` (<=|>=|<|>) (\S+)", text):

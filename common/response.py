@@ -54,7 +54,9 @@ never makes it run again. An event without a session (a service that had heard n
 belongs to the running session; what comes before any session id is known belongs to the first
 session named. A session's trainee is the one the clock's ``session`` event that opened it
 names (``null`` when that event was not heard). A reset or a restore within a session (a new
-epoch) begins no session: the values' bands start again from it. A recording of a twin older
+epoch) begins no session, but the faults in effect end with it (unresolved, as at a session's
+end), and nothing before it counts for a fault injected after it (the clock's times start
+again): the values' bands, the alarms, the crew's actions. A recording of a twin older
 than sessions is one session, named ``""``.
 
 **Expectations** come from the journal (``scenario`` events whose params hold an
@@ -223,6 +225,7 @@ class _Fault:
     resolved_by: str = ""
     settled_t: float | None = None  # no more actions collected after this
     actions: list[CrewAction] = field(default_factory=list)
+    era: int = 0  # its session's epochs before the one it was injected in (_Session.era)
 
     @property
     def active(self) -> bool:
@@ -261,6 +264,7 @@ class _Session:
     start_t: float | None = None
     last_t: float | None = None
     ticks: int = 0  # clock samples seen in it: a session only replayed has none
+    era: int = 0  # resets and restores within it so far (each a new epoch of the clock)
 
     def empty(self) -> bool:
         return not (self.faults or self.scored or self.pending)
@@ -323,6 +327,13 @@ class Response:
         self.version += 1
         return s
 
+    def know_rails(self, load_rail: Mapping[str, str]) -> None:
+        """Which rail feeds each load, known before the events come: a recording made after a
+        fault holds the journal's history first and the loads' telemetry (which says their
+        rails) only after it, and a short's rail trip was then no alarm of the short's (it was
+        taken as resolved once the load's own alarm cleared, the rail still tripped)."""
+        self._load_rail.update(load_rail)
+
     # -- telemetry ---------------------------------------------------------------------------------
 
     def value(self, parts: Sequence[str], payload: Any) -> str:
@@ -369,9 +380,12 @@ class Response:
 
     def _clock(self, t: float, get: Any) -> None:
         epoch, sid = get("epoch", 0) or 0, get("session", "") or ""
+        running = self._current
         if sid and sid != self._current.id:
             if self._session_of(sid, t) is not self._current:
                 return  # a late tick of an ended session: none of the running one's time
+        if self._epoch is not None and epoch > self._epoch and self._current is running:
+            self._new_epoch()
         if self._epoch is not None and epoch != self._epoch:
             self._forget_values()
         if self._epoch is None or epoch >= self._epoch:
@@ -383,6 +397,25 @@ class Response:
             s.start_t = t
         if s.last_t is None or t > s.last_t:
             s.last_t = t
+
+    def _new_epoch(self) -> None:
+        """A reset or a restore within the running session: the faults in effect end with the
+        twin's state (the reset cleared them: unresolved, as at a session's end), and nothing
+        heard before it - an alarm, a crew action - belongs to a fault injected after it (the
+        clock starts again from the reset's time, so the two epochs' times overlap). Found: a
+        drill played after faults injected by hand, in one session, showed the drill's fault
+        acted upon with the actions before the reset."""
+        s = self._current
+        s.era += 1
+        for f in s.active.values():
+            f.ended = True
+        s.active.clear()
+        s.raised.clear()
+        s.recent_raises.clear()
+        s.recent_actions.clear()
+        self._watchers.clear()
+        self._rail_faults.clear()
+        self.version += 1
 
     def _forget_values(self) -> None:
         """A new epoch or session: the values before it are no band of anything after it."""
@@ -515,7 +548,8 @@ class Response:
         elif component == "rail" and name is not None:
             rails[name] = self._states.get(name)
             scopes += [self.prefix + f"load/{ld}/" for ld, r in self._load_rail.items() if r == name]
-        f = _Fault(key, path, component, name, kind, dict(params), actor or "", t, tuple(scopes), rails)
+        f = _Fault(key, path, component, name, kind, dict(params), actor or "", t, tuple(scopes), rails,
+                   era=s.era)
         s.faults.append(f)
         if s is not self._current:  # of a session that ended, heard late: the twin moved on
             f.ended = True
@@ -637,7 +671,7 @@ class Response:
         t = action.t_s
         s.recent_actions.append(action)
         for f in s.faults:
-            if t >= f.injected_t and (f.settled_t is None or t <= f.settled_t):
+            if f.era == s.era and t >= f.injected_t and (f.settled_t is None or t <= f.settled_t):
                 f.actions.append(action)
                 if len(f.actions) > 1 and f.actions[-2].t_s > t:
                     f.actions.sort(key=lambda a: a.t_s)

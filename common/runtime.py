@@ -4,7 +4,8 @@ Longer than 450 lines: the session, the subscriptions that feed the worker
 (:mod:`common.worker`), and the publishers and events are one shell.
 
 A :class:`Runtime` is a context manager: ``with Runtime(name, rovers, conf, state_dir) as rt:``
-opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)``), and
+opens the Zenoh session, the service declares what it needs (a node's ports,
+:meth:`common.node.Node.attach`; the bridge's ``serve(rt, rovers)``), and
 :meth:`Runtime.run` serves until SIGINT or SIGTERM. What it gives a service:
 
 - a liveliness token ``lunaris/<rover>/service/<name>`` per rover served, declared once
@@ -55,6 +56,7 @@ opens the Zenoh session, the service declares what it needs (``serve(rt, rovers)
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import gc
 import os
@@ -63,7 +65,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any, Literal, NamedTuple
 
 import msgspec
@@ -173,7 +175,14 @@ class Runtime:
         self._session_keeper: SessionKeeper | None = None
         self._zid = ""
         self._lock_file: Any = None
+        self._heard_epoch: dict[str, tuple[int, str]] = {}  # rover -> its ticks' (epoch, session)
+        self._claim_tokens: list[Any] = []  # this instance's claims, from __enter__ to claim()
+        self._claim_started = 0.0  # monotonic time they were declared
+        self._claim_refused = ""  # the state directory is another instance's: why, in words
         self._event_seq: dict[str, int] = {}  # per served rover; "" for the rovers not served
+        self._own_events: Callable[[str, Event], None] | None = None  # see record_own_events
+        self._held: list[tuple[tuple, dict]] | None = None  # see events_after
+        self._last_tick: dict[str, tuple[int, int, float]] = {}  # rover -> the tick handled last
         self._acting: str | None = None  # the actor of the sample being handled
         self._inputs: InputLog | None = None
         self._heard: dict[str, Any] = {}  # telemetry key -> its declared key expression
@@ -187,7 +196,13 @@ class Runtime:
     def __enter__(self) -> Runtime:
         self.session = zenoh.open(self._conf)
         self._zid = str(self.session.info.zid())
-        self.subscribe(keys.clock("*"), self._on_clock, telemetry=True)
+        self._begin_claim()  # settles while the time is learnt: one wait, not two
+        # A tick that begins an epoch or a session is handled ahead of everything waiting, as
+        # a fault is: a write sent once the new session was seen must never be applied in
+        # the old one and undone by its reset (one of ten pokes so was, under load). (A
+        # fleet's ticks are drained from a channel, the first, ahead of the other streams.)
+        self.subscribe(keys.clock("*"), self._on_clock, telemetry=True,
+                       urgent_if=self._begins_epoch)
         self._learn_time()
         self.every(SAVE_TIME_S, self.save_time)
         self.on_exit(self.save_time)
@@ -315,15 +330,35 @@ class Runtime:
         return True
 
     def state_damaged(self, rover: str, message: str, key: str | None = None,
-                      params: dict | None = None) -> None:
-        """Say in a ``critical`` event that saved state was damaged, and what was done (the
-        message names the service: "battery state of mapp-1 damaged (...): ...")."""
+                      params: dict | None = None, severity: Severity = "critical") -> None:
+        """Say in an event (``critical``: damaged; ``warning``: saved with another rover file)
+        that saved state could not be used, and what was done (the message names the service:
+        "battery state of mapp-1 damaged (...): ...")."""
         print(f"{self.name}: {message}", file=sys.stderr, flush=True)
-        self.event(rover, "critical", "state_damaged", key or keys.service(rover, self.name),
+        self.event(rover, severity, "state_damaged", key or keys.service(rover, self.name),
                    message, params)
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+    def _begin_claim(self) -> None:
+        """Lock the state directory and declare this instance's claims (see :meth:`claim`),
+        as soon as the session is open: the claims settle while the runtime learns the time
+        (:meth:`__enter__`), so a service starts after one wait of half a second, not two."""
+        self._claim_started = time.monotonic()
+        if self.store.dir is not None:
+            self.store.dir.mkdir(parents=True, exist_ok=True)
+            self._lock_file = open(self.store.dir / f"{self.name}.lock", "w")  # noqa: SIM115
+            try:
+                fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:  # said by claim(); no claim of ours to mislead another
+                self._lock_file.close()
+                self._lock_file = None
+                self._claim_refused = f"another {self.name} service holds {self.store.dir}"
+                return
+        liveliness = self.zenoh_session.liveliness()
+        self._claim_tokens = [liveliness.declare_token(keys.service_claim(rover, self.name, self._zid))
+                              for rover in sorted(self.rovers)]
 
     def claim(self, wait_s: float = 3.0) -> None:
         """Refuse to run beside another instance of this service for the same rovers.
@@ -338,33 +373,27 @@ class Runtime:
           (``lunaris run`` exits with status 3). One still up after ``wait_s`` is a live
           instance, not the last one going away (a restart right after a crash: the router
           drops a dead session's tokens at once);
-        - else each instance declares ``.../service/<name>/claim/<zid>``, looks again
-          ``CLAIM_SETTLE_S`` later, and gives way to a claim of a smaller Zenoh id. Of two
-          instances started at once, either each sees the other's claim (and both pick the
-          same one), or the later one's claim came after the earlier one looked: the earlier
-          one has won and owns the rover by the time the later one looks.
+        - else each instance has declared ``.../service/<name>/claim/<zid>`` (when its
+          session opened: :meth:`_begin_claim`), looks ``CLAIM_SETTLE_S`` after that or
+          later, and gives way to a claim of a smaller Zenoh id. Of two instances started at
+          once, either each sees the other's claim (and both pick the same one), or the later
+          one's claim came after the earlier one looked: the earlier one has won and owns the
+          rover by the time the later one looks.
         """
-        if self.store.dir is not None:
-            self.store.dir.mkdir(parents=True, exist_ok=True)
-            self._lock_file = open(self.store.dir / f"{self.name}.lock", "w")  # noqa: SIM115
-            try:
-                fcntl.flock(self._lock_file, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                raise AlreadyRunning(f"another {self.name} service holds {self.store.dir}") from None
+        if self._claim_refused:
+            raise AlreadyRunning(self._claim_refused)
         liveliness = self.zenoh_session.liveliness()
         me = self._zid
-        claims = [liveliness.declare_token(keys.service_claim(rover, self.name, me))
-                  for rover in sorted(self.rovers)]
         try:
             start = time.monotonic()
             while True:
                 owners, rivals = self._claims(me)
-                waited = time.monotonic() - start
+                now = time.monotonic()
                 if owners:
-                    if waited >= wait_s:
+                    if now - start >= wait_s:
                         raise AlreadyRunning(f"another {self.name} service already serves "
                                              f"{', '.join(owners)} (its liveliness token is up)")
-                elif waited >= CLAIM_SETTLE_S:
+                elif now - self._claim_started >= CLAIM_SETTLE_S:
                     first = {rover: zid for rover, zid in rivals.items() if zid < me}
                     if first:
                         raise AlreadyRunning(
@@ -373,12 +402,15 @@ class Runtime:
                             f"{min(first.values())}; this one is {me})")
                     break
                 time.sleep(0.1)
+            # Won: the owner tokens are up before the claims go (a rival looking in between
+            # would see neither, and win too), held until the service tokens are up (run),
+            # which say the same from then on.
+            self._owner_tokens = [liveliness.declare_token(keys.service_owner(rover, self.name, me))
+                                  for rover in sorted(self.rovers)]
         finally:
-            for token in claims:
+            for token in self._claim_tokens:
                 token.undeclare()
-        # held until the service tokens are up (run), which say the same from then on
-        self._owner_tokens = [liveliness.declare_token(keys.service_owner(rover, self.name, me))
-                              for rover in sorted(self.rovers)]
+            self._claim_tokens = []
 
     def _claims(self, me: str) -> tuple[list[str], dict[str, str]]:
         """(the rovers another instance owns or serves, {rover: the smallest rival claim})."""
@@ -417,16 +449,17 @@ class Runtime:
     def own_state(self, get: StateGet, set_: StateSet, reset: StateReset, *,
                   after: Callable[[str], None] | None = None,
                   persist_every_s: float | None = 1.0, check: StateCheck | None = None,
-                  damaged: StateDamaged | None = None) -> None:
+                  damaged: StateDamaged | None = None, files: dict[str, str] | None = None) -> None:
         """Hand the service's state to the session keeper (:mod:`common.session`): kept on
         disk, reset by ``control/reset``, saved and restored by snapshots. ``after(rover)``
         republishes once the state has changed by a control. The persisted state is read back
         at once (call this before the first publish), checked against the shape of the
         state the service has now and by ``check(rover, state)`` (ranges: raise ValueError);
         a damaged one is said aloud and the rover reset (``damaged(rover)``, which returns
-        what it did in words, instead of ``reset``)."""
+        what it did in words, instead of ``reset``). ``files``: each rover file's fingerprint
+        (:func:`common.config.fingerprint`): a state saved with another is not resumed."""
         self._session_keeper = SessionKeeper(self, get, set_, reset, after, persist_every_s,
-                                             check=check, damaged=damaged)
+                                             check=check, damaged=damaged, files=files)
 
     @property
     def keeper(self) -> SessionKeeper:
@@ -446,9 +479,25 @@ class Runtime:
         """Call ``fn(rover, tick)`` for every clock tick, after :attr:`t_s` has moved to it."""
         self._tick_handlers.append(fn)
 
+    def _begins_epoch(self, s: Sample) -> bool:
+        """Whether a tick, as it arrives, is the first heard of a new epoch or session of its
+        rover (Zenoh's thread: :attr:`_heard_epoch` is this method's alone)."""
+        try:
+            tick = decode(s.payload, Clock)
+        except (msgspec.DecodeError, msgspec.ValidationError):
+            return False  # said by _on_clock, in its turn
+        heard = (tick.epoch, tick.session)
+        before = self._heard_epoch.get(s.rover)
+        self._heard_epoch[s.rover] = heard
+        return before is not None and before != heard
+
     def _on_clock(self, s: Sample) -> None:
         tick = decode(s.payload, Clock)
         rover = s.rover
+        heard = (tick.epoch, tick.seq, tick.t_s)
+        if self._last_tick.get(rover) == heard:
+            return  # the same tick again: an epoch's first comes ahead of the telemetry too
+        self._last_tick[rover] = heard
         if not self._makes_time and (tick.epoch, tick.t_s) < (self.epoch[rover], self.t_s[rover]):
             self._clock_behind(rover, tick)  # a late tick of an older epoch, or a clock that
             return                           # lost its time: never back in time
@@ -550,6 +599,7 @@ class Runtime:
             self._lock_file.close()
             self._lock_file = None
         self._keep.clear()
+        self._claim_tokens.clear()
         self._owner_tokens.clear()
         self._heard.clear()
         self._publishers.clear()
@@ -620,6 +670,12 @@ class Runtime:
         """Hold a declared Zenoh entity for the life of the service."""
         self._keep.append(entity)
 
+    def record_own_events(self, record: Callable[[str, Event], None]) -> None:
+        """Hand each event of a served rover to ``record(rover, event)`` before it is
+        published: the faults service journals its own events so (heard back from Zenoh a
+        moment later, a kill in that moment lost one, with no gap to show for it)."""
+        self._own_events = record
+
     def on_wildcard(self, handler: Handler) -> None:
         """Hand ``handler`` each sample whose key holds a wildcard (``*``, ``**``, ``$*``),
         once, however many of this service's subscriptions it reaches: the gatekeeper's, which
@@ -644,7 +700,8 @@ class Runtime:
 
     def subscribe(self, keyexpr: str, handler: Handler, *, any_rover: bool = False,
                   history: bool = False, telemetry: bool = False, urgent: bool = False,
-                  writes: WriteRole = "own") -> None:
+                  writes: WriteRole = "own",
+                  urgent_if: Callable[[Sample], bool] | None = None) -> None:
         """Queue every sample on ``keyexpr`` for ``handler``; samples for rovers this service
         does not serve are dropped unless ``any_rover``. With ``history`` the publishers'
         caches are replayed first (an advanced subscriber), for a service that joins late.
@@ -661,7 +718,10 @@ class Runtime:
         (``own``: refused with a rejection event, the handler not called), a follower of a
         write another service answers (``follow``: dropped without a word; so is a session
         control, which the faults service answers), or the gatekeeper (``gate``: the handler
-        decides, with :meth:`refusal`)."""
+        decides, with :meth:`refusal`).
+
+        ``urgent_if(sample)``: urgent when it says so (on Zenoh's thread, as the sample
+        arrives; a fleet's stream, drained from a channel, in its turn)."""
         if writes != "gate":
             handler = self._writes_checked(handler, answer=writes == "own")
         session = self.zenoh_session
@@ -701,7 +761,8 @@ class Runtime:
         def on_sample(s: zenoh.Sample) -> None:
             sample = convert(s)
             if sample is not None:
-                self.worker.put(handler, sample, urgent=urgent)
+                self.worker.put(handler, sample, urgent=urgent or (
+                    urgent_if is not None and urgent_if(sample)))
 
         how: Any = zenoh.handlers.FifoChannel(CHANNEL_CAPACITY) if polled else on_sample
         sub: Any
@@ -766,11 +827,21 @@ class Runtime:
             self.zenoh_session.declare_queryable(keyexpr, lambda q: self.worker.call_soon(handler, q))
         )
 
-    def publish(self, key: str, msg: msgspec.Struct, *, reliable: bool = False) -> None:
-        """Publish a payload on an advanced publisher that caches the last sample. Telemetry
-        may drop a sample under congestion (the next one replaces it); ``reliable`` blocks
-        instead, for what must never be lost (events, the faults in effect)."""
-        self.publish_bytes(key, encode(msg), zenoh.Encoding.APPLICATION_JSON, reliable=reliable)
+    def publish(self, key: str, msg: msgspec.Struct, *, reliable: bool = False,
+                cache: int = 1) -> None:
+        """Publish a payload on an advanced publisher that caches the last sample (``cache``:
+        the last so many). Telemetry may drop a sample under congestion (the next one replaces
+        it); ``reliable`` blocks instead, for what must never be lost (events, the faults in
+        effect)."""
+        self.publish_bytes(key, encode(msg), zenoh.Encoding.APPLICATION_JSON, reliable=reliable,
+                           cache=cache)
+
+    def publish_ahead(self, key: str, msg: msgspec.Struct) -> None:
+        """Put a sample at the writes' priority (``PRIORITY``), never dropped: it goes ahead of
+        the telemetry queued on the links, and nothing written after it at that priority
+        overtakes it. (A put of the session: the key's publisher sends it again, cached.)"""
+        self.zenoh_session.put(key, encode(msg), encoding=zenoh.Encoding.APPLICATION_JSON,
+                               congestion_control=zenoh.CongestionControl.BLOCK, priority=PRIORITY)
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding,
                       attachment: bytes | None = None, *, reliable: bool = False,
@@ -827,6 +898,9 @@ class Runtime:
         the service is in (:attr:`session_id`). ``(source_id, seq)`` names the event
         among the rover's. A rover this service does not serve (a rejection of a key naming
         an unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
+        if self._held is not None:  # (events_after)
+            self._held.append(((rover, severity, kind, key, message, params), {"actor": actor}))
+            return
         if keys.has_wildcard(rover) or "/" in rover or not rover:  # never a key naming many
             print(f"{self.name}: no event for rover {rover!r}: {message}", file=sys.stderr, flush=True)
             return
@@ -844,14 +918,33 @@ class Runtime:
                                    congestion_control=zenoh.CongestionControl.BLOCK,
                                    priority=PRIORITY)
             return
+        if self._own_events is not None:
+            self._own_events(rover, ev)
         if ekey not in self._publishers:
             self._declare_publisher(ekey, max(EVENT_CACHE, EVENT_HISTORY // len(self.rovers)),
                                     reliable=True)
         self.publish(ekey, ev)
 
-    def reject(self, rover: str, key: str, reason: str) -> None:
-        """Refuse an input: nothing changes, and a warning event says why."""
-        self.event(rover, "warning", "rejected", key, f"rejected: {reason}")
+    @contextlib.contextmanager
+    def events_after(self) -> Iterator[list[tuple[tuple, dict]]]:
+        """Hold the events of this service published in the block: they go out at its end,
+        after those the block puts in the list it is given (``(args, kwargs)`` of
+        :meth:`event`). The fault book's injection goes out before the alarms its effect
+        raised: the journal says the cause first (it said the load's over-current, raised
+        and resolved, before the short that caused it)."""
+        held, self._held = self._held, []
+        first: list[tuple[tuple, dict]] = []
+        try:
+            yield first
+        finally:
+            mine, self._held = self._held, held
+            for args, kwargs in first + mine:
+                self.event(*args, **kwargs)
+
+    def reject(self, rover: str, key: str, reason: str, actor: str | None = None) -> None:
+        """Refuse an input: nothing changes, and a warning event says why (``actor``: whose,
+        by default the write's being handled: the bridge says the crew's)."""
+        self.event(rover, "warning", "rejected", key, f"rejected: {reason}", actor=actor)
 
     def accepted_input(self, rover: str, key: str, message: str, params: dict | None = None) -> None:
         """Journal an accepted input as an ``input`` event; a ramp's stream of them is folded

@@ -236,7 +236,7 @@ def parse_scenario(text: str, source: str = "<scenario>", rover: Rover | None = 
                 if isinstance(step, dict):
                     _step_problems(step, f"steps[{i}]", rover, problems, base)
     if problems:
-        raise ScenarioError(source, problems)
+        raise ScenarioError(source, problems, data)
     return msgspec.convert(data, Scenario)
 
 

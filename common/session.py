@@ -51,13 +51,13 @@ import zenoh
 from common import keys
 from common.fault_book import saved_fault
 from common.messages import Clock, SnapshotInfo, encode
-from common.state_store import Damaged, StateStore, not_finite
+from common.state_store import Damaged, StateStore, kind_of, not_finite, quoted, shape_problem
 
 if TYPE_CHECKING:
     from common.runtime import Runtime, Sample
 
 __all__ = ["RESTORE", "SNAPSHOT_NAME", "SessionKeeper", "StateCheck", "StateDamaged", "StateGet",
-           "StateReset", "StateSet", "parse_control", "shape_problem"]
+           "StateReset", "StateSet", "parse_control"]
 
 StateGet = Callable[[str], dict[str, Any]]
 StateSet = Callable[[str, dict[str, Any]], None]
@@ -80,71 +80,15 @@ def parse_control(parts: list[str]) -> tuple[str, str] | None:
     return None
 
 
-def _kind(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true or false"
-    if isinstance(value, int | float):
-        return "a number"
-    if isinstance(value, str):
-        return "text"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, dict):
-        return "a mapping"
-    return "null" if value is None else type(value).__name__
-
-
-def shape_problem(saved: Any, template: Any, at: str = "the state") -> str | None:
-    """What is wrong with ``saved`` against ``template`` (a state as the service has it now),
-    or None: a field of another type than the template's (a number where a number is, true
-    or false where a flag is, ...), a number that is not finite. Fields the template does
-    not have are let through (the service's ``set`` ignores them); missing ones too (it has
-    defaults for what older versions did not save)."""
-    if isinstance(template, bool):
-        ok = isinstance(saved, bool)
-    elif isinstance(template, int | float):
-        ok = isinstance(saved, int | float) and not isinstance(saved, bool)
-        if ok and not_finite(float(saved)):
-            return f"{at} is {saved!r}, not a finite number"
-    elif isinstance(template, str):
-        ok = isinstance(saved, str)
-    elif isinstance(template, list):
-        ok = isinstance(saved, list)
-        if ok and template:
-            for i, item in enumerate(saved):
-                problem = shape_problem(item, template[0], f"{at}[{i}]")
-                if problem:
-                    return problem
-    elif isinstance(template, dict):
-        ok = isinstance(saved, dict)
-        if ok:
-            for k, v in saved.items():
-                if k in template:
-                    problem = shape_problem(v, template[k], k if at == "the state" else f"{at}.{k}")
-                    if problem:
-                        return problem
-                elif (path := not_finite(v)) is not None:
-                    where = k if at == "the state" else f"{at}.{k}"
-                    return f"{where}{'' if path == 'the value' else '.' + path} is not a finite number"
-    else:
-        return None
-    if not ok:
-        return f"{at} is {_kind(saved)}, not {_kind(template)} ({_short(saved)})"
-    return None
-
-
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
 class SessionKeeper:
     """Persistence, reset, snapshots and restores of one service's state."""
 
     def __init__(self, rt: Runtime, get: StateGet, set_: StateSet, reset: StateReset,
                  after: Callable[[str], None] | None, persist_every_s: float | None,
-                 check: StateCheck | None = None, damaged: StateDamaged | None = None):
+                 check: StateCheck | None = None, damaged: StateDamaged | None = None,
+                 files: dict[str, str] | None = None):
         self.rt, self._get, self._set, self._reset = rt, get, set_, reset
+        self._files = files or {}  # rover -> the fingerprint of its rover file (common.config)
         self._after = after or (lambda rover: None)
         self._check = check
         self._damaged = damaged or self._reset_damaged
@@ -176,13 +120,17 @@ class SessionKeeper:
         if saved is None:
             return
         bad: dict[str, str] = {}
+        changed: list[str] = []  # saved with another version of the rover file
         if not isinstance(saved, dict):
-            bad = dict.fromkeys(sorted(rt.rovers), f"the file holds {_kind(saved)}, not a "
+            bad = dict.fromkeys(sorted(rt.rovers), f"the file holds {kind_of(saved)}, not a "
                                                      "mapping of rovers")
         for rover in sorted(rt.rovers) if not bad else ():
             record = saved.get(rover)
             if record is None:
                 continue  # not saved yet (a rover new to the fleet)
+            if self._other_file(rover, record):
+                changed.append(rover)
+                continue
             try:
                 state, epoch = self._record(rover, record)
             except ValueError as exc:
@@ -195,21 +143,34 @@ class SessionKeeper:
                 continue
             self.epoch[rover] = epoch
             self.resumed.add(rover)
-        if bad:
-            moved = rt.store.set_aside("state")
+        if bad or changed:
+            moved = rt.store.set_aside("state", "damaged" if bad else "old-rover-file")
             where = f"the file was moved to {moved.name}" if moved else "the file is left where it is"
             for rover, reason in bad.items():
                 self._report(rover, reason, where)
+            for rover in changed:
+                self._reset(rover)
+                rt.state_damaged(rover, f"{rt.name} state of {rover} not resumed: it was saved with "
+                                 "another version of the rover file, changed since; started from the "
+                                 f"rover file as it is now; {where}",
+                                 params={"what": "state", "reason": "rover file changed",
+                                         "done": "started from the rover file"}, severity="warning")
             self.persist()  # the intact rovers' records, in a file of their own again
+
+    def _other_file(self, rover: str, record: Any) -> bool:
+        """Whether ``record`` was saved with another version of the rover's file (a record
+        saved before files were fingerprinted says nothing: it resumes)."""
+        saved = record.get("file") if isinstance(record, dict) else None
+        return saved is not None and rover in self._files and saved != self._files[rover]
 
     def _record(self, rover: str, record: Any) -> tuple[dict[str, Any], int]:
         """The state and epoch of a saved record, checked; ValueError naming the problem."""
         if not isinstance(record, dict) or not isinstance(record.get("state"), dict):
-            what = _kind(record.get("state")) if isinstance(record, dict) else _kind(record)
+            what = kind_of(record.get("state")) if isinstance(record, dict) else kind_of(record)
             raise ValueError(f"the state is {what}, not a mapping")
         epoch = record.get("epoch", 0)
         if type(epoch) is not int or epoch < 0:
-            raise ValueError(f"epoch is {_short(epoch)}, not a whole number >= 0")
+            raise ValueError(f"epoch is {quoted(epoch)}, not a whole number >= 0")
         state = record["state"]
         self.check(rover, state)
         return state, epoch
@@ -239,7 +200,8 @@ class SessionKeeper:
 
     def persist(self, durable: bool = True) -> None:
         self.rt.save_state("state", {
-            rover: {"state": self._get(rover), "epoch": self.epoch.get(rover, 0)}
+            rover: {"state": self._get(rover), "epoch": self.epoch.get(rover, 0),
+                    **({"file": self._files[rover]} if rover in self._files else {})}
             for rover in sorted(self.rt.rovers)}, durable)
 
     # -- following the clock's epochs ---------------------------------------------------------
@@ -368,18 +330,18 @@ class SessionKeeper:
         if saved is None or (isinstance(saved, dict) and rover not in saved):
             raise ValueError(NO_PART)
         if not isinstance(saved, dict):
-            raise ValueError(f"the file holds {_kind(saved)}, not a mapping of rovers")
+            raise ValueError(f"the file holds {kind_of(saved)}, not a mapping of rovers")
         record = saved[rover]
         if not isinstance(record, dict) or not isinstance(record.get("state"), dict):
             raise ValueError("the part is not a mapping with a state")
         t_s = record.get("t_s", 0.0)
         if isinstance(t_s, bool) or not isinstance(t_s, int | float) or not_finite(float(t_s)) \
                 or t_s < 0:
-            raise ValueError(f"t_s is {_short(t_s)}, not a finite number >= 0")
+            raise ValueError(f"t_s is {quoted(t_s)}, not a finite number >= 0")
         self.check(rover, record["state"])
         raw_faults = record.get("faults", [])
         if not isinstance(raw_faults, list):
-            raise ValueError(f"faults is {_kind(raw_faults)}, not a list")
+            raise ValueError(f"faults is {kind_of(raw_faults)}, not a list")
         faults = []
         for raw in raw_faults:
             try:

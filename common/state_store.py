@@ -33,7 +33,8 @@ from typing import Any
 
 import msgspec
 
-__all__ = ["Damaged", "StateStore", "not_finite", "set_aside", "write_atomically"]
+__all__ = ["Damaged", "StateStore", "kind_of", "not_finite", "quoted", "set_aside", "shape_problem",
+           "write_atomically"]
 
 
 class Damaged(Exception):
@@ -87,17 +88,17 @@ def fsync_folder(folder: Path) -> None:
         os.close(fd)
 
 
-def set_aside(path: Path) -> Path | None:
+def set_aside(path: Path, why: str = "damaged") -> Path | None:
     """Move a damaged file (or whatever is in its place) out of the way, to
-    ``<name>.damaged-<UTC time>``; where it went, or None if it could not be moved."""
+    ``<name>.<why>-<UTC time>``; where it went, or None if it could not be moved."""
     if not os.path.lexists(path):
         return None
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-    target = path.with_name(f"{path.name}.damaged-{stamp}")
+    target = path.with_name(f"{path.name}.{why}-{stamp}")
     n = 1
     while os.path.lexists(target):
         n += 1
-        target = path.with_name(f"{path.name}.damaged-{stamp}-{n}")
+        target = path.with_name(f"{path.name}.{why}-{stamp}-{n}")
     try:
         os.replace(path, target)
     except OSError:
@@ -177,7 +178,67 @@ class StateStore:
             return data
         raise Damaged(path, reason, self.set_aside(what) if set_aside else None)
 
-    def set_aside(self, what: str) -> Path | None:
+    def set_aside(self, what: str, why: str = "damaged") -> Path | None:
         """Move the file of ``what`` out of the way (see :func:`set_aside`)."""
         path = self.path(what)
-        return None if path is None else set_aside(path)
+        return None if path is None else set_aside(path, why)
+
+
+def kind_of(value: Any) -> str:
+    """What a JSON value is, in words (in what a check of saved state says)."""
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, str):
+        return "text"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a mapping"
+    return "null" if value is None else type(value).__name__
+
+
+def shape_problem(saved: Any, template: Any, at: str = "the state") -> str | None:
+    """What is wrong with ``saved`` against ``template`` (a state as the service has it now),
+    or None: a field of another type than the template's (a number where a number is, true
+    or false where a flag is, ...), a number that is not finite. Fields the template does
+    not have are let through (the service's ``set`` ignores them); missing ones too (it has
+    defaults for what older versions did not save)."""
+    if isinstance(template, bool):
+        ok = isinstance(saved, bool)
+    elif isinstance(template, int | float):
+        ok = isinstance(saved, int | float) and not isinstance(saved, bool)
+        if ok and not_finite(float(saved)):
+            return f"{at} is {saved!r}, not a finite number"
+    elif isinstance(template, str):
+        ok = isinstance(saved, str)
+    elif isinstance(template, list):
+        ok = isinstance(saved, list)
+        if ok and template:
+            for i, item in enumerate(saved):
+                problem = shape_problem(item, template[0], f"{at}[{i}]")
+                if problem:
+                    return problem
+    elif isinstance(template, dict):
+        ok = isinstance(saved, dict)
+        if ok:
+            for k, v in saved.items():
+                if k in template:
+                    problem = shape_problem(v, template[k], k if at == "the state" else f"{at}.{k}")
+                    if problem:
+                        return problem
+                elif (path := not_finite(v)) is not None:
+                    where = k if at == "the state" else f"{at}.{k}"
+                    return f"{where}{'' if path == 'the value' else '.' + path} is not a finite number"
+    else:
+        return None
+    if not ok:
+        return f"{at} is {kind_of(saved)}, not {kind_of(template)} ({quoted(saved)})"
+    return None
+
+
+def quoted(value: Any) -> str:
+    """A value as a check of saved state quotes it: its repr, cut at 40 characters."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."

@@ -103,7 +103,7 @@ def parse_traverse(text: str, source: str = "<traverse>", rover: Rover | None = 
                 problems += plan(traverse.command(), rover.drive, (s.x_m, s.y_m, s.z_m))[1]
         if not problems:
             return traverse
-    raise TraverseError(source, problems)
+    raise TraverseError(source, problems, data)
 
 
 def plan(cmd: DriveTraverse, drive: Drive, start: Point) -> tuple[list[Leg], list[str]]:

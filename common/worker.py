@@ -24,13 +24,14 @@ from __future__ import annotations
 
 import math
 import queue
+import signal
 import threading
 import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["MAX_BATCH_S", "POLL_MAX_S", "POLL_S", "Worker"]
+__all__ = ["MAX_BATCH_S", "POLL_MAX_S", "POLL_S", "Worker", "wait_get"]
 
 MAX_BATCH_S = 0.02  # the longest a batch runs before its hooks and the timers [s]
 POLL_S = 0.002  # how often the channels are drained while they bring samples [s]
@@ -38,6 +39,28 @@ POLL_MAX_S = 0.016  # ... backing off to this while they are empty (between a fl
 
 _WAKE = ("wake",)  # queued for an urgent input, which waits in a line of its own
 _STOP = ("stop",)
+
+_HELD_OFF = {signal.SIGINT, signal.SIGTERM}  # the signals the tools and services handle
+
+
+def wait_get(q: queue.SimpleQueue, timeout: float) -> Any:
+    """``q.get(timeout=timeout)`` with SIGINT and SIGTERM held off while it waits: their
+    handlers run as soon as it returns, within ``timeout``.
+
+    CPython 3.11's C ``SimpleQueue``, interrupted by a signal whose handler (or getting the
+    GIL back) takes it past its deadline, computes a negative timeout and then waits for
+    ever: a service so interrupted by its supervisor's death signal lived on as an orphan,
+    deaf to every SIGTERM after (a main thread in an untimed ``sem_wait``); ``lunaris record``
+    and ``scenario run`` could hang so on Ctrl-C. A held-off signal waits for the unblock (or
+    goes to another thread, whose C handler only trips the flag the main thread then sees)."""
+    if timeout <= 0:
+        return q.get(timeout=0.0)
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _HELD_OFF)
+    try:
+        return q.get(timeout=timeout)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
 
 Guard = Callable[..., None]  # guard(fn, *args): run fn(*args), reporting what it raises
 Convert = Callable[[Any], Any]  # a Zenoh sample -> the handler's argument, or None to drop it
@@ -108,7 +131,7 @@ class Worker:
             if self._channels:
                 timeout = min(timeout, self._poll_s)
             try:  # at once while urgent inputs wait (their wake-up taken by a batch)
-                item = self._queue.get(timeout=0.0 if self._urgent else timeout)
+                item = wait_get(self._queue, 0.0 if self._urgent else timeout)
             except queue.Empty:
                 item = None
             if self._batch(None if item is _WAKE or item is _STOP else item):
@@ -148,8 +171,7 @@ class Worker:
             if wait <= 0:
                 break
             try:  # the rest of a burst: a queued sample at once, a channel's within POLL_S
-                item = self._next(self._queue.get(
-                    timeout=min(wait, POLL_S) if self._channels else wait))
+                item = self._next(wait_get(self._queue, min(wait, POLL_S) if self._channels else wait))
             except queue.Empty:
                 if not self._channels:
                     break

@@ -25,8 +25,8 @@ from common.faults import parse_fault_key, parse_params
 from common.messages import BARE_FIELD, BadInput, ScenarioMark, SessionStart, TimelineMark, decode_input
 from common.session import parse_control
 
-__all__ = ["DELETABLE", "FAULT_OWNERS", "Write", "answer_of", "check_chunks", "plan_write",
-           "snapshot_name_problem"]
+__all__ = ["DELETABLE", "FAULT_OWNERS", "STANDS_IN", "Write", "answer_of", "check_chunks", "plan_write",
+           "snapshot_name_problem", "stand_in"]
 
 DELETABLE = keys.DELETABLE  # the inputs that take a delete
 # The service that owns (and answers for) each component type of the fault catalogue.
@@ -45,6 +45,27 @@ _CHUNK = re.compile(NAME_PATTERN)
 _ROVER = re.compile(ID_PATTERN)
 
 
+STANDS_IN = ("cmd/rail/", "input/drive/traverse")  # what an instructor may do as the crew
+
+
+def stand_in(write: Write) -> Write:
+    """The write made by the instructor standing in for the crew (a drill run without the
+    crew's dashboard): it counts as the crew's action in the crew's response and the debrief.
+    Only the crew's rail controls and its stop of the rover (a delete of the traverse: the
+    crew never drives it); else :class:`BadInput`."""
+    tail = write.tail
+    if tail == "input/drive/traverse" and write.payload is not None:
+        raise BadInput("the crew stops the rover (a delete of input/drive/traverse) but does not "
+                       "send it a traverse: send it as the instructor")
+    if not tail.startswith(STANDS_IN):
+        if tail.startswith("input/"):  # the dashboard writes some inputs; a stand-in does not
+            raise BadInput(f"standing in for the crew covers its rail commands and stopping the "
+                           f"rover only: send {tail} as the instructor")
+        raise BadInput(f"the crew's dashboard cannot write {tail}: only its rail commands and "
+                       "stopping the rover can be made for the crew")
+    return write._replace(actor="crew")
+
+
 class Write(NamedTuple):
     """A write on one key of the twin: the key, the payload to send (None: a delete), the
     event kind that accepts it and the service that answers it."""
@@ -53,6 +74,7 @@ class Write(NamedTuple):
     payload: bytes | None
     accepted: str
     owner: str
+    actor: str | None = None  # who it says made it; None: its writer (see stand_in)
 
     @property
     def rover(self) -> str:

@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from common.config import ConfigError, Rover, budget_warnings, load_rover
+from common.budget import budget_warnings
+from common.config import ConfigError, Rover, load_rover
 
 __all__ = ["add_arguments", "main"]
 

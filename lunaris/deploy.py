@@ -1,4 +1,4 @@
-"""``lunaris deploy acl|secrets|check``: who may do what in a deployment, and its secrets.
+"""``lunaris deploy acl|secrets|check|compose``: who may do what in a deployment, and its secrets.
 
 - ``acl`` writes ``deploy/zenohd.json5``, the router's configuration with its access control
   (:mod:`lunaris.deploy_acl`); ``tests/deploy`` fails when the committed file is stale.
@@ -8,7 +8,8 @@
 - ``--site FILE``: a deployment of several machines, each with a router of its own, from one
   description (``deploy/site.yaml``, :mod:`lunaris.deploy_site`): every router's identity,
   certificate, dictionary and configuration, made, rotated and checked
-  (:mod:`lunaris.deploy_routers`).
+  (:mod:`lunaris.deploy_routers`); ``compose --site`` writes its Docker Compose file
+  (:mod:`lunaris.deploy_compose`).
 """
 
 from __future__ import annotations
@@ -71,6 +72,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     s.add_argument("--secrets-dir", metavar="DIR",
                    help="with --site: where the routers find their folders when they run outside "
                         f"Docker (DIR/<router>; default: the container's {ROUTER_SECRETS})")
+    o = sub.add_parser("compose", help="write the Docker Compose file of a site (one profile per "
+                                       "machine) from its site file")
+    o.add_argument("--site", metavar="FILE", required=True, help=site_help)
+    o.add_argument("--output", metavar="PATH",
+                   help="the file to write, in the repository the images are built from "
+                        "(default docker-compose.site.yml)")
+    o.add_argument("--secrets", metavar="DIR", default="deploy/secrets",
+                   help="the site's secrets folder, relative to the repository (default deploy/secrets)")
+    o.add_argument("--check", action="store_true", help="exit 1 if the file is not up to date")
     c = sub.add_parser("check", help="refuse secrets that cannot be trusted (exit 1)")
     c.add_argument("dir", metavar="DIR")
     c.add_argument("--no-tls", action="store_true")
@@ -161,6 +171,17 @@ def _main_site(args: argparse.Namespace) -> int:
                     raise ValueError(f"{args.site} has no router {args.router!r}")
                 return _report(check_router_folder(Path(args.dir), site, args.router), args.dir)
             return _report(check_site_secrets(Path(args.dir), site), args.dir)
+        if args.action == "compose":
+            from lunaris.deploy_compose import COMPOSE_FILE, write_site_compose
+            out = Path(args.output) if args.output else COMPOSE_FILE
+            current = write_site_compose(site, out, args.check, args.secrets)
+            if args.check:
+                if not current:
+                    print(f"{out} is stale: run lunaris deploy compose --site {args.site}",
+                          file=sys.stderr)
+                return 0 if current else 1
+            print(f"{out} is up to date" if current else f"wrote {out}")
+            return 0
         if args.action == "secrets":
             written = make_site_secrets(Path(args.dir), site, args.rotate, args.secrets_dir)
             print(f"wrote {', '.join(written)} in {args.dir} (keep it private; copy each "

@@ -34,6 +34,8 @@ __all__ = ["REPO", "ROUTER_FILE", "ROUTER_SECRETS", "acl", "render_router_config
 
 LINK_LEASE_MS = 3000  # a site's routers: a cut link closed within 3 s
 RETRY_MS = 1000  # ... and opened again within 1 s of the cable's return
+ACCEPT_TIMEOUT_MS = 3000  # a client that has not finished TLS and its password by then is closed
+ACCEPT_PENDING = 1000  # connections in that state at once (Zenoh: 100)
 ROUTER_SECRETS = "/etc/zenoh/secrets"  # where the router container finds the secrets
 REPO = Path(__file__).resolve().parent.parent
 ROUTER_FILE = REPO / "deploy" / "zenohd.json5"
@@ -119,7 +121,8 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
     # the crew's controls: the dashboard calls them, the bridge answers (its queryables open
     # across the rovers it serves, as it hears the inbound topics)
     calls, answers = dashboard_calls(mf, fleet), bridge_answers(mf, fleet)
-    crew = crew_writes(mf)  # what the bridge writes for the crew: inputs and commands
+    # what the bridge writes for the crew: inputs and commands (puts), the rover's stop (a delete)
+    crew_puts, crew_deletes = crew_writes(mf, "put"), crew_writes(mf, "delete")
     dash_adv = [f"{k}/@adv/**" for k in reads]
     rules = [
         _rule("read-twin", "allow", ["ingress"], _READ_IN, _TWIN),
@@ -180,8 +183,12 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
         answered = _answered(service)
         adv = [f"{k}/@adv/**" for k in pub]
         extra_pub: list[str] = []
-        if service == "bridge":  # the dashboard's topics, and the crew's inputs and commands
-            extra_pub = reads + dash_adv + ["@ros2_lv/**"] + crew
+        crew_rules: list[dict[str, Any]] = []
+        if service == "bridge":  # the dashboard's topics; the crew's writes are rules of their own
+            extra_pub = reads + dash_adv + ["@ros2_lv/**"]
+            crew_rules = [_rule(f"svc-bridge-crew-{op}", "allow", ["ingress"], [op], writes_)
+                          for op, writes_ in (("put", crew_puts), ("delete", crew_deletes)) if writes_]
+            rules += crew_rules
         r = f"svc-{service}"
         rules += [
             _rule(f"{r}-publish", "allow", ["ingress"], ["put", "delete"], pub + extra_pub),
@@ -208,7 +215,8 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
             "id": f"service-{service}", "subjects": [f"lunaris-{service}"],
             "rules": ["read-twin", "deliver-twin", "learn-subscribers", f"{r}-publish",
                       f"{r}-answer", f"{r}-asked", f"{r}-announce"]
-            + (["svc-bridge-hear", "svc-bridge-heard"] if service == "bridge" else []),
+            + (["svc-bridge-hear", "svc-bridge-heard", *(c["id"] for c in crew_rules)]
+               if service == "bridge" else []),
         })
     known = set(clients) | {router_identity(n) for n in (*routers_in, *routers_out)}
     subjects = [sub for sub in subjects if sub["id"] in known]
@@ -274,6 +282,11 @@ def router_config(mf: MappingFile, fleet: list[RoverNames], secrets_dir: str = R
         # §5b says what that means for ROS 2 nodes.
         "timestamping": {"enabled": {"router": True, "peer": True, "client": True}},
         "transport": {
+            # A connection that has not shown who it is within ACCEPT_TIMEOUT_MS is closed, and
+            # ACCEPT_PENDING of them may wait at once: with Zenoh's 10 s and 100, a hundred TLS
+            # handshakes with nothing after them held every new session back 12 s (a client
+            # with no password, on a router reachable from the network).
+            "unicast": {"accept_timeout": ACCEPT_TIMEOUT_MS, "accept_pending": ACCEPT_PENDING},
             "auth": {"usrpwd": auth},
             "link": link,
         },

@@ -96,11 +96,13 @@ def bridge_answers(mf: MappingFile, fleet: list[RoverNames]) -> list[str]:
     return _open(mf, fleet, "call")
 
 
-def crew_writes(mf: MappingFile) -> list[str]:
-    """The twin keys the bridge writes for the crew: those of the inbound topics and of the
-    services (components as ``*``)."""
+def crew_writes(mf: MappingFile, op: str = "put") -> list[str]:
+    """The twin keys the bridge writes for the crew with ``op`` (put or delete): those of the
+    inbound topics and of the services (components as ``*``). A service that deletes its key
+    (the rover's stop) is its only delete: the bridge may not drive the rover."""
     return sorted({re.sub(r"\{[a-z_]*\}", "*", m.key.replace("{rover}", "*"))
-                   for m in mf.mappings if m.kind == "service" or m.direction == "in"})
+                   for m in mf.mappings if (m.kind == "service" or m.direction == "in")
+                   and (m.write if m.kind == "service" else "put") == op})
 
 
 def inbound_regexes(mf: MappingFile) -> list[str]:

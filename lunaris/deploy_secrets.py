@@ -124,6 +124,8 @@ def make_certificate(folder: Path, ca: Path, common_name: str, hosts: list[str],
     and addresses ``hosts`` (what clients check), ``common_name`` (what another router's
     access control matches); ``linked``: also a TLS client's certificate, for the links it
     opens to other routers (mutual TLS)."""
+    # openssl runs in the certificate's folder: the CA's path must not be relative to ours
+    folder, ca = folder.resolve(), ca.resolve()
     _private_folder(folder)
     _openssl("req", *_EC, "-keyout", "router.key", "-out", "router.csr", "-subj",
              f"/CN={common_name}", cwd=folder)

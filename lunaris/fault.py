@@ -184,7 +184,10 @@ def _list(args: argparse.Namespace) -> int:
         events = (journal or [])[-args.journal:]
         print(f"last {len(events)} event(s):")
         for e in events:
-            print(f"  {e['t_s']:10.1f}  {e['severity']:<9} {e['kind']:<15} [{e['source']}] {e['message']}")
+            actor = e.get("actor") or "twin"  # who acted: the crew's calls apart from the rest
+            by = "" if actor == "twin" else f", by the {actor}"
+            print(f"  {e['t_s']:10.1f}  {e['severity']:<9} {e['kind']:<15} [{e['source']}{by}] "
+                  f"{e['message']}")
     return 2 if missing else 0
 
 

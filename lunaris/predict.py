@@ -81,7 +81,7 @@ def _from_file(path: str, request: PredictionRequest, traverse: str | None = Non
                back: bool = False) -> tuple[Prediction, str]:
     from common.config import ConfigError, load_rover
     from common.traverse import load_traverse
-    from services.battery.prediction import percentiles, predict, start_of
+    from services.battery.prediction import assumptions, percentiles, predict, start_of
     from services.composed import ComposedTwin
     from services.drive.budget import power_profile
 
@@ -127,7 +127,7 @@ def _from_file(path: str, request: PredictionRequest, traverse: str | None = Non
         t_s=out.t_s, horizon_s=out.horizon_s, samples=out.samples,
         time_to_empty_s=msgspec.convert(percentiles(out.time_to_empty_s), Percentiles),
         soc_at_horizon=msgspec.convert(percentiles(out.soc_at_horizon), Percentiles),
-        computed_in_s=took, step_s=out.step_s, notes=notes), f"{rover.id}, from {path}"
+        computed_in_s=took, step_s=out.step_s, notes=notes + assumptions(rover)), f"{rover.id}, from {path}"
 
 
 def _from_twin(args: argparse.Namespace, request: PredictionRequest) -> tuple[Prediction, str]:

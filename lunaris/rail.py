@@ -2,7 +2,8 @@
 
 Puts ``lunaris/<rover>/cmd/rail/<rail>`` and prints the twin's answer: the ``command`` event
 with the rail's new state, or the rejection (an unknown rail, the solar rail ...). Exit
-status as ``lunaris fault``: 0 accepted, 1 rejected, 2 not applied.
+status as ``lunaris fault``: 0 accepted, 1 rejected, 2 not applied. ``--as-crew``: the
+instructor standing in for the crew, the command counted as the crew's.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import argparse
 import msgspec
 
 from common.messages import RailCommand
+from common.writes import stand_in
 from lunaris.client import shown
 from lunaris.confirm import add_common_arguments, confirm, plan, tool_main
 
@@ -30,10 +32,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("rover", help="rover id, e.g. mapp-1")
     p.add_argument("rail", help="rail name, e.g. 5V_CH2")
     p.add_argument("action", type=_action, metavar="ACTION", help="on, off, or reset (after a trip)")
+    p.add_argument("--as-crew", action="store_true",
+                   help="the instructor standing in for the crew (a drill run without its "
+                        "dashboard): the command counts as the crew's action in its response and "
+                        "the debrief")
     add_common_arguments(p)
 
 
 def main(args: argparse.Namespace) -> int:
     body = msgspec.json.encode(COMMANDS[args.action])
-    return tool_main("rail", lambda a: confirm(a, "rail", plan(a.rover, f"cmd/rail/{a.rail}", body)),
-                     args)
+
+    def run(a: argparse.Namespace) -> int:
+        write = plan(a.rover, f"cmd/rail/{a.rail}", body)
+        return confirm(a, "rail", stand_in(write) if a.as_crew else write)
+    return tool_main("rail", run, args)

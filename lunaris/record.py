@@ -52,6 +52,7 @@ from mcap.writer import Writer
 
 from common import keys
 from common.connection import add_connection_args
+from common.worker import wait_get
 from lunaris.client import ToolError, describe_endpoint, open_session
 
 __all__ = ["KeyWrite", "Recorder", "add_arguments", "main", "read_messages", "schema_for"]
@@ -322,7 +323,7 @@ def _record(args: argparse.Namespace, path: Path) -> int:
             if args.duration is not None and now - started >= args.duration:
                 break
             try:
-                item = samples.get(timeout=0.1)
+                item = wait_get(samples, 0.1)
             except queue.Empty:
                 item = None
             while item is not None:

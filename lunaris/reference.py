@@ -25,7 +25,7 @@ import msgspec.inspect as mi
 from common import keys
 from common.conditions import SOURCES
 from common.config import Rover
-from common.datafile import struct_fields
+from common.datafile import ID_PATTERN, struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RETIRED_CODES, NoParams
 from common.messages import Prediction, PredictionRequest, SessionInfo, SessionStart, TimelineMark
 from common.scenario import Scenario
@@ -62,8 +62,8 @@ def _type_name(t: Any) -> str:
         return "integer"
     if isinstance(t, mi.BoolType):
         return "true/false"
-    if isinstance(t, mi.StrType):
-        return "name" if t.pattern else "text"
+    if isinstance(t, mi.StrType):  # an id (a rover's) is a name of its own: lower case, no dots
+        return ("id" if t.pattern == ID_PATTERN else "name") if t.pattern else "text"
     if isinstance(t, mi.LiteralType):
         return " \\| ".join(f"`{v}`" for v in t.values)
     if isinstance(t, mi.ListType):
@@ -149,7 +149,8 @@ def rover_page() -> str:
             "change. `lunaris check FILE` validates a file and prints every problem with its "
             "path. Units are SI and appear in the field names; `x[]` is an item of the list "
             "`x`. Names (`name`) become chunks of key expressions: letters, digits, `_`, `-` "
-            "and `.`.\n\n"
+            "and `.`. The rover's `id` is the first chunk after `lunaris/`: lower-case letters, "
+            "digits, `_` and `-`, beginning with a letter or a digit.\n\n"
             + struct_table(Rover)
             + "\nCross-field rules: `battery.thermal`: `min_c < max_c < cutoff_c`; "
             "`battery.ocv_curve`: as many `volts` as `soc` points, `soc` strictly increasing "

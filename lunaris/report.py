@@ -38,7 +38,7 @@ from common import keys
 from common.response import Response, SessionResponse
 from lunaris.client.events import EventWindow, event_identity
 from lunaris.record import read_messages
-from lunaris.report_draw import draw, html_page, place_labels
+from lunaris.report_draw import draw, html_page, moved, place_labels
 from lunaris.report_session import Session
 
 __all__ = ["Recording", "Session", "add_arguments", "add_thresholds", "draw", "load_recording",
@@ -124,7 +124,8 @@ class _Channel:
         self.rec, self.parts, self.family, self.decode = rec, parts, family, decode
 
 
-def _channel(topic: str, plots: bool, out: dict[str, Recording]) -> _Channel | None:
+def _channel(topic: str, plots: bool, out: dict[str, Recording],
+             load_rails: dict[str, dict[str, str]]) -> _Channel | None:
     """How to read a channel; None to skip it."""
     try:
         rover, parts = keys.split(topic)
@@ -138,8 +139,35 @@ def _channel(topic: str, plots: bool, out: dict[str, Recording]) -> _Channel | N
     rec = out.get(rover)
     if rec is None:
         rec = out[rover] = Recording(rover, Response(rover))
+        rec.response.know_rails(load_rails.get(rover, {}))
     typ = dict if plots else _FAST[family]
     return _Channel(rec, parts, family, msgspec.json.Decoder(typ).decode)
+
+
+def _load_rails(path: Path) -> dict[str, dict[str, str]]:
+    """Each rover's ``{load: rail}`` from the first tick of its loads' telemetry: read ahead,
+    until a load of every rover heard so far has been heard twice (a tick's loads all come
+    before the next tick's), since a recording begins with the journal's history, before it."""
+    rails: dict[str, dict[str, str]] = {}
+    twice: set[str] = set()
+    for topic, data in read_messages(path):
+        parts = topic.split("/")
+        if len(parts) != 5 or parts[2] != "load" or parts[4] != "power":
+            continue
+        rover, load = parts[1], parts[3]
+        known = rails.setdefault(rover, {})
+        if load in known:
+            twice.add(rover)
+            if twice >= rails.keys():
+                break
+            continue
+        try:
+            rail = msgspec.json.decode(data).get("rail")
+        except (msgspec.DecodeError, AttributeError):
+            continue
+        if isinstance(rail, str) and rail:
+            known[load] = rail
+    return rails
 
 
 def load_recording(path: Path, plots: bool = True) -> dict[str, Recording]:
@@ -150,11 +178,15 @@ def load_recording(path: Path, plots: bool = True) -> dict[str, Recording]:
     channels: dict[str, _Channel | None] = {}
     errors = (msgspec.DecodeError, msgspec.ValidationError)
     try:
+        load_rails = _load_rails(path)
+    except (ValueError, EOFError) as exc:
+        raise ValueError(f"{path} is not a readable MCAP file: {exc}") from None
+    try:
         for topic, data in read_messages(path):
             if topic in channels:
                 ch = channels[topic]
             else:
-                ch = channels[topic] = _channel(topic, plots, out)
+                ch = channels[topic] = _channel(topic, plots, out, load_rails)
             if ch is None:
                 continue
             try:
@@ -266,12 +298,24 @@ def _sessions_named(recs: dict[str, Recording]) -> str:
                      for r, rec in sorted(recs.items()))
 
 
+def _tidy(value: Any) -> Any:
+    """Numbers to the microsecond (sim times add a tenth of a second at a time: 30.100000000000158
+    is 30.1), the rest as it is."""
+    if isinstance(value, float):
+        return round(value, 6)
+    if isinstance(value, list):
+        return [_tidy(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _tidy(v) for k, v in value.items()}
+    return value
+
+
 def _json(args: argparse.Namespace) -> int:
     recs = _load(args, plots=False)
     scores = [s for rover in sorted(recs) for s in recs[rover].scores(args.session)]
     if args.session is not None and not scores:
         raise _Refused(f"no session {args.session!r} in {args.file} (sessions: {_sessions_named(recs)})")
-    print(msgspec.json.format(msgspec.json.encode(scores), indent=2).decode())
+    print(msgspec.json.format(msgspec.json.encode(_tidy(msgspec.to_builtins(scores))), indent=2).decode())
     if not scores:
         print(f"lunaris report: {args.file} holds no session of a rover (no clock tick recorded)",
               file=sys.stderr)
@@ -314,8 +358,9 @@ def _draw(args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".png":
         out.write_bytes(png.getvalue())
     else:
-        out.write_text(html_page(s, title, png.getvalue()))
-    drove = f", a path of {len(s.path[0])} positions" if s.path[0] else ""
+        out.write_text(html_page(s, title, png.getvalue(), [
+            (x.id, x.score.trainee if x.score is not None else None) for x in drawn[rover]]))
+    drove = f", a path of {len(s.path[0])} positions" if moved(s) else ""
     before = sum(1 for e in s.events if e.get("at_s") is None)
     others = len(drawn[rover]) - 1
     score = s.score

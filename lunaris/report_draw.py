@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import base64
 import html
+import urllib.parse
 
 from common import keys
 from common.response import SessionResponse
 from lunaris.report_session import Session
 
-__all__ = ["draw", "html_page", "place_labels", "score_rows"]
+__all__ = ["draw", "html_page", "moved", "place_labels", "score_rows"]
 
 MARK_KINDS = {"fault_injected": "+", "fault_cleared": "-", "fault_raised": "!",
               "fault_resolved": "ok ", "rejected": "x ", "command": "", "input": "", "clock": "",
@@ -36,6 +37,7 @@ LANES = (("scenario", ("scenario",)), ("session", ("session",)),
          ("faults", ("fault_injected", "fault_cleared", "fault_raised", "fault_resolved", "rejected")))
 LANE_COLOUR = {"scenario": "tab:purple", "session": "black", "actions": "tab:green"}
 SEVERITY_COLOUR = {"info": "tab:blue", "warning": "tab:orange", "critical": "tab:red"}
+MOVED_M = 0.05  # a path narrower than this in x and y is a parked rover: no path drawn
 
 
 
@@ -55,22 +57,31 @@ def _short(s: Session, e: dict) -> str:
 
 
 def place_labels(marks: list[tuple[float, str]], span_s: float, width_chars: float,
-                 rows: int) -> tuple[list[tuple[float, str, int]], int]:
-    """Labels that do not overlap: ``(time, text)`` marks on an axis ``span_s`` wide that holds
-    ``width_chars`` characters, each put on the first of ``rows`` rows where it fits; the
-    labels placed ``(time, text, row)`` and how many found no room."""
+                 rows: int, t0: float = 0.0) -> tuple[list[tuple[float, str, int]], int]:
+    """Labels that do not overlap: ``(time, text)`` marks on an axis from ``t0``, ``span_s``
+    wide, that holds ``width_chars`` characters, each put on the first of ``rows`` rows where it fits; the
+    labels placed ``(where it begins, text, row)`` and how many found no room. A label that
+    would run past the axis's end begins early enough to end there (it was cut off)."""
     per_char = span_s / max(1.0, width_chars)
     ends = [float("-inf")] * rows
     placed, dropped = [], 0
     for t, text in sorted(marks):
+        start = max(t0, min(t, t0 + span_s - (len(text) + 1) * per_char))
         for row in range(rows):
-            if t >= ends[row]:
-                ends[row] = t + (len(text) + 2) * per_char
-                placed.append((t, text, row))
+            if start >= ends[row]:
+                ends[row] = start + (len(text) + 2) * per_char
+                placed.append((start, text, row))
                 break
         else:
             dropped += 1
     return placed, dropped
+
+
+def moved(s: Session) -> bool:
+    """Whether the rover drove in the session: its path is drawn (a parked rover's one point
+    drew a path and a colour bar)."""
+    xs, ys = s.path[0], s.path[1]
+    return bool(xs) and (max(xs) - min(xs) > MOVED_M or max(ys) - min(ys) > MOVED_M)
 
 
 def draw(s: Session, title: str):
@@ -80,7 +91,7 @@ def draw(s: Session, title: str):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    drove = len(s.path[0]) > 0
+    drove = moved(s)
     radios = sorted(s.radios)
     rows = score_rows(s.score)
     ratios = ([1.3, 0.3 + 0.22 * max(1, len(rows)), 1, 1, 1, 1, 1]
@@ -136,7 +147,7 @@ def draw(s: Session, title: str):
         for e in marks:
             ax.axvline(e["at_s"], color=_colour(e), alpha=0.5, linewidth=1.0,
                        linestyle=":" if e.get("kind") in ("rejected", "scenario") else "-")
-    _draw_timeline(ax_tl, s, marks, t1 - t0)
+    _draw_timeline(ax_tl, s, marks, t0, t1 - t0)
     if drove:
         _draw_path(fig, all_axes[-1], s)
     before = sum(1 for e in s.events if e.get("at_s") is None)
@@ -152,7 +163,13 @@ def score_rows(score: SessionResponse | None) -> list[tuple[str, object]]:
 
 
 def _since(a: float | None, b: float | None) -> str:
-    return "-" if a is None or b is None else f"+{a - b:.1f} s"
+    """How long after ``b`` (or before: a crew acting ahead of the symptom) ``a`` came."""
+    return "-" if a is None or b is None else f"{a - b:+.1f} s"
+
+
+def _t_since(a: float | None, b: float | None) -> str:
+    """``a`` and how long after ``b`` it came; ``-`` alone when there is no ``a``."""
+    return "-" if a is None else f"{a:.1f} ({_since(a, b)})"
 
 
 def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
@@ -234,7 +251,7 @@ def _colour(e: dict) -> str:
     return LANE_COLOUR.get(lane) or SEVERITY_COLOUR.get(e.get("severity", ""), "gray")
 
 
-def _draw_timeline(ax, s: Session, marks: list[dict], span_s: float) -> None:
+def _draw_timeline(ax, s: Session, marks: list[dict], t0: float, span_s: float) -> None:
     """The session's events in lanes, each label on a row where it overlaps no other."""
     rows = 3
     ax.set_ylim(0, len(LANES) * rows)
@@ -249,12 +266,12 @@ def _draw_timeline(ax, s: Session, marks: list[dict], span_s: float) -> None:
         lane = [e for e in marks if e.get("kind") in kinds]
         for e in lane:
             ax.plot([e["at_s"]], [base + 0.35], marker="|", color=_colour(e), markersize=8)
-        placed, lost = place_labels([(e["at_s"], _short(s, e)) for e in lane], span_s, 150, rows)
+        placed, lost = place_labels([(e["at_s"], _short(s, e)) for e in lane], span_s, 150, rows, t0)
         dropped += lost
-        colours = {(e["at_s"], _short(s, e)): _colour(e) for e in lane}
+        colours = {_short(s, e): _colour(e) for e in lane}
         for t, text, row in placed:
             ax.text(t, base + rows - 0.6 - row * 0.95, text, fontsize="x-small", va="center",
-                    color=colours[(t, text)], clip_on=True)
+                    color=colours[text], clip_on=True)
     ax.set_title("what happened" + (f" ({dropped} more label(s) without room: see the event table)"
                                     if dropped else ""), fontsize="medium", loc="left")
 
@@ -305,10 +322,10 @@ def _score_html(score: SessionResponse | None) -> str:
         f"<tr class='{'resolved' if f.resolved_t_s is not None else 'open'}'>"
         f"<td>{e(f.fault)}</td><td>{e(json_params(f.params))}</td><td>{e(f.injected_by)}</td>"
         f"<td>{_t(f.injected_t_s)}</td>"
-        f"<td>{_t(f.first_symptom_t_s)} ({_since(f.first_symptom_t_s, f.injected_t_s)})<br>"
+        f"<td>{_t_since(f.first_symptom_t_s, f.injected_t_s)}<br>"
         f"<small>{e(f.symptom)}</small></td>"
         f"<td>{_t(f.first_crew_action_t_s)}</td>"
-        f"<td>{_t(f.resolved_t_s)} ({_since(f.resolved_t_s, f.injected_t_s)})<br>"
+        f"<td>{_t_since(f.resolved_t_s, f.injected_t_s)}<br>"
         f"<small>{e(f.resolved_by)}</small></td>"
         f"<td>{'<br>'.join(f'{a.t_s:.1f} {e(a.action)} {e(a.target)}' + ('' if a.accepted else ' <b>refused</b>: ' + e(a.message)) for a in f.crew_actions) or '-'}</td></tr>"  # noqa: E501
         for f in score.faults)
@@ -336,13 +353,32 @@ def json_params(params: dict) -> str:
     return ", ".join(f"{k}={v}" for k, v in params.items())
 
 
-def html_page(s: Session, title: str, png: bytes) -> str:
+def _sessions_nav(s: Session, sessions: list[tuple[str, str | None]]) -> str:
+    """Every session of the recording, each trainee's report a link away (``?session=ID``: the
+    console draws it; the command line names it)."""
+    if len(sessions) < 2:
+        return ""
+    def item(sid: str, trainee: str | None) -> str:
+        words = f"{html.escape(trainee or 'no trainee named')} - session {html.escape(sid)}"
+        if sid == s.id:
+            return f"<li><b>{words} (this report)</b></li>"
+        return f'<li><a href="?session={urllib.parse.quote(sid)}">{words}</a></li>'
+    items = "".join(item(sid, trainee) for sid, trainee in sessions)
+    return (f"<nav><p>Sessions in this recording ({len(sessions)}); on the command line: "
+            f"<code>lunaris report FILE --session ID</code></p><ul>{items}</ul></nav>")
+
+
+def html_page(s: Session, title: str, png: bytes,
+              sessions: list[tuple[str, str | None]] | None = None) -> str:
+    """The report as one HTML page: the plots, the score sheet, every event with who acted;
+    ``sessions`` (id, trainee) are the recording's, linked."""
     def when(e: dict) -> str:
         return "before the recording" if e.get("at_s") is None else f"{e['at_s']:.1f}"
     rows = "\n".join(
         f"<tr class='{html.escape(e.get('severity', ''))}{' before' if e.get('at_s') is None else ''}'>"
         f"<td>{when(e)}</td><td>{e.get('t_s', 0.0):.1f}</td>"
         f"<td>{html.escape(e.get('severity', ''))}</td><td>{html.escape(e.get('source', ''))}</td>"
+        f"<td>{html.escape(e.get('actor') or '')}</td>"
         f"<td>{html.escape(e.get('kind', ''))}</td><td>{html.escape(e.get('message', ''))}</td></tr>"
         for e in s.events)
     return f"""<!doctype html>
@@ -356,11 +392,12 @@ tr.met td, tr.resolved td {{ color: #1b5e20; }} tr.missed td, tr.open td {{ colo
 </style></head>
 <body>
 <h1>{html.escape(title)}</h1>
+{_sessions_nav(s, sessions or [])}
 <img alt="session plots" src="data:image/png;base64,{base64.b64encode(png).decode()}">
 {_score_html(s.score)}
 <h2>Events ({len(s.events)})</h2>
-<table><tr><th>t [s since the start]</th><th>sim t [s]</th><th>severity</th><th>source</th><th>kind</th>
-<th>message</th></tr>
+<table><tr><th>t [s since the start]</th><th>sim t [s]</th><th>severity</th><th>source</th><th>who</th>
+<th>kind</th><th>message</th></tr>
 {rows}
 </table>
 </body></html>

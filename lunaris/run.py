@@ -7,8 +7,9 @@ process serves it.
 
 A service module (``services/<name>/service.py``) holds a node, ``NODE``: a
 :class:`common.node.Node` class, made with the rovers it serves and attached to the runtime,
-which declares its ports. (The clock, the faults service, the power service and the bridge still define
-``serve(rt, rovers, ...)``, which declares what they need on the runtime itself.)
+which declares its ports. (The bridge still defines ``serve(rt, rovers, ...)``: it reads its
+mapping file, then a class of its own, :class:`services.bridge.service.Bridge`, declares its
+ports on the runtime.)
 
 A node's ``serves(rover)`` (or a module's ``serves``) leaves out the rovers a service has
 nothing to do for (the drive serves only rovers with a ``drive`` section). When that leaves

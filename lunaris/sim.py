@@ -1,15 +1,17 @@
-"""``lunaris sim FILE [--hours H] [--traverse TRAVERSE.yaml]``: accelerated runs, no Zenoh.
+"""``lunaris sim FILE [--hours H] [--traverse TRAVERSE.yaml] [--csv FILE]``: accelerated runs, no Zenoh.
 
 For the vehicle engineer checking a power budget: state of charge over the run, when rails
 are shed, when (if ever) the pack is depleted. With ``--traverse`` the rover drives a
 traverse file from its start (``--return``: and back) and the run answers "can this rover
 do this traverse and come back with the reserve left?" plainly; the exit status is then 0
-for yes and 1 for no.
+for yes and 1 for no. ``--csv FILE`` writes the run as a series too (a row every ``--every``
+seconds of simulated time), for a spreadsheet or a plot.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import sys
 import time
 
@@ -32,6 +34,50 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --traverse: then drive back through its waypoints to the start")
     p.add_argument("--reserve", type=float, default=0.2, metavar="SOC",
                    help="with --traverse: the state of charge to keep, 0..1 (default 0.2)")
+    p.add_argument("--csv", metavar="FILE",
+                   help="also write the run as a series, one row every --every seconds of "
+                        "simulated time (battery, power, rails not on; with --traverse where "
+                        "the rover is), for a spreadsheet or a plot")
+    p.add_argument("--every", type=float, default=60.0, metavar="S",
+                   help="with --csv: seconds of simulated time between rows (default 60)")
+
+
+COLUMNS = ("t_s", "soc", "energy_j", "voltage_v", "current_a", "temperature_c", "load_power_w",
+           "bus_power_w", "generation_w", "net_battery_power_w", "rails_not_on")
+DRIVE_COLUMNS = ("x_m", "y_m", "odometer_m", "drive_status")
+
+
+class _Series:
+    """The rows of ``--csv``: the twin as it stands every ``--every`` seconds."""
+
+    def __init__(self, path: str, drives: bool):
+        self.file = open(path, "w", newline="")  # closed by close(), in main's finally
+        self.out = csv.writer(self.file)
+        self.drives = drives
+        self.out.writerow(COLUMNS + (DRIVE_COLUMNS if drives else ()))
+        self.rows = 0
+
+    def __call__(self, twin) -> None:
+        b = twin.reading()
+        summary = twin.summary
+        ok = twin.power.battery_ok
+        states = ((name, sw.state(ok)[0]) for name, sw in twin.power.switches.items())
+        off = [f"{name}:{state}" for name, state in states if state != "on"]
+        row: list[object] = [round(twin.t_s, 3), round(b.soc, 6), round(b.energy_j, 1),
+                             round(b.voltage_v, 4), round(b.current_a, 4), round(b.temperature_c, 3),
+                             *(round(v, 3) for v in summary[:4]), " ".join(off)]
+        if self.drives:
+            r = twin.drive.reading()
+            row += [round(r.x_m, 2), round(r.y_m, 2), round(r.odometer_m, 2), r.status]
+        self.out.writerow(row)
+        self.rows += 1
+
+    def close(self) -> None:
+        self.file.close()
+
+
+def _series(args: argparse.Namespace, drives: bool) -> _Series | None:
+    return None if args.csv is None else _Series(args.csv, drives)
 
 
 def _hms(t_s: float) -> str:
@@ -42,6 +88,9 @@ def _hms(t_s: float) -> str:
 def main(args: argparse.Namespace) -> int:
     if args.hours is not None and not args.hours > 0:
         print(f"--hours must be > 0, got {args.hours}", file=sys.stderr)
+        return 2
+    if not args.every > 0:
+        print(f"--every must be > 0 seconds, got {args.every}", file=sys.stderr)
         return 2
     if args.traverse is not None:
         return _traverse(args)
@@ -55,8 +104,13 @@ def main(args: argparse.Namespace) -> int:
     def progress(done: int, total: int, twin) -> None:
         print(f"  {done / total:5.0%}  t={_hms(twin.t_s)}  soc={twin.battery.soc:.4f}", flush=True)
 
+    series = _series(args, False)
     t0 = time.perf_counter()
-    b = run_budget(rover, hours, args.seed, progress)
+    try:
+        b = run_budget(rover, hours, args.seed, progress, series, args.every)
+    finally:
+        if series is not None:
+            series.close()
     wall = time.perf_counter() - t0
     print(f"done: {b.ticks} ticks in {wall:.2f} s ({b.simulated_s / wall:,.0f}x real time)")
     print(f"  state of charge   {b.final_soc:.4f} at the end, {b.min_soc:.4f} at the lowest")
@@ -69,6 +123,12 @@ def main(args: argparse.Namespace) -> int:
           else "  never depleted")
     print(f"  under-voltage cut-off at {_hms(b.cutoff_at_s)}" if b.cutoff_at_s is not None
           else "  never cut off for under-voltage")
+    if b.short_s > 0.0:  # the loads asked for more than the pack gave: said, not averaged away
+        print(f"  demand NOT met    for {_hms(b.short_s)}: {b.unmet_j / 3600:.1f} Wh the loads asked "
+              f"for and the pack could not give (its max_discharge_a {rover.battery.max_discharge_a:g} A, "
+              "or a brownout)")
+    if series is not None:
+        print(f"  series            {series.rows} rows, one every {args.every:g} s, in {args.csv}")
     return 0
 
 
@@ -93,16 +153,23 @@ def _traverse(args: argparse.Namespace) -> int:
         print(f"  t={_hms(twin.t_s)}  soc={twin.battery.soc:.4f}  odometer {r.odometer_m:8.1f} m  "
               f"{r.status}", flush=True)
 
+    series = _series(args, True)
     t0 = time.perf_counter()
     try:
-        b = run_traverse(rover, cmd, args.reserve, args.hours, args.seed, progress)
+        b = run_traverse(rover, cmd, args.reserve, args.hours, args.seed, progress,
+                         sample=series, sample_every_s=args.every)
     except ValueError as exc:  # the rover's drive refuses it
         print(f"{args.traverse}: {exc}", file=sys.stderr)
         return 2
+    finally:
+        if series is not None:
+            series.close()
     wall = time.perf_counter() - t0
     print(f"done: {b.simulated_s / 3600:.2f} simulated hours in {wall:.2f} s "
           f"({b.simulated_s / wall:,.0f}x real time)")
     _print_budget(b)
+    if series is not None:
+        print(f"  series            {series.rows} rows, one every {args.every:g} s, in {args.csv}")
     return 0 if b.ok else 1
 
 
@@ -122,6 +189,11 @@ def _print_budget(b: TraverseBudget) -> None:
     print(f"  drive energy      {b.drive_energy_j / 3600:,.1f} Wh, peak {b.peak_drive_w:,.0f} W")
     print(f"  from the pack     {b.battery_energy_j / 3600:,.1f} Wh (every load, less generation)")
     print(f"  state of charge   {b.final_soc:.1%} at the end, {b.min_soc:.1%} at the lowest")
+    for name, cov in b.coverage:  # the link with the crew's radios, where it drives
+        w = cov.first_out
+        print(f"  radio {name:<11} " + ("in range all the way" if w is None else
+              f"OUT of range {_hms(cov.out_s)} in all, first at {_hms(w.t_s)}, {w.odometer_m:,.0f} m "
+              f"along, at ({w.x_m:,.0f}, {w.y_m:,.0f}) m"))
     reserve = f"{b.reserve_soc:.0%}"
     c = b.below_reserve
     if c is not None:

@@ -12,6 +12,7 @@ does. A compact status line per rover is shown; Ctrl-C stops everything.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import errno
 import os
@@ -24,6 +25,7 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
 import zenoh
 
 from common import keys
@@ -71,6 +73,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "supervised like the services")
     p.add_argument("--console-accounts", metavar="FILE",
                    help="the console's accounts file (without one it serves this computer only)")
+    p.add_argument("--recordings", metavar="DIR", default="recordings",
+                   help="where the console makes and lists its recordings (default ./recordings, "
+                        "from where up runs: kept when a temporary state folder goes)")
 
 
 def _die_with_parent() -> None:
@@ -225,14 +230,20 @@ class _Status:
                                                     history=True),
         ]
 
+    # A payload that is no state (a forged or junk put: the services say it in words) leaves
+    # the line as it was; it printed a traceback into up's output.
+
     def _on_battery(self, s: zenoh.Sample) -> None:
         rover, _ = keys.split(str(s.key_expr))
-        self.battery[rover] = decode(s.payload.to_bytes(), BatteryState)
+        if rover in self.rails:
+            with contextlib.suppress(msgspec.DecodeError):  # a ValidationError is one
+                self.battery[rover] = decode(s.payload.to_bytes(), BatteryState)
 
     def _on_rail(self, s: zenoh.Sample) -> None:
         rover, parts = keys.split(str(s.key_expr))
         if rover in self.rails:
-            self.rails[rover][parts[1]] = decode(s.payload.to_bytes(), RailState).state
+            with contextlib.suppress(msgspec.DecodeError):
+                self.rails[rover][parts[1]] = decode(s.payload.to_bytes(), RailState).state
 
     def _on_token(self, s: zenoh.Sample) -> None:
         rover, parts = keys.split(str(s.key_expr))
@@ -343,11 +354,13 @@ def main(args: argparse.Namespace) -> int:
             console += ["--rover", os.path.abspath(f)]
         if args.console_accounts:
             console += ["--accounts", args.console_accounts]
+        recordings = os.path.abspath(args.recordings)
+        console += ["--recordings", recordings]
         sup.add("console", console)
         who = ("sign-in with the accounts of " + args.console_accounts if args.console_accounts
                else "this computer only; you are the instructor")
-        print(f"[up] instructor console: http://{args.console}/  ({who}; its log: "
-              f"{sup.log_path('console')})", flush=True)
+        print(f"[up] instructor console: http://{args.console}/  ({who}; recordings in "
+              f"{recordings}; its log: {sup.log_path('console')})", flush=True)
     status = _Status(router, [r.id for r in rovers])
     tty = sys.stdout.isatty() and not args.no_status
     try:

@@ -38,7 +38,8 @@ from rich.live import Live
 
 from common import keys
 from common.connection import add_connection_args
-from common.messages import ActiveFaults
+from common.messages import ActiveFaults, Event
+from common.session import parse_control
 from lunaris.client import Mirror, ToolError, close_session, describe_endpoint, open_session
 from lunaris.processes import quiet_stdout
 from lunaris.watch_compact import fleet_compact, render_compact
@@ -62,6 +63,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_connection_args(p)
 
 
+def _in_sim_order(events: list[tuple[str, Event]]) -> list[tuple[str, Event]]:
+    """Events as they came, put in sim time order (the services' interleave) between a rover's
+    resets and restores: the clock starts again at each, and what came after one is later
+    whatever its time says (a drill's reset put the minutes before it last)."""
+    era: dict[str, int] = {}
+    keyed = []
+    for i, (rover, ev) in enumerate(events):
+        keyed.append(((era.get(rover, 0), ev.t_s, i), (rover, ev)))
+        control = parse_control(ev.key.split("/")[2:]) if ev.kind == "session" else None
+        if control is not None and control[0] in ("reset", "restore") and ev.severity == "info":
+            era[rover] = era.get(rover, 0) + 1  # (a restore refused, a warning, begins nothing)
+    return [item for _, item in sorted(keyed, key=lambda k: k[0])]
+
+
 def snapshot_of(mirror: Mirror, rover: str | None = None) -> Snapshot:
     """What one frame is drawn from: the mirror's latest values, events (in sim time order:
     services interleave), faults in effect, live services and links (``rover``'s too when
@@ -76,7 +91,7 @@ def snapshot_of(mirror: Mirror, rover: str | None = None) -> Snapshot:
             latest[key] = (v.raw, v.at)
     for listed in faults.values():
         listed.sort(key=lambda f: (f["since_t_s"], f["key"]))
-    events = sorted(((rover, ev) for rover, ev, _ in mirror.events()), key=lambda re: re[1].t_s)
+    events = _in_sim_order([(rover, ev) for rover, ev, _ in mirror.events()])
     links = mirror.links()
     if rover is not None and rover not in links:
         links[rover] = mirror.link(rover)

@@ -177,7 +177,8 @@ def _battery_panel(snap: Snapshot, rover: str, faults: list[dict]) -> Panel:
         ("voltage", f"{b.voltage_v:8.2f} V   (open circuit {b.ocv_v:.2f} V)"),
         ("current", f"{b.current_a:8.2f} A   ({b.power_w:.1f} W)"),
         ("temperature", Text(f"{b.temperature_c:8.1f} C", style=temp_style)),
-        ("time to empty", "- (not draining)" if b.time_to_empty_s is None else duration(b.time_to_empty_s)),
+        ("time to empty", "- (not draining)" if b.time_to_empty_s is None
+         else f"{duration(b.time_to_empty_s)}   (at this draw; predict counts shedding)"),
         ("status", status),
     ]
     if age > STALE_S:

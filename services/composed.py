@@ -24,6 +24,7 @@ from services.battery.model import BatteryModel, BatteryReading
 from services.drive.model import DriveModel
 from services.loads.model import LoadsModel, sample_power
 from services.power.model import PowerModel, Summary
+from services.radio.model import in_range
 from services.solar.model import SolarModel
 
 __all__ = ["Budget", "ComposedTwin", "run_budget"]
@@ -45,6 +46,7 @@ class ComposedTwin:
 
     def __init__(self, rover: Rover, seed: int | None = 0, fast: bool = True):
         self.rover = rover
+        self.sited = [r for r in rover.radios if r.site is not None]  # the radios the drive moves against
         self.fast = fast  # False: every tick takes the general path (the tests compare them)
         self.dt_s = 1.0 / rover.tick_hz
         self.t_s = 0.0
@@ -84,6 +86,15 @@ class ComposedTwin:
                 sums[:, j] = sums[:, j] + self._samples[:, k]
         self._rail_w = sums.tolist()
         self._row = 0
+
+    def out_of_range(self) -> list[str]:
+        """The radios standing at a site whose footprint the rover is outside now (the
+        geometry only: whether the rover's end has power is the radio service's)."""
+        d = self.drive
+        if d is None:
+            return []
+        return [r.name for r in self.sited if r.site is not None and not in_range(
+            d.x_m - r.site.x_m, d.y_m - r.site.y_m, r.a_m, r.b_m, r.offset_x_m, r.offset_y_m)]
 
     def set_faults(self, component: str, name: str | None, faults: Iterable[FaultParams]) -> None:
         """Give the model of one component every injected fault in effect on it, as the
@@ -203,11 +214,15 @@ class Budget(NamedTuple):
     shed_at_s: dict[str, float]
     peak_temperature_c: float
     cutoff_at_s: float | None = None  # the first under-voltage cut-off
+    short_s: float = 0.0  # time the pack could not give the demand (its discharge limit, a brownout)
+    unmet_j: float = 0.0  # the energy of the demand it could not give
 
 
 def run_budget(rover: Rover, hours: float, seed: int | None = 0,
-               progress=None) -> Budget:
-    """Run ``hours`` of simulated time and summarise the power budget."""
+               progress=None, sample=None, sample_every_s: float = 60.0) -> Budget:
+    """Run ``hours`` of simulated time and summarise the power budget. ``sample(twin)`` is
+    called every ``sample_every_s`` of simulated time and at the end (a series: ``lunaris sim
+    --csv``)."""
     twin = ComposedTwin(rover, seed)
     ticks = int(round(hours * 3600.0 * rover.tick_hz))
     e0 = twin.battery.energy_j
@@ -223,8 +238,17 @@ def run_budget(rover: Rover, hours: float, seed: int | None = 0,
                if sw.cfg.shed_below_soc is not None]
     shed_soc = max((sw.cfg.shed_below_soc or 0.0 for _, sw in pending), default=0.0)
     next_report = report_every if progress is not None else ticks + 1
+    dt = 1.0 / rover.tick_hz
+    short_s = unmet_j = 0.0
+    sample_every = max(1, int(round(sample_every_s * rover.tick_hz)))
+    next_sample = sample_every if sample is not None else ticks + 1
     for i in range(1, ticks + 1):
+        demand = b.demand_w
+        point = b.operating_point()  # what the step below gives the bus (solved once: cached)
         step()
+        if point.current_limited or point.brownout:
+            short_s += dt
+            unmet_j += max(0.0, demand - point.power_w) * dt
         soc = b.soc
         if soc < min_soc:
             min_soc = soc
@@ -244,6 +268,11 @@ def run_budget(rover: Rover, hours: float, seed: int | None = 0,
         if i == next_report:
             next_report += report_every
             progress(i, ticks, twin)
+        if i == next_sample:
+            next_sample += sample_every
+            sample(twin)
+    if sample is not None and ticks % sample_every:
+        sample(twin)  # the run's end
     n = max(ticks, 1)
     return Budget(twin.t_s, ticks, twin.battery.soc, min_soc, e0 - twin.battery.energy_j,
-                  load_sum / n, gen_sum / n, depleted_at, shed_at, peak_t, cutoff_at)
+                  load_sum / n, gen_sum / n, depleted_at, shed_at, peak_t, cutoff_at, short_s, unmet_j)

@@ -31,6 +31,7 @@ KINDS: dict[str, tuple[str, ...]] = {
     "common": ("unit",),
     "common/test_config.py": ("twin",),  # lunaris check and lunaris run as processes
     "common/test_connection.py": ("twin",),
+    "common/test_worker_signals.py": ("twin",),  # each case a process of its own, ended if it hangs
     "console": ("twin", "browser"),
     "console/test_server.py": ("twin",),  # the server in-process, a router and a stand-in rover
     "console/test_up_console.py": ("twin",),

@@ -38,6 +38,7 @@ from common.messages import BadInput, Clock, ExpectationMark, ScenarioMark
 from common.scenario import Scenario, describe_start
 from common.scenario_player import Player, StepResult, StepWrite, describe_action, describe_trigger
 from common.scenario_progress import ExpectProgress, ScenarioProgress, StepProgress
+from common.worker import wait_get
 from common.writes import Write, plan_write
 from lunaris.client.mirror import Change, Mirror
 from lunaris.client.session import ToolError, live_rovers, unknown_rover
@@ -180,7 +181,7 @@ class Runner:
 
     def _first_tick(self) -> Clock:
         try:
-            first = self.ticks.get(timeout=self.wait_s)
+            first = wait_get(self.ticks, self.wait_s)
         except queue.Empty:
             raise ToolError(f"no clock from {self.rover} within {self.wait_s:g} s: is its clock "
                             "service running?") from None
@@ -211,7 +212,7 @@ class Runner:
         deadline = time.monotonic() + self.wait_s
         while time.monotonic() < deadline and not self.stopped.is_set():
             try:
-                tick = self.ticks.get(timeout=0.1)
+                tick = wait_get(self.ticks, 0.1)
             except queue.Empty:
                 continue
             self.last_clock = tick
@@ -263,7 +264,7 @@ class Runner:
                 break
             tick = None
             try:
-                tick = self.ticks.get(timeout=0.2)
+                tick = wait_get(self.ticks, 0.2)
                 while True:  # a backlog is folded into its latest tick
                     tick = self.ticks.get_nowait()
             except queue.Empty:

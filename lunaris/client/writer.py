@@ -171,7 +171,7 @@ class Writer:
         return p.answer or answer
 
     def _send(self, write: Write) -> None:
-        put_or_delete(self.session, write.key, write.payload, actor=self.actor)
+        put_or_delete(self.session, write.key, write.payload, actor=write.actor or self.actor)
 
     # -- the answers -------------------------------------------------------------------------------
 

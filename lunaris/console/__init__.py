@@ -22,6 +22,7 @@ import argparse
 import getpass
 import os
 import sys
+import termios
 import threading
 from pathlib import Path
 
@@ -111,8 +112,16 @@ def _users(args: argparse.Namespace) -> int:
     if args.password_stdin:
         password = sys.stdin.readline().rstrip("\n")
     else:
-        password = getpass.getpass(f"password for {args.name}: ")
-        if getpass.getpass("again: ") != password:
+        no_terminal = ToolError("no terminal to ask the password on: give it on standard input "
+                                "with --password-stdin", 2)
+        if not sys.stdin.isatty():
+            raise no_terminal
+        try:
+            password = getpass.getpass(f"password for {args.name}: ")
+            again = getpass.getpass("again: ")
+        except (EOFError, OSError, termios.error):
+            raise no_terminal from None
+        if again != password:
             raise ToolError("the two passwords differ", 1)
     Accounts.add(args.accounts, args.name, args.role, password, replace=args.replace)
     print(f"{args.name} may sign in to the console as {args.role} ({args.accounts})")

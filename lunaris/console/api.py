@@ -40,7 +40,7 @@ from starlette.routing import Route
 from common import keys
 from common.faults import CATALOGUE, DERIVED, NAMED_COMPONENTS, parameters
 from common.messages import MAX_INPUT_BYTES, SESSION_ID, BadInput
-from common.writes import Write, plan_write
+from common.writes import Write, plan_write, stand_in
 from lunaris.client import Accepted, NotApplied, Rejected, describe, humane
 from lunaris.console.auth import User
 from lunaris.console.live import Hub
@@ -139,6 +139,11 @@ async def _write(request: Request) -> Response:
         return Response(status_code=400)
     try:
         planned = plan_write(rover, tail, None if request.method == "DELETE" else body)
+        if request.query_params.get("as") == "crew":  # the instructor standing in for the crew
+            planned = stand_in(planned)
+        elif "as" in request.query_params:
+            raise BadInput(f"as={request.query_params['as']!r}: the console writes as the crew "
+                           "(as=crew) or as the instructor (no as)")
     except BadInput as exc:
         return answer(422, "invalid", f"not sent: {humane(str(exc))}")
     return await send(request, planned)

@@ -33,6 +33,7 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Route
 
+from common.messages import SESSION_ID
 from common.scenario import Scenario, ScenarioError, describe_start, load_scenario
 from lunaris.client import ToolError
 from lunaris.client.runner import Runner
@@ -223,17 +224,19 @@ class Extras:
             return None, 404, f"no recording {name!r} in {folder}"
         return path, 200, ""
 
-    def record(self, name: str) -> str | None:
-        if self.recording is not None and self.recording.running:
-            return f"already recording to {self.recording_file}: stop it first"
-        if self.recordings_dir is None:
-            return "this console has no folder for recordings (lunaris console --recordings DIR)"
+    def record(self, name: str) -> tuple[int, str] | None:
+        """Start recording to ``name``; None, or why not: (422, a name that cannot be one) or
+        (409, what stands in the way: a recording running, a file of that name)."""
         stem = name.removesuffix(".mcap")
         if not NAME.match(stem):
-            return f"bad name {name!r}: letters, digits, '.', '_' and '-'"
+            return 422, f"not recorded: bad name {name!r}: letters, digits, '.', '_' and '-'"
+        if self.recording is not None and self.recording.running:
+            return 409, f"already recording to {self.recording_file}: stop it first"
+        if self.recordings_dir is None:
+            return 409, "this console has no folder for recordings (lunaris console --recordings DIR)"
         path = self.recordings_dir / f"{stem}.mcap"
         if path.exists():
-            return f"{path.name} exists: choose another name"
+            return 409, f"{path.name} exists: choose another name"
         self.recordings_dir.mkdir(parents=True, exist_ok=True)
         self.recording = _Job(["record", str(path), *self.connection], "record")
         self.recording_file = path
@@ -246,19 +249,23 @@ class Extras:
         return {"file": self.recording_file.name if self.recording_file else None,
                 "running": job.running, "started": job.started, "lines": list(job.lines)[-3:]}
 
-    async def report(self, name: str) -> tuple[Path | None, int, str]:
-        """The debrief report of recording ``name`` (drawn once, again when the recording is
-        newer): (its path, 200, "") or (None, the status, why)."""
+    async def report(self, name: str, session: str | None = None) -> tuple[Path | None, int, str]:
+        """The debrief report of recording ``name``, of its last session or of ``session``
+        (each trainee's: the report links the recording's others), drawn once, again when the
+        recording is newer: (its path, 200, "") or (None, the status, why)."""
         path, status, why = self.mcap(name)
         if path is None:
             return None, status, why
-        out = path.with_suffix(".html")
+        if session is not None and not SESSION_ID.match(session):
+            return None, 422, f"{session!r} is no session id (the UTC time it began, YYYYMMDD-HHMMSS)"
+        out = path.with_suffix(".html" if session is None else f".{session}.html")
+        picked = [] if session is None else ["--session", session]
         if not out.is_file() or out.stat().st_mtime < path.stat().st_mtime:
             done = await asyncio.to_thread(subprocess.run, [sys.executable, "-m", "lunaris.cli", "report",
-                                                            str(path), "-o", str(out)],
+                                                            str(path), "-o", str(out), *picked],
                                            capture_output=True, text=True, timeout=300)
-            if done.returncode != 0:
-                return None, 500, (done.stderr or done.stdout).strip()
+            if done.returncode != 0:  # 2: what was asked is not in the recording (a session)
+                return None, 404 if done.returncode == 2 else 500, (done.stderr or done.stdout).strip()
         return out, 200, ""
 
 
@@ -311,14 +318,17 @@ async def _recordings(request: Request) -> Response:
                                 status_code=409)
         ex.recording.stop()
         return JSONResponse({"verdict": "accepted", "message": "recording stopped"})
-    why = ex.record(str(body.get("name", "")))
-    if why:
-        return JSONResponse({"verdict": "rejected", "message": why}, status_code=409)
+    refused = ex.record(str(body.get("name", "")))
+    if refused:
+        status, why = refused
+        return JSONResponse({"verdict": "invalid" if status == 422 else "rejected", "message": why},
+                            status_code=status)
     return JSONResponse({"verdict": "accepted", "message": f"recording to {ex.recording_file}"})
 
 
 async def _report(request: Request) -> Response:
-    out, status, why = await request.app.state.extras.report(request.path_params["name"])
+    out, status, why = await request.app.state.extras.report(request.path_params["name"],
+                                                              request.query_params.get("session"))
     if out is None:
         return JSONResponse({"message": why}, status_code=status)
     return FileResponse(out, media_type="text/html")

@@ -11,6 +11,10 @@ the console was given with ``--rover FILE``; ``lunaris up --console`` gives it i
   ``why``); false when the position input moves it; null when the console cannot tell. With
   the rover file, also the radio's ``site`` and its footprint (``a_m``, ``b_m``,
   ``offset_x_m``, ``offset_y_m``).
+- ``rails``: with the rover file, each switchable rail with ``essential`` (never shed) and the
+  loads it powers: the page asks before switching an essential rail off (the flight
+  computer's: a slip of the instructor's would end the drill). Without it, none (the
+  telemetry does not say which rails are essential).
 
 How the console knows, most certain first: the radio's own telemetry (``radio/<radio>/link``
 says ``follows_drive``, its ``site`` and its nominal footprint), the rover file, then the
@@ -120,7 +124,11 @@ def describe_rovers(mirror: Mirror, files: RoverFiles) -> list[dict[str, Any]]:
                     "services": sorted(mirror.services(rover)),
                     "rover_file": str(files.paths[rover]) if rover in files.paths else None,
                     "drives": drives, "drives_why": drives_why,
-                    "radios": [_radio(rover, n, mirror, files, drives) for n in sorted(names)]})
+                    "radios": [_radio(rover, n, mirror, files, drives) for n in sorted(names)],
+                    "rails": [] if spec is None else [
+                        {"name": r.name, "essential": r.essential,
+                         "loads": [ld.name for ld in spec.loads if ld.rail == r.name]}
+                        for r in spec.rails]})
     return out
 
 

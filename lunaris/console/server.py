@@ -7,6 +7,10 @@ Every request goes through :class:`Gate` (pure ASGI, so the live stream is not b
   site whose name was made to resolve to this computer (DNS rebinding) is refused with 421,
   in words;
 - a write whose ``Origin`` is another site is refused with 403;
+- every answer says what it is and nothing else (``X-Content-Type-Options: nosniff``: a
+  downloaded recording or a JSON answer is never run as a page or a script) and may be
+  framed only by the console's own pages (``X-Frame-Options: SAMEORIGIN``: no other site
+  shows the console under its own buttons);
 - without an accounts file every request is the local instructor's (the server listens on
   loopback only, :mod:`lunaris.console`); with one, a request without a valid sign-in is sent
   to ``/login`` (a page) or refused with 401 (the API).
@@ -102,6 +106,21 @@ def _host_of(header: str) -> str:
     return header.rsplit(":", 1)[0] if header.count(":") == 1 else header
 
 
+HARDENING = ((b"x-content-type-options", b"nosniff"), (b"x-frame-options", b"SAMEORIGIN"))
+
+
+def _hardened(send: Any) -> Any:
+    """``send`` with :data:`HARDENING` added to every answer's headers (unless it set them)."""
+    async def hardened(message: dict) -> None:
+        if message["type"] == "http.response.start":
+            headers = list(message.get("headers", []))
+            have = {name.lower() for name, _ in headers}
+            headers += [h for h in HARDENING if h[0] not in have]
+            message = {**message, "headers": headers}
+        await send(message)
+    return hardened
+
+
 class Gate:
     """Which site is asking (``Host``, ``Origin``) and who: the local user, a signed-in user,
     or nobody (sign in first)."""
@@ -114,6 +133,7 @@ class Gate:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        send = _hardened(send)
         scope.setdefault("state", {})
         path = scope["path"]
         headers = {k.decode("latin-1"): v.decode("latin-1") for k, v in scope["headers"]}
@@ -227,7 +247,9 @@ _LOGIN = """<!doctype html><html lang="en"><head><meta charset="utf-8">
 
 
 def _safe_next(nxt: str) -> str:
-    return nxt if nxt.startswith("/") and not nxt.startswith("//") else "/"
+    """A path of this console to go back to after signing in, never another site: browsers
+    read ``//host`` and ``/\\host`` as another host."""
+    return nxt if nxt.startswith("/") and not nxt.startswith(("//", "/\\")) else "/"
 
 
 def _login_page(error: str, nxt: str, status: int, headers: dict[str, str] | None = None) -> Response:

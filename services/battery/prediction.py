@@ -35,8 +35,24 @@ from common.config import Rover
 from services.battery.model import BatteryModel
 from services.battery.packs import Packs
 
-__all__ = ["MAX_STEPS", "Outcome", "RailStart", "Start", "clipped_moments", "percentiles", "predict",
-           "start_of"]
+__all__ = ["MAX_STEPS", "Outcome", "RailStart", "Start", "assumptions", "clipped_moments", "percentiles",
+           "predict", "start_of"]
+
+
+def assumptions(rover: Rover) -> list[str]:
+    """What every prediction assumes, in words for its notes: the inputs held and where the
+    spread of its futures comes from. Found by a vehicle engineer: four answers to "how long
+    does it last" differed and none said why; a rover file without uncertainty gave p05 = p95
+    with nothing saying the spread was zero."""
+    u = rover.battery.uncertainty
+    spread = [f"{name} {frac:.0%}" for name, frac in (("capacity", u.capacity_frac),
+              ("resistance", u.resistance_frac), ("generation", u.generation_frac)) if frac > 0.0]
+    return ["held over the whole horizon: the sun and the generation as now, the rails' switches "
+            "(a shed rail comes back above its threshold), each load's nominal power with its noise",
+            ("each future draws its own " + ", ".join(spread) + " (battery.uncertainty: one standard "
+             "deviation each)") if spread else
+            "the rover file gives no battery.uncertainty: the futures differ by the loads' noise only"]
+
 
 MAX_STEPS = 10_000  # the default step is the tick, or longer so that a horizon takes no more
 _NOISE_BLOCK = 64  # steps of noise drawn at once

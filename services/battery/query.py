@@ -60,7 +60,7 @@ from common.messages import (
     encode,
 )
 from services.battery.model import BatteryModel
-from services.battery.prediction import MAX_STEPS, RailStart, Start, percentiles, predict
+from services.battery.prediction import MAX_STEPS, RailStart, Start, assumptions, percentiles, predict
 from services.loads.model import LoadsModel
 from services.power.model import COMMANDED_OFF
 
@@ -192,6 +192,9 @@ class PredictionQueries:
                 notes.append(f"no power from the drive's load {cfg.drive.load} yet: its idle power assumed")
                 driven = cfg.drive.idle_w
             fixed[cfg.drive.load] = driven  # the drive's present power, held like every input
+            if driven > cfg.drive.idle_w:
+                notes.append(f"the drive draws {driven:.1f} W now, held over the whole horizon: a traverse "
+                             "under way is taken as going on (lunaris predict --traverse plans one's end)")
         if generation_w is None:
             notes.append("no power/summary received yet: no generation assumed")
         start = Start(cfg, pack, rails, fixed, generation_w or 0.0, t_s)
@@ -207,7 +210,7 @@ class PredictionQueries:
             t_s=t_s, horizon_s=out.horizon_s, samples=out.samples,
             time_to_empty_s=msgspec.convert(percentiles(out.time_to_empty_s), Percentiles),
             soc_at_horizon=msgspec.convert(percentiles(out.soc_at_horizon), Percentiles),
-            computed_in_s=took, step_s=out.step_s, notes=notes)
+            computed_in_s=took, step_s=out.step_s, notes=notes + assumptions(cfg))
 
     def _rails(self, cfg: Rover, soc: float, notes: list[str]) -> dict[str, RailStart]:
         wanted = {r.name for r in cfg.rails}

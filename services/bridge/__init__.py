@@ -21,6 +21,7 @@ from services.bridge.crew import SYMPTOMS, crew_view
 from services.bridge.mapping import (
     CONVERTERS,
     DEFAULT_MAPPING,
+    LOCAL_MAPPING,
     PLACEHOLDERS,
     BridgeOptions,
     Mapping,
@@ -31,7 +32,7 @@ from services.bridge.mapping import (
     ros_name,
 )
 
-__all__ = ["CONVERTERS", "DEFAULT_MAPPING", "PLACEHOLDERS", "SYMPTOMS", "Binding", "BridgeOptions",
-           "Mapping", "MappingFile", "RoverNames", "crew_view", "expand", "load_mapping",
+__all__ = ["CONVERTERS", "DEFAULT_MAPPING", "LOCAL_MAPPING", "PLACEHOLDERS", "SYMPTOMS", "Binding",
+           "BridgeOptions", "Mapping", "MappingFile", "RoverNames", "crew_view", "expand", "load_mapping",
            "open_keyexpr", "out_value", "parse_mapping", "resolve_mapping", "ros_name",
            "rover_names", "zenoh_key"]

@@ -17,6 +17,7 @@ topic names. :func:`zenoh_key` gives a binding's key in each Zenoh flavour.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterable
 from typing import NamedTuple
 
@@ -104,13 +105,26 @@ def zenoh_key(b: Binding, opts: BridgeOptions, flavour: str) -> str:
 
 def open_keyexpr(keyexprs: list[str]) -> str | None:
     """One key expression matching each of ``keyexprs`` (keys of as many chunks): a chunk in
-    which they differ is ``*``. So one subscription hears an inbound topic of several rovers,
-    whose keys differ in the rover's namespace or ROS 2 domain only. None when they do not
-    have as many chunks."""
+    which they differ keeps what they all begin and end with around ``$*`` (``rail_$*`` for
+    ``rail_12V`` and ``rail_5V_CH2``), or is ``*``. So one subscription hears an inbound topic
+    of several rovers, and one queryable answers a service of every rail - within what the
+    router's generated rules allow the bridge to declare (``pdm/rail_$*/set_enabled``, made
+    by this same function from the mapping's templates: a plain ``*`` was refused). None when
+    they do not have as many chunks."""
     split = [k.split("/") for k in keyexprs]
     if len({len(chunks) for chunks in split}) != 1:
         return None
-    return "/".join(col[0] if len(set(col)) == 1 else "*" for col in zip(*split, strict=True))
+    return "/".join(_open_chunk(list(col)) for col in zip(*split, strict=True))
+
+
+def _open_chunk(values: list[str]) -> str:
+    if len(set(values)) == 1:
+        return values[0]
+    if any("*" in v or "$" in v for v in values):
+        return "*"  # already a wildcard: no sub-chunk form of two of them
+    head = os.path.commonprefix(values)
+    tail = os.path.commonprefix([v[len(head):][::-1] for v in values])[::-1]
+    return f"{head}$*{tail}" if head or tail else "*"
 
 
 def expand(mf: MappingFile, rovers: Iterable[RoverNames], source: str = "<mapping>",

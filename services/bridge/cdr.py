@@ -190,5 +190,5 @@ def decode_cdr(typename: str, payload: bytes, distro: str = "jazzy") -> dict:
     """A message dict from CDR; :class:`BadInput` when the bytes are not that message."""
     try:
         return _from_ros(typestore(distro).deserialize_cdr(bytes(payload), typename))
-    except Exception as exc:  # rosbags raises assorted errors on truncated or foreign bytes
-        raise BadInput(f"not a CDR {typename}: {type(exc).__name__}: {exc}") from None
+    except Exception:  # rosbags raises assorted errors on truncated or foreign bytes
+        raise BadInput(f"not a CDR {typename} ({len(payload)} bytes)") from None

@@ -44,7 +44,7 @@ import zenoh
 from common import keys
 from common.answers import ANSWER_S, Accepted, Answer, Awaiting, NotApplied, Pending
 from common.connection import write
-from common.messages import BadInput, Event
+from common.messages import MAX_INPUT_BYTES, BadInput, Event
 from common.runtime import Runtime
 from common.writes import Write, plan_write
 from services.bridge.bindings import Binding, open_keyexpr, zenoh_key
@@ -250,10 +250,12 @@ class Controls:
                 q.drop()
 
         try:
+            if len(raw) > MAX_INPUT_BYTES:
+                raise BadInput(f"{len(raw)} bytes: more than a request ever holds ({MAX_INPUT_BYTES})")
             fields = _json_request(srv, raw) if flavour == "json" else decode_request(
                 srv, raw, self.opts.ros_distro)
         except BadInput as exc:
-            self.rt.call_soon(self.rt.reject, b.rover, key, str(exc))
+            self.rt.call_soon(self.rt.reject, b.rover, key, str(exc), "crew")
             response = service_response(b.mapping)
             values = {"accepted": False, "reason": f"refused: {exc}; nothing was sent"}
             respond({f: values[what] for f, what in response.items()})

@@ -31,6 +31,7 @@ from services.bridge.srv import SERVICE_TYPES, request_fields, response_fields
 
 __all__ = [
     "DEFAULT_MAPPING",
+    "LOCAL_MAPPING",
     "MAX_DOMAIN",
     "JOINT_STATE",
     "OTHERWISE",
@@ -62,6 +63,7 @@ _PLACEHOLDER = re.compile(r"\{([a-z_]*)\}")
 REPO = Path(__file__).resolve().parents[2]  # the source tree (an installed package: site-packages)
 # The shipped mapping, package data: in the source tree the link resolves to config/bridge/.
 DEFAULT_MAPPING = Path(__file__).with_name("default.yaml").resolve()
+LOCAL_MAPPING = "config/bridge/default.yaml"  # the mapping of the working directory (the image's)
 
 
 # == the mapping file ========================================================================
@@ -252,12 +254,12 @@ def service_response(m: Mapping) -> dict[str, str]:
 
 
 def resolve_mapping(mapping_file: str | None) -> Path:
-    """The mapping file: the default one (``config/bridge/default.yaml`` of the working
+    """The mapping file: the default one (:data:`LOCAL_MAPPING` of the working
     directory, as in the container image, where an operator may mount a mapping of their own;
     else the shipped one, :data:`DEFAULT_MAPPING`), or a path as given (relative to the working
     directory) or, failing that, relative to the source tree."""
     if mapping_file is None:
-        local = Path("config/bridge/default.yaml")
+        local = Path(LOCAL_MAPPING)
         return local.resolve() if local.is_file() else DEFAULT_MAPPING
     path = Path(mapping_file)
     if not path.is_absolute() and not path.exists() and (REPO / path).exists():

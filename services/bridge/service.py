@@ -41,7 +41,7 @@ from common import keys
 from common.config import ConfigError, Rover
 from common.connection import write
 from common.datafile import field_kind, struct_fields
-from common.messages import ActiveFault, ActiveFaults, BadInput, decode
+from common.messages import MAX_INPUT_BYTES, ActiveFault, ActiveFaults, BadInput, decode
 from common.runtime import Runtime, Sample
 from services.bridge.bindings import Binding, expand, open_keyexpr, rover_names, zenoh_key
 from services.bridge.cdr import decode_cdr, encode_cdr, restamp
@@ -400,6 +400,9 @@ class Bridge:
         """A dashboard's message on an inbound topic: the twin input or command it carries,
         or a rejection event naming the key and what is wrong."""
         try:
+            if len(payload) > MAX_INPUT_BYTES:
+                raise BadInput(f"{len(payload)} bytes: more than an input ever holds "
+                               f"({MAX_INPUT_BYTES})")
             if flavour == "json":
                 try:
                     msg = msgspec.json.decode(payload)
@@ -411,7 +414,7 @@ class Bridge:
                 msg = decode_cdr(b.mapping.type, payload, self.opts.ros_distro)
             value = in_payload(b.mapping, msg)
         except BadInput as exc:
-            self.rt.reject(b.rover, key, str(exc))
+            self.rt.reject(b.rover, key, str(exc), "crew")  # the crew's refused action
             return
         # the crew's dashboard wrote it: its owner's events say so (actor crew)
         write(self.rt.zenoh_session, b.key, msgspec.json.encode(value), actor="crew")

@@ -20,7 +20,7 @@ from common.traverse import length_and_duration, plan
 from services.composed import ComposedTwin
 from services.drive.model import DriveModel, umbilical_holds
 
-__all__ = ["ReserveCrossing", "TraverseBudget", "power_profile", "run_traverse"]
+__all__ = ["Coverage", "ReserveCrossing", "TraverseBudget", "power_profile", "run_traverse"]
 
 
 class ReserveCrossing(NamedTuple):
@@ -31,6 +31,15 @@ class ReserveCrossing(NamedTuple):
     x_m: float
     y_m: float
     waypoint: int | None  # the waypoint it was driving to
+
+
+class Coverage(NamedTuple):
+    """A radio that follows the rover along a traverse: how long the rover was outside its
+    footprint (its ellipse around the radio's site; what the rover's end of the link would
+    say with power), and where it first left it (None: never)."""
+
+    out_s: float
+    first_out: ReserveCrossing | None
 
 
 class TraverseBudget(NamedTuple):
@@ -50,6 +59,7 @@ class TraverseBudget(NamedTuple):
     power_limited_s: float  # driving slowed by the drive load's max_w
     unpowered_s: float  # halted: the drive load had no power
     peak_drive_w: float
+    coverage: tuple[tuple[str, Coverage], ...] = ()  # (name, coverage) of each radio standing at a site
 
     @property
     def ok(self) -> bool:
@@ -62,11 +72,13 @@ Progress = Callable[[ComposedTwin], None]
 
 def run_traverse(rover: Rover, traverse: DriveTraverse, reserve_soc: float = 0.2,
                  max_hours: float | None = None, seed: int | None = 0,
-                 progress: Progress | None = None, progress_every_s: float = 600.0) -> TraverseBudget:
+                 progress: Progress | None = None, progress_every_s: float = 600.0,
+                 sample: Progress | None = None, sample_every_s: float = 60.0) -> TraverseBudget:
     """Drive ``traverse`` from the rover file's start. ``max_hours`` defaults to three times
-    the planned duration plus an hour. Raises ValueError for a rover without a drive or a
-    traverse the drive would refuse (the reasons in the message: a rover file that starts
-    plugged in to an umbilical that does not follow the rover, too)."""
+    the planned duration plus an hour. ``sample(twin)`` is called every ``sample_every_s`` of
+    simulated time and at the end (a series: ``lunaris sim --csv``). Raises ValueError for a
+    rover without a drive or a traverse the drive would refuse (the reasons in the message: a
+    rover file that starts plugged in to an umbilical that does not follow the rover, too)."""
     if rover.drive is None:
         raise ValueError(f"rover {rover.id} has no drive section: it cannot follow a traverse")
     twin = ComposedTwin(rover, seed)
@@ -89,12 +101,20 @@ def run_traverse(rover: Rover, traverse: DriveTraverse, reserve_soc: float = 0.2
     limited_s = unpowered_s = 0.0
     peak_w = drive.power_w
     every = max(1, round(progress_every_s / twin.dt_s))
+    sample_every = max(1, round(sample_every_s / twin.dt_s))
     ticks = 0
     outcome = "time limit"
+    out_s = dict.fromkeys((r.name for r in twin.sited), 0.0)
+    first_out: dict[str, ReserveCrossing] = {}
     while twin.t_s < limit_s - 1e-9:
         status = drive.status
         twin.step()
         ticks += 1
+        for name in twin.out_of_range() if twin.sited else ():
+            out_s[name] += twin.dt_s
+            if name not in first_out:
+                r = drive.reading()
+                first_out[name] = ReserveCrossing(twin.t_s, r.odometer_m, r.x_m, r.y_m, r.waypoint)
         if status == "power_limited":
             limited_s += twin.dt_s
         elif status == "unpowered":
@@ -108,16 +128,21 @@ def run_traverse(rover: Rover, traverse: DriveTraverse, reserve_soc: float = 0.2
             crossing = ReserveCrossing(twin.t_s, r.odometer_m, r.x_m, r.y_m, r.waypoint)
         if progress is not None and ticks % every == 0:
             progress(twin)
+        if sample is not None and ticks % sample_every == 0:
+            sample(twin)
         if drive.status == "arrived":
             outcome = "arrived"
             break
         if battery.depleted:
             outcome = "depleted"
             break
+    if sample is not None and ticks % sample_every:
+        sample(twin)  # the run's end: arrived, depleted or out of time
     return TraverseBudget(length, duration, len(legs), outcome, twin.t_s,
                           twin.t_s if outcome == "arrived" else None, drive.odometer_m,
                           battery.soc, min_soc, reserve_soc, crossing, drive.energy_j - e_drive0,
-                          e0 - battery.energy_j, limited_s, unpowered_s, peak_w)
+                          e0 - battery.energy_j, limited_s, unpowered_s, peak_w,
+                          tuple((name, Coverage(out, first_out.get(name))) for name, out in out_s.items()))
 
 
 def power_profile(rover: Rover, traverse: DriveTraverse, dt_s: float | None = None) -> list[float]:

@@ -34,12 +34,19 @@
   A trainee's session (``control/session``) is the clock's to answer, as a restore is.
 - **Marks**: ``control/mark`` ``{"text"}`` is answered with a ``mark`` event (by whoever wrote
   it: its ``actor``), an instructor's note on the timeline.
+
+A node (:class:`FaultsNode`) whose ports are heard, not read: every service's events and the
+gatekeeper's keys are no key family (:class:`common.node.Hears`); it publishes the journal's
+stream (``event``, the last ``EVENT_CACHE`` events cached). The journal of each rover is in
+its :class:`Desk`; the queries (no key family either) are declared at start.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass, field
+from functools import partial
 
 import msgspec
 import zenoh
@@ -52,20 +59,21 @@ from common.messages import (
     ActiveFault,
     ActiveFaults,
     BadInput,
+    Clock,
     Event,
     ScenarioMark,
     SnapshotInfo,
     TimelineMark,
     decode,
     decode_input,
-    encode,
 )
+from common.node import Every, Hears, Node, PerRover, Publishes
 from common.reasons import shown
 from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
 from services.faults.journal import Journal
 
-__all__ = ["fault_owners", "serve"]
+__all__ = ["NODE", "Desk", "FaultsNode", "fault_owners"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
 # The heads of the keys that instructors, scenarios and dashboards write.
@@ -93,27 +101,63 @@ def fault_owners(rover: Rover) -> set[str]:
     return owners
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    folder = rt.store.dir
-    journals = {r.id: Journal(folder / f"faults-journal-{r.id}.jsonl" if folder else None,
-                              rover=r.id) for r in rovers}
-    drives = {r.id: r.drive is not None for r in rovers}
-    owners = {r.id: fault_owners(r) for r in rovers}
-    live_rovers: set[str] = set()
-    session = rt.session
-    assert session is not None
+@dataclass
+class Desk(PerRover):
+    """What the faults service keeps of one rover: its journal and what its rover file says."""
 
-    def on_token(s: zenoh.Sample) -> None:
+    drives: bool  # it has a drive section (a traverse is an input it has)
+    owners: set[str]  # the services that own the faults of its components
+    # the journal in memory until attach opens the one in the state folder (the runtime's)
+    journal: Journal = field(default_factory=Journal)
+    unopened: bool = False  # a new journal: its first line waits for the session of a tick
+
+
+class FaultsNode(Node[Desk]):
+    """The journal, the faults in effect gathered, the gatekeeper and the session controls of
+    every rover served."""
+
+    name = "faults"
+    keeps_state = False  # the journal is its own file (services.faults.journal)
+    # Every service's events (event/<service>: no key family, the access control's), and the
+    # gatekeeper's every write and one-chunk key, of any rover (a rover nobody serves included)
+    hears = (
+        Hears("event/*", "on_event", history=True),
+        *(Hears(head, "on_instructor_key", any_rover=True, writes="gate") for head in WRITABLE),
+        Hears("*", "on_one_chunk", any_rover=True, telemetry=True, writes="gate"),
+    )
+    publishes = (Publishes("event", Event, reliable=True, cache=EVENT_CACHE),)
+    timers = (Every(1.0, "end_floods"),)
+
+    def __init__(self, rovers: list[Rover], seed: int | None = None):
+        self.live_rovers: set[str] = set()  # rovers some service serves (their tokens)
+        super().__init__(rovers, seed)
+
+    def rover_state(self, rover: Rover) -> Desk:
+        return Desk(rover.id, rover.drive is not None, fault_owners(rover))
+
+    def attach(self, rt: Runtime) -> None:
+        # The journals are the state folder's, the runtime's; the services' liveliness tokens
+        # are no port of the table (heard on Zenoh's thread, with the tokens up already).
+        folder = rt.store.dir
+        for desk in self.rovers.values():
+            desk.journal = Journal(folder / f"faults-journal-{desk.id}.jsonl" if folder else None,
+                                   rover=desk.id)
+        rt.keep(rt.zenoh_session.liveliness().declare_subscriber(
+            keys.service("*", "*"), self.on_token, history=True))
+        rt.record_own_events(self.journal_own)
+        super().attach(rt)
+
+    def on_token(self, s: zenoh.Sample) -> None:
         rover, _ = keys.split(str(s.key_expr))
         if s.kind == zenoh.SampleKind.PUT:
-            live_rovers.add(rover)
+            self.live_rovers.add(rover)
 
-    rt.keep(session.liveliness().declare_subscriber(
-        keys.service("*", "*"), on_token, history=True))
+    # -- the journal -------------------------------------------------------------------------
 
-    def on_event(s: Sample) -> None:
+    def on_event(self, s: Sample) -> None:
         """An event a service published on its own key: journalled and relayed on the rover's
         ``event`` key if its ``source`` is that service, refused (and said) if not."""
+        rt = self.rt
         ev = decode(s.payload, Event)
         if len(s.parts) != 2 or ev.source != s.parts[1]:
             rt.event(s.rover, "critical", "rejected", s.key,
@@ -121,7 +165,7 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                      f"{s.parts[-1]} service, it claims to come from {shown(ev.source)} "
                      f"({ev.kind}: {shown(ev.message)}); not journalled")
             return
-        relay(s.rover, journals[s.rover].record(ev, time.monotonic()))
+        self.relay(s.rover, self.rovers[s.rover].journal.record(ev, time.monotonic()))
         if ev.source == "clock" and ev.kind == "session" and ev.session > rt.session_id[s.rover] \
                 and "started_wall" in (ev.params or {}):
             # the clock's word that a session begins: a write answered here after it is in
@@ -129,21 +173,40 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             # event replayed from a cache never takes this service back)
             rt.enter_session(s.rover, ev.session)
 
-    def relay(rover: str, written: list[Event]) -> None:
+    def journal_own(self, rover: str, ev: Event) -> None:
+        """This service's own event (a mark, a session control, a rejection), journalled and
+        relayed before it is published on ``event/faults``: heard back, it is known already."""
+        self.relay(rover, self.rovers[rover].journal.record(ev, time.monotonic()))
+
+    def relay(self, rover: str, written: list[Event]) -> None:
         """What the journal wrote, unchanged, on ``lunaris/<rover>/event``: the journal's
         stream (complete, authenticated, floods summarised)."""
         for ev in written:
-            rt.publish_bytes(keys.event(rover), encode(ev), zenoh.Encoding.APPLICATION_JSON,
-                             reliable=True, cache=EVENT_CACHE)
+            self.publish(keys.event(rover), ev)
 
-    def end_floods(force: bool = False) -> None:
+    def end_floods(self, force: bool = False) -> None:
         """Summaries of the floods that have ended (all of them, ``force``), and the events
         that never came back counted."""
-        for rover, journal in journals.items():
-            relay(rover, journal.tick(time.monotonic(), flood_over=force))
+        for rover, desk in self.rovers.items():
+            self.relay(rover, desk.journal.tick(time.monotonic(), flood_over=force))
 
-    def on_instructor_key(s: Sample) -> None:
-        if s.rover not in rt.rovers and s.rover not in live_rovers:
+    def on_tick(self, desk: Desk, tick: Clock) -> None:
+        if desk.unopened:
+            self.open_journal(desk)
+
+    def open_journal(self, desk: Desk) -> None:
+        """A new journal's first line, in the session the clock's ticks say (once one has come)."""
+        if desk.unopened and self.rt.session_id.get(desk.id):
+            desk.unopened = False
+            self.rt.event(desk.id, "info", "session", keys.faults_journal(desk.id),
+                          f"journal opened: the journal of {desk.id} begins in session "
+                          f"{self.rt.session_id[desk.id]}")
+
+    # -- the gatekeeper and the session controls ------------------------------------------------
+
+    def on_instructor_key(self, s: Sample) -> None:
+        rt = self.rt
+        if s.rover not in rt.rovers and s.rover not in self.live_rovers:
             raise BadInput(f"unknown rover {s.rover!r}: no Lunaris service serves it")
         if s.rover not in rt.rovers:
             return  # another faults service journals that rover
@@ -154,28 +217,35 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             refusal = rt.refusal(s)
             if refusal is not None:
                 raise BadInput(refusal)
-            on_control(s)
+            self.on_control(s)
             return
         family = keys.family_of(s.parts)
         if family is None or family.direction != "in":
             writable = ", ".join(f.name for f in keys.families("in"))
             raise BadInput(f"no such input or command {'/'.join(s.parts)!r} (the twin reads: "
                            f"{writable}, fault/...)")
-        if family.owner == "drive" and not drives[s.rover]:
+        if family.owner == "drive" and not self.rovers[s.rover].drives:
             raise BadInput(f"rover {s.rover} has no drive section in its rover file: it does not "
                            "drive, so it cannot follow a traverse")
 
-    def on_wildcard(s: Sample) -> None:
+    def on_one_chunk(self, s: Sample) -> None:
+        if s.parts[0] in ("clock", "event") or any(h.startswith(s.parts[0] + "/") for h in WRITABLE):
+            return  # telemetry (its writer is the router's to check), or answered above
+        self.on_instructor_key(s)
+
+    def on_wildcard(self, s: Sample) -> None:
         """A write on a key naming many (``lunaris/**``): no service took it; refused once, in
         words, for each rover served here that it reaches."""
         verb = "delete" if s.deleted else "put"
         expr = zenoh.KeyExpr(s.key)
-        for rover in sorted(rt.rovers):
+        for rover in sorted(self.rt.rovers):
             if zenoh.KeyExpr(keys.under(rover)).intersects(expr):
-                rt.reject(rover, s.key, f"a {verb} on {s.key} names many keys (it holds a wildcard: "
-                                        "*, ** or $*); a write names exactly one key. Nothing changed")
+                self.rt.reject(rover, s.key, f"a {verb} on {s.key} names many keys (it holds a "
+                               "wildcard: *, ** or $*); a write names exactly one key. Nothing "
+                               "changed")
 
-    def on_control(s: Sample) -> None:
+    def on_control(self, s: Sample) -> None:
+        rt = self.rt
         if s.parts == ["control", "scenario"]:  # a scenario's progress, for the journal
             if s.deleted:
                 raise BadInput("a scenario mark is a put")
@@ -202,10 +272,13 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             return
         rt.event(s.rover, "info", "session", s.key, SESSION_MESSAGES[action].format(name=name))
 
-    def gather_snapshots(rover: str) -> list[SnapshotInfo]:
+    # -- the queries -------------------------------------------------------------------------
+
+    def gather_snapshots(self, rover: str) -> list[SnapshotInfo]:
         merged: dict[str, SnapshotInfo] = {}
-        for reply in session.get(keys.snapshots_of(rover, "*"), timeout=GATHER_TIMEOUT_S,
-                                 consolidation=zenoh.ConsolidationMode.NONE):
+        for reply in self.rt.zenoh_session.get(keys.snapshots_of(rover, "*"),
+                                               timeout=GATHER_TIMEOUT_S,
+                                               consolidation=zenoh.ConsolidationMode.NONE):
             if reply.ok is None:
                 continue
             for info in msgspec.json.decode(reply.ok.payload.to_bytes(), type=list[SnapshotInfo]):
@@ -214,19 +287,19 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                 known.services.extend(info.services)
         return [merged[n] for n in sorted(merged)]
 
-    def on_snapshots_query(q: zenoh.Query) -> None:
+    def on_snapshots_query(self, q: zenoh.Query) -> None:
         with q:
-            for rover in sorted(journals):
+            for rover in sorted(self.rovers):
                 key = keys.snapshots(rover)
                 if zenoh.KeyExpr(key).intersects(q.key_expr):
-                    q.reply(key, msgspec.json.encode(gather_snapshots(rover)),
+                    q.reply(key, msgspec.json.encode(self.gather_snapshots(rover)),
                             encoding=zenoh.Encoding.APPLICATION_JSON)
 
-    def running(rover: str) -> str:
+    def running(self, desk: Desk) -> str:
         """The session running: as the ticks say, or the journal's latest."""
-        return rt.session_id.get(rover) or journals[rover].sessions.running
+        return self.rt.session_id.get(desk.id) or desk.journal.sessions.running
 
-    def on_journal_query(q: zenoh.Query) -> None:
+    def on_journal_query(self, q: zenoh.Query) -> None:
         with q:
             last = q.parameters.get("last")
             if last is not None and not last.isdigit():
@@ -237,11 +310,12 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                 q.reply_err(f"session={shown(asked)}: give a session's id (YYYYMMDD-HHMMSS, as "
                             "get sessions lists them) or all")
                 return
-            for rover, journal in journals.items():
-                key = keys.faults_journal(rover)
+            for rover, desk in self.rovers.items():
+                key, journal = keys.faults_journal(rover), desk.journal
                 if zenoh.KeyExpr(key).intersects(q.key_expr):
-                    session = running(rover) if asked is None else asked
-                    if session not in ("all", running(rover)) and not journal.sessions.known(session):
+                    session = self.running(desk) if asked is None else asked
+                    if session not in ("all", self.running(desk)) \
+                            and not journal.sessions.known(session):
                         ids = ", ".join(journal.sessions.ids()) or "none"
                         q.reply_err(f"no session {session} of {rover} in its journal (sessions: {ids})")
                         continue
@@ -253,81 +327,79 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
                             encoding=zenoh.Encoding.APPLICATION_JSON,
                             congestion_control=zenoh.CongestionControl.BLOCK)
 
-    def on_sessions_query(q: zenoh.Query) -> None:
+    def on_sessions_query(self, q: zenoh.Query) -> None:
         with q:
-            for rover, journal in journals.items():
+            for rover, desk in self.rovers.items():
                 key = keys.sessions(rover)
                 if zenoh.KeyExpr(key).intersects(q.key_expr):
-                    q.reply(key, msgspec.json.encode(journal.session_infos(running(rover))),
+                    q.reply(key, msgspec.json.encode(desk.journal.session_infos(self.running(desk))),
                             encoding=zenoh.Encoding.APPLICATION_JSON)
 
-    def on_faults_query(q: zenoh.Query) -> None:
+    def on_faults_query(self, q: zenoh.Query) -> None:
         # Answered on Zenoh's thread: the owners are asked at once, and the query is
         # finalised when their answers are in (or the timeout ends the gathering).
-        wanted = [r for r in sorted(journals) if zenoh.KeyExpr(keys.faults(r)).intersects(q.key_expr)]
+        wanted = [r for r in sorted(self.rovers)
+                  if zenoh.KeyExpr(keys.faults(r)).intersects(q.key_expr)]
         if not wanted:
             q.drop()
             return
-        gathered: dict[str, list[ActiveFault]] = {r: [] for r in wanted}
-        answered: dict[str, set[str]] = {r: set() for r in wanted}
-        lock = threading.Lock()
-
-        def on_reply(reply: zenoh.Reply) -> None:
-            if reply.ok is None:
-                return
-            rover, _ = keys.split(str(reply.ok.key_expr))
-            answer = decode(reply.ok.payload.to_bytes(), ActiveFaults)
-            with lock:
-                if rover in gathered:
-                    gathered[rover].extend(answer.faults)
-                    answered[rover].add(answer.service)
-
-        def on_done() -> None:
-            with q:
-                for rover in wanted:
-                    faults = sorted(gathered[rover], key=lambda f: (f.since_t_s, f.key))
-                    q.reply(keys.faults(rover), msgspec.json.encode(faults),
-                            encoding=zenoh.Encoding.APPLICATION_JSON)
-                    for service in sorted(owners[rover] - answered[rover]):
-                        q.reply_err(f"the {service} service of {rover} did not answer within "
-                                    f"{GATHER_TIMEOUT_S:g} s: its faults are not listed")
-
+        gathering = Gathering(q, {r: self.rovers[r].owners for r in wanted})
         rover_chunk = wanted[0] if len(wanted) == 1 else "*"
-        session.get(keys.faults_active(rover_chunk, "*"),
-                    zenoh.handlers.Callback(on_reply, on_done),
-                    consolidation=zenoh.ConsolidationMode.NONE,
-                    timeout=GATHER_TIMEOUT_S)
+        self.rt.zenoh_session.get(keys.faults_active(rover_chunk, "*"),
+                                  zenoh.handlers.Callback(gathering.on_reply, gathering.on_done),
+                                  consolidation=zenoh.ConsolidationMode.NONE,
+                                  timeout=GATHER_TIMEOUT_S)
 
-    rt.on_wildcard(on_wildcard)
-    rt.subscribe(keys.event_of("*", "*"), on_event, history=True)
-    for rover, journal in journals.items():
-        if journal.damage:
-            rt.state_damaged(rover, f"faults journal of {rover} damaged: {journal.damage}",
-                             keys.faults_journal(rover))
-    # A new journal's first line, in the session the clock's ticks say (once one has come)
-    unopened = {rover for rover, journal in journals.items() if journal.count == 0}
+    def start(self) -> None:
+        rt = self.rt
+        for rover, desk in self.rovers.items():
+            if desk.journal.damage:
+                rt.state_damaged(rover, f"faults journal of {rover} damaged: {desk.journal.damage}",
+                                 keys.faults_journal(rover))
+        for desk in self.rovers.values():
+            desk.unopened = desk.journal.count == 0
+        for rover in sorted(self.rovers):
+            self.open_journal(self.rovers[rover])
+        rt.on_exit(partial(self.end_floods, force=True))
+        # The queries are no port of the table: keys no family describes (their answers are
+        # lists, not one Struct), each answered for every rover the query names at once;
+        # `get faults` on Zenoh's thread, as it waits on the owners' answers.
+        rt.keep(rt.zenoh_session.declare_queryable(keys.faults("*"), self.on_faults_query))
+        rt.queryable(keys.faults_journal("*"), self.on_journal_query)
+        rt.queryable(keys.snapshots("*"), self.on_snapshots_query)
+        rt.queryable(keys.sessions("*"), self.on_sessions_query)
 
-    def open_journal(rover: str, tick: object = None) -> None:
-        if rover in unopened and rt.session_id.get(rover):
-            unopened.discard(rover)
-            rt.event(rover, "info", "session", keys.faults_journal(rover),
-                     f"journal opened: the journal of {rover} begins in session "
-                     f"{rt.session_id[rover]}")
 
-    for rover in sorted(unopened):
-        open_journal(rover)
-    rt.on_tick(lambda rover, tick: open_journal(rover) if unopened else None)
-    rt.every(1.0, end_floods)
-    rt.on_exit(lambda: end_floods(force=True))
-    def on_one_chunk(s: Sample) -> None:
-        if s.parts[0] in ("clock", "event") or any(h.startswith(s.parts[0] + "/") for h in WRITABLE):
-            return  # telemetry (its writer is the router's to check), or answered above
-        on_instructor_key(s)
+class Gathering:
+    """A ``get faults``: the owners' records of the faults in effect gathered on Zenoh's
+    thread, the query answered once the get is over."""
 
-    for head in WRITABLE:
-        rt.subscribe(keys.under("*", head), on_instructor_key, any_rover=True, writes="gate")
-    rt.subscribe(keys.under("*", "*"), on_one_chunk, any_rover=True, telemetry=True, writes="gate")
-    rt.keep(session.declare_queryable(keys.faults("*"), on_faults_query))
-    rt.queryable(keys.faults_journal("*"), on_journal_query)
-    rt.queryable(keys.snapshots("*"), on_snapshots_query)
-    rt.queryable(keys.sessions("*"), on_sessions_query)
+    def __init__(self, q: zenoh.Query, owners: dict[str, set[str]]):
+        self.q, self.owners = q, owners  # rover -> the services that must answer
+        self.gathered: dict[str, list[ActiveFault]] = {r: [] for r in owners}
+        self.answered: dict[str, set[str]] = {r: set() for r in owners}
+        self.lock = threading.Lock()
+
+    def on_reply(self, reply: zenoh.Reply) -> None:
+        if reply.ok is None:
+            return
+        rover, _ = keys.split(str(reply.ok.key_expr))
+        answer = decode(reply.ok.payload.to_bytes(), ActiveFaults)
+        with self.lock:
+            if rover in self.gathered:
+                self.gathered[rover].extend(answer.faults)
+                self.answered[rover].add(answer.service)
+
+    def on_done(self) -> None:
+        q = self.q
+        with q:
+            for rover, owners in self.owners.items():
+                faults = sorted(self.gathered[rover], key=lambda f: (f.since_t_s, f.key))
+                q.reply(keys.faults(rover), msgspec.json.encode(faults),
+                        encoding=zenoh.Encoding.APPLICATION_JSON)
+                for service in sorted(owners - self.answered[rover]):
+                    q.reply_err(f"the {service} service of {rover} did not answer within "
+                                f"{GATHER_TIMEOUT_S:g} s: its faults are not listed")
+
+
+NODE = FaultsNode

@@ -23,6 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from common.events import session_opened
 from common.messages import Event, SessionInfo
 
 __all__ = ["SessionIndex"]
@@ -70,20 +71,19 @@ class SessionIndex:
                 self._unplaced.clear()
         self.of_line.append(sid)
         self._count(seg, ev)
-        said = _clock_says(ev)
-        if said is not None and said.get("session") == sid:
-            if "started_wall" in said:
-                self._opened(seg, said)
-            elif (end := _number(said.get("end_t_s"))) is not None:
-                seg.end_t_s = end
+        opened = session_opened(ev)  # the one rule the tools and the response read it by
+        if opened is not None and opened[0] == sid:
+            self._opened(seg, opened[1], ev.params or {})
+        elif (end := _ends(ev, sid)) is not None:
+            seg.end_t_s = end
         return sid
 
     def _count(self, seg: _Segment, ev: Event) -> None:
         seg.events += 1
         seg.last_t_s = ev.t_s
 
-    def _opened(self, seg: _Segment, p: dict[str, Any]) -> None:
-        seg.trainee = str(p.get("trainee") or "")
+    def _opened(self, seg: _Segment, trainee: str, p: dict[str, Any]) -> None:
+        seg.trainee = trainee
         seg.start_t_s = _number(p.get("start_t_s"))
         seg.started_wall = _number(p.get("started_wall"))
         snapshot = p.get("from_snapshot")
@@ -114,12 +114,12 @@ class SessionIndex:
         return out
 
 
-def _clock_says(ev: Event) -> dict[str, Any] | None:
-    """The params of the clock's event that opens or closes a session, or None."""
+def _ends(ev: Event, sid: str) -> float | None:
+    """The end (sim time) of session ``sid`` if ``ev`` is the clock's event that closes it."""
     p = ev.params
-    if ev.kind == "session" and ev.source == "clock" and isinstance(p, dict) and (
-            "started_wall" in p or "end_t_s" in p):
-        return p
+    if ev.kind == "session" and ev.source == "clock" and isinstance(p, dict) and p.get(
+            "session") == sid and "started_wall" not in p:
+        return _number(p.get("end_t_s"))
     return None
 
 

@@ -21,13 +21,13 @@ it on again. A short still there has tripped the rail by then, and the answer sa
 from __future__ import annotations
 
 import time
-from typing import NamedTuple
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
 
 from common import keys
 from common.config import Rover
 from common.faults import Fault
 from common.messages import (
-    BARE_FIELD,
     BadInput,
     BatteryState,
     LoadPower,
@@ -36,20 +36,20 @@ from common.messages import (
     RailState,
     SolarPower,
     UmbilicalState,
-    decode,
-    decode_input,
 )
-from common.runtime import Runtime, Sample
+from common.node import Every, Node, Owns, PerRover, Publishes, Reads
+from common.runtime import Sample
 from services.power.model import PowerModel
 
-__all__ = ["serve"]
+__all__ = ["NODE", "Held", "Pdm", "PowerNode"]
 
 HOLD_S = 0.04  # the longest a rover's recomputation waits for the rest of its tick's loads [s]
 RESET_HOLD_S = 0.25  # the longest a rail reset waits for its rover's next tick (a paused clock) [s]
 
 
-class _Held(NamedTuple):
+class Held(NamedTuple):
     """A rail command waiting for the rover's next tick of loads: a reset, or one behind it."""
+
     key: str
     rail: str
     cmd: RailCommand
@@ -58,74 +58,192 @@ class _Held(NamedTuple):
     actor: str = "instructor"  # who sent it (its answer says so)
 
 
-def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
-    models = {r.id: PowerModel(r) for r in rovers}
-    dirty: set[str] = set()
-    due: dict[str, float] = {}  # rover -> monotonic time it is recomputed anyway
-    newest: dict[str, float] = {}  # rover -> sim time of its newest load sample
-    at_newest: dict[str, set[str]] = {r.id: set() for r in rovers}  # the loads of that tick
-    last_state: dict[tuple[str, str], str] = {}
+@dataclass
+class Pdm(PerRover):
+    """One rover's PDM and what the service remembers of its ticks and commands."""
 
-    rail_keys = {rover: [keys.rail_state(rover, name) for name in m.rail_names()]
-                 for rover, m in models.items()}
+    model: PowerModel
+    rail_keys: list[str]  # rail/<name>/state of each rail, in the model's order
+    due: float | None = None  # monotonic time it is recomputed anyway (while dirty)
+    newest: float | None = None  # sim time of its newest load sample
+    at_newest: set[str] = field(default_factory=set)  # the loads of that tick
+    published: float | None = None  # the newest tick of loads when the rails last went out
+    stamped: tuple[int, float] = (-1, 0.0)  # (epoch, t_s) of the last rails and summary out
+    last_state: dict[str, str] = field(default_factory=dict)  # rail -> its state last published
+    held: list[Held] = field(default_factory=list)  # rail commands waiting for a tick, in order
+    # the resets applied whose answer waits for the loads to follow (tick_t: the tick they
+    # were applied on)
+    answering: list[Held] = field(default_factory=list)
 
-    def publish(rover: str) -> None:
-        m = models[rover]
+
+class PowerNode(Node[Pdm]):
+    """The PDM of every rover served: rails and summary once per tick of loads, commands
+    answered in words."""
+
+    name = "power"
+    reads = (
+        Reads("load/*/power", LoadPower, "on_load", check="feeds_rail"),
+        Reads("battery/state", BatteryState, "on_battery"),
+        Reads("solar/*/power", SolarPower, "on_solar"),
+        Reads("umbilical/state", UmbilicalState, "on_umbilical"),
+        Reads("cmd/rail/*", RailCommand, "on_command", kind="command", check="has_rail"),
+    )
+    publishes = (Publishes("rail/*/state", RailState), Publishes("power/summary", PowerSummary))
+    owns = (Owns("rail", "apply_faults", names="rail_names"),)
+    timers = (Every(HOLD_S / 4, "flush"),)
+    # The loads of a rover arrive as a burst each tick: fold it into one recomputation.
+    after_batch = "flush"
+
+    def __init__(self, rovers: list[Rover], seed: int | None = None):
+        self.dirty: set[str] = set()  # rovers with news not yet published
+        super().__init__(rovers, seed)
+
+    def rover_state(self, rover: Rover) -> Pdm:
+        model = PowerModel(rover)
+        return Pdm(rover.id, model, [keys.rail_state(rover.id, n) for n in model.rail_names()])
+
+    def publish_pdm(self, pdm: Pdm, tick_t: float | None = None) -> None:
+        """The rover's rails and summary: of the tick of loads ``tick_t`` (stamped with it), or
+        news between ticks (stamped with the rover's time now). Never stamped later than the
+        time this service has reached (what it saves, and starts again from), nor earlier
+        than its last stamp in the same epoch."""
+        m = pdm.model
         readings, summary = m.compute()
-        t = rt.t_s[rover]
-        for key, r in zip(rail_keys[rover], readings, strict=True):
-            rt.publish(key, RailState(t, *r[1:]))  # the reading's fields but its name, in order
-            if last_state.get((rover, r.name)) != r.state:
-                last_state[(rover, r.name)] = r.state
-                rt.faults.sync_derived(rover, f"rail/{r.name}", m.derived_faults(r.name))
-        rt.publish(keys.power_summary(rover), PowerSummary(t, *summary))
+        t = self.rt.t_s[pdm.id]
+        if tick_t is not None:  # a service that heard the clock before that tick's loads
+            t = min(t, tick_t)
+        stamp = (self.rt.epoch[pdm.id], t)
+        if stamp < pdm.stamped:  # (a tick older than news already out: never back)
+            stamp = pdm.stamped
+        pdm.stamped, t = stamp, stamp[1]
+        pdm.published = pdm.newest
+        for key, r in zip(pdm.rail_keys, readings, strict=True):
+            self.publish(key, RailState(t, *r[1:]))  # the reading's fields but its name, in order
+            if pdm.last_state.get(r.name) != r.state:
+                pdm.last_state[r.name] = r.state
+                self.rt.faults.sync_derived(pdm.id, f"rail/{r.name}", m.derived_faults(r.name))
+        self.publish(keys.power_summary(pdm.id), PowerSummary(t, *summary))
 
-    held: dict[str, list[_Held]] = {}  # rover -> its rail commands waiting for a tick, in order
-    # rover -> the resets applied whose answer waits for the loads to follow (tick_t: the tick
-    # they were applied on)
-    answering: dict[str, list[_Held]] = {}
+    # -- a tick's burst of loads, and news between ticks ------------------------------------
 
-    def answer_due(rover: str, now: float) -> None:
-        pending = answering.get(rover)
-        if pending and (newest.get(rover) != pending[0].tick_t or now >= pending[0].until):
-            answer(rover, answering.pop(rover))
-
-    def flush() -> None:
+    def flush(self) -> None:
         now = time.monotonic()
-        ready = [r for r in sorted(dirty) if len(at_newest[r]) == len(models[r].load_power_w)
-                 or now >= due.setdefault(r, now + HOLD_S)]
-        for rover in ready:
-            rt.urgent_first()  # a fleet's PDMs: a fault must not wait for the rest
-            dirty.discard(rover)
-            due.pop(rover, None)
-            if rover in held and (newest.get(rover) != held[rover][0].tick_t
-                                  or now >= held[rover][0].until):
-                command(rover, held.pop(rover))
-            publish(rover)
-            answer_due(rover, now)
-        for rover in [r for r, cmds in held.items() if now >= cmds[0].until]:  # no tick came
-            command(rover, held.pop(rover))
-            publish(rover)
-        for rover in list(answering):
-            answer_due(rover, now)
+        ready = []
+        for rover in sorted(self.dirty):
+            pdm = self.rovers[rover]
+            if pdm.due is None:
+                pdm.due = now + HOLD_S
+            if len(pdm.at_newest) == len(pdm.model.load_power_w) or now >= pdm.due:
+                ready.append(pdm)
+        for pdm in ready:
+            self.rt.urgent_first()  # a fleet's PDMs: a fault must not wait for the rest
+            if pdm.held and (pdm.newest != pdm.held[0].tick_t or now >= pdm.held[0].until):
+                self.command(pdm, self.take_held(pdm))
+            self.publish_tick(pdm)
+            self.answer_due(pdm, now)
+        for pdm in self.rovers.values():
+            if not (pdm.held or pdm.answering):  # (most rovers, most of the time)
+                continue
+            if pdm.held and now >= pdm.held[0].until:  # no tick came
+                self.command(pdm, self.take_held(pdm))
+                self.publish_pdm(pdm)
+            self.answer_due(pdm, now)
 
-    def command(rover: str, cmds: list[_Held]) -> None:
+    def publish_tick(self, pdm: Pdm) -> None:
+        """The rover's newest tick of loads: published, stamped with it, nothing left waiting."""
+        self.dirty.discard(pdm.id)
+        pdm.due = None
+        self.publish_pdm(pdm, pdm.newest)
+
+    @staticmethod
+    def take_held(pdm: Pdm) -> list[Held]:
+        cmds, pdm.held = pdm.held, []
+        return cmds
+
+    def answer_due(self, pdm: Pdm, now: float) -> None:
+        pending = pdm.answering
+        if pending and (pdm.newest != pending[0].tick_t or now >= pending[0].until):
+            pdm.answering = []
+            self.answer(pdm, pending)
+
+    def catch_up(self, pdm: Pdm) -> None:
+        """The next tick's loads came before the last tick was published (a service behind,
+        its batch holding two ticks of a rover): that tick goes out now, with its own time,
+        rather than not at all. A held command waits for the tick that is coming."""
+        self.publish_tick(pdm)
+
+    def feeds_rail(self, pdm: Pdm, s: Sample) -> bool:
+        return s.parts[1] in pdm.model.load_power_w
+
+    def on_load(self, pdm: Pdm, load: LoadPower, s: Sample) -> None:
+        # the loads publish every tick: the PDM follows them
+        if load.t_s != pdm.newest:  # a new tick (or time put back by a reset)
+            if (pdm.newest is not None and load.t_s > pdm.newest and pdm.published != pdm.newest
+                    and pdm.id in self.dirty):
+                self.catch_up(pdm)
+            pdm.newest = load.t_s
+            pdm.at_newest.clear()
+        pdm.model.load_power_w[s.parts[1]] = load.power_w
+        pdm.at_newest.add(s.parts[1])
+        self.dirty.add(pdm.id)
+
+    def on_battery(self, pdm: Pdm, b: BatteryState, s: Sample) -> None:
+        m = pdm.model
+        before = (m.battery_ok, [sw.shed for sw in m.switches.values()])
+        m.set_battery(b.soc, b.operational, b.voltage_v)
+        if before != (m.battery_ok, [sw.shed for sw in m.switches.values()]):
+            self.dirty.add(pdm.id)
+
+    def on_solar(self, pdm: Pdm, solar: SolarPower, s: Sample) -> None:
+        m = pdm.model
+        if m.panel_power_w.get(s.parts[1], solar.power_w) != solar.power_w:
+            m.panel_power_w[s.parts[1]] = solar.power_w
+            self.dirty.add(pdm.id)
+
+    def on_umbilical(self, pdm: Pdm, umbilical: UmbilicalState, s: Sample) -> None:
+        if pdm.model.umbilical_w != umbilical.power_w:
+            pdm.model.umbilical_w = umbilical.power_w
+            self.dirty.add(pdm.id)
+
+    # -- rail commands ----------------------------------------------------------------------
+
+    def has_rail(self, pdm: Pdm, s: Sample) -> bool:
+        m, rail = pdm.model, s.parts[2]
+        if rail in m.switches:
+            return True
+        if rail == m.solar_rail.name:
+            raise BadInput(f"the solar rail {rail} cannot be switched")
+        raise BadInput(f"rover {pdm.id} has no rail {rail!r} (rails: {', '.join(m.switches)})")
+
+    def on_command(self, pdm: Pdm, cmd: RailCommand | None, s: Sample) -> None:
+        if cmd is None:
+            raise BadInput("a rail command is a put, not a delete")
+        if cmd.on is None and not cmd.reset:
+            raise BadInput('give {"on": true|false} or {"reset": true}')
+        c = Held(s.key, s.parts[2], cmd, pdm.newest, time.monotonic() + RESET_HOLD_S,
+                 self.rt.actor(s))
+        if cmd.reset or pdm.held:  # judged on the next tick's loads (in order)
+            pdm.held.append(c)
+            return
+        self.command(pdm, [c])
+        self.publish_pdm(pdm)  # at once: the loads follow the new rail state
+
+    def command(self, pdm: Pdm, cmds: list[Held]) -> None:
         """Apply rail commands, each answered by an event with the rail's state after it."""
-        m = models[rover]
+        m = pdm.model
         for c in cmds:
             m.command(c.rail, on=c.cmd.on, reset=bool(c.cmd.reset))
         readings = {r.name: r for r in m.compute()[0]}  # trips a rail a reset cannot hold
         if any(c.cmd.reset and (r := readings.get(c.rail)) is not None and r.state == "on"
                for c in cmds):  # answered, in order, once the loads have seen the rail on
             until = time.monotonic() + RESET_HOLD_S
-            answering.setdefault(rover, []).extend(
-                c._replace(tick_t=newest.get(rover), until=until) for c in cmds)
+            pdm.answering.extend(c._replace(tick_t=pdm.newest, until=until) for c in cmds)
             return
-        answer(rover, cmds)
+        self.answer(pdm, cmds)
 
-    def answer(rover: str, cmds: list[_Held]) -> None:
+    def answer(self, pdm: Pdm, cmds: list[Held]) -> None:
         """Each command's event: the rail's state now, in words the crew can act on."""
-        readings = {r.name: r for r in models[rover].compute()[0]}
+        readings = {r.name: r for r in pdm.model.compute()[0]}
         for c in cmds:
             what = ", ".join(w for w in (None if c.cmd.on is None else f"on={c.cmd.on}".lower(),
                                          "reset" if c.cmd.reset else None) if w)
@@ -134,86 +252,42 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None) -> None:
             said = f"rail {c.rail}: {what}; the rail is now {now}"
             if now == "tripped" and c.cmd.reset:  # what the crew must hear: the fault is still there
                 said += f": it tripped again at once ({why}), what draws that current is still there"
+            elif now == "tripped" and c.cmd.on is False:  # what to do next: off is held, not shown
+                said += (f" ({why}): a tripped rail stays tripped until it is reset; switched off "
+                         "now, a reset leaves it off")
             elif now != "on" and why:
                 said += f" ({why})"
-            rt.event(rover, "info", "command", c.key, said,
-                     {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now}, actor=c.actor)
+            self.rt.event(pdm.id, "info", "command", c.key, said,
+                          {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now}, actor=c.actor)
 
-    def on_load(s: Sample) -> None:
-        m = models[s.rover]
-        name = s.parts[1]
-        if name in m.load_power_w:  # the loads publish every tick: the PDM follows them
-            load = decode(s.payload, LoadPower)
-            m.load_power_w[name] = load.power_w
-            if load.t_s != newest.get(s.rover):  # a new tick (or time put back by a reset)
-                newest[s.rover] = load.t_s
-                at_newest[s.rover].clear()
-            at_newest[s.rover].add(name)
-            dirty.add(s.rover)
+    # -- faults and state -------------------------------------------------------------------
 
-    def on_battery(s: Sample) -> None:
-        b = decode(s.payload, BatteryState)
-        m = models[s.rover]
-        before = (m.battery_ok, [sw.shed for sw in m.switches.values()])
-        m.set_battery(b.soc, b.operational, b.voltage_v)
-        if before != (m.battery_ok, [sw.shed for sw in m.switches.values()]):
-            dirty.add(s.rover)
+    def rail_names(self, pdm: Pdm) -> list[str]:
+        return pdm.model.rail_names()
 
-    def on_solar(s: Sample) -> None:
-        m = models[s.rover]
-        power_w = decode(s.payload, SolarPower).power_w
-        if m.panel_power_w.get(s.parts[1], power_w) != power_w:
-            m.panel_power_w[s.parts[1]] = power_w
-            dirty.add(s.rover)
-
-    def on_umbilical(s: Sample) -> None:
-        m = models[s.rover]
-        power_w = decode(s.payload, UmbilicalState).power_w
-        if m.umbilical_w != power_w:
-            m.umbilical_w = power_w
-            dirty.add(s.rover)
-
-    def on_command(s: Sample) -> None:
-        m = models[s.rover]
-        rail = s.parts[2]
-        if rail not in m.switches:
-            if rail == m.solar_rail.name:
-                raise BadInput(f"the solar rail {rail} cannot be switched")
-            raise BadInput(f"rover {s.rover} has no rail {rail!r} "
-                           f"(rails: {', '.join(m.switches)})")
-        if s.deleted:
-            raise BadInput("a rail command is a put, not a delete")
-        cmd = decode_input(s.payload, RailCommand, bare=BARE_FIELD[RailCommand])
-        if cmd.on is None and not cmd.reset:
-            raise BadInput('give {"on": true|false} or {"reset": true}')
-        c = _Held(s.key, rail, cmd, newest.get(s.rover), time.monotonic() + RESET_HOLD_S, rt.actor(s))
-        if cmd.reset or s.rover in held:  # judged on the next tick's loads (in order)
-            held.setdefault(s.rover, []).append(c)
-            return
-        command(s.rover, [c])
-        publish(s.rover)  # at once: the loads follow the new rail state
-
-    def apply_faults(rover: str, rail: str | None, faults: tuple[Fault, ...]) -> None:
+    def apply_faults(self, pdm: Pdm, rail: str | None, faults: tuple[Fault, ...]) -> None:
         assert rail is not None  # a rail fault names its rail
-        models[rover].set_faults(rail, faults)
-        publish(rover)
+        pdm.model.set_faults(rail, faults)
+        self.publish_pdm(pdm)
 
-    rt.subscribe(keys.load_power("*", "*"), on_load, telemetry=True)
-    rt.subscribe(keys.battery_state("*"), on_battery, telemetry=True)
-    rt.subscribe(keys.solar_power("*", "*"), on_solar, telemetry=True)
-    rt.subscribe(keys.umbilical_state("*"), on_umbilical, telemetry=True)
-    rt.subscribe(keys.cmd_rail("*", "*"), on_command)
-    rt.faults.own("rail", lambda rover: models[rover].rail_names(), apply_faults)
-    def reset(rover: str) -> None:
-        held.pop(rover, None)  # a command from before a session reset does not outlive it
-        answering.pop(rover, None)
-        models[rover].reset()
+    def get_state(self, pdm: Pdm) -> dict[str, Any]:
+        return pdm.model.state()
 
-    rt.own_state(lambda rover: models[rover].state(), lambda rover, st: models[rover].set_state(st),
-                 reset, after=publish)
-    rt.faults.restore()
-    # The loads of a rover arrive as a burst each tick: fold it into one recomputation.
-    rt.after_batch(flush)
-    rt.every(HOLD_S / 4, flush)
-    for rover in models:
-        publish(rover)
+    def set_state(self, pdm: Pdm, state: dict[str, Any]) -> None:
+        pdm.model.set_state(state)
+
+    def reset(self, pdm: Pdm) -> None:
+        pdm.held.clear()  # a command from before a session reset does not outlive it
+        pdm.answering.clear()
+        pdm.model.reset()
+
+    def republish(self, pdm: Pdm) -> None:
+        self.publish_pdm(pdm)
+
+    def start(self) -> None:
+        for pdm in self.rovers.values():  # from the time reached (saved, or the clock's)
+            pdm.stamped = (self.rt.epoch[pdm.id], self.rt.t_s[pdm.id])
+            self.publish_pdm(pdm)
+
+
+NODE = PowerNode

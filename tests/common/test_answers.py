@@ -3,9 +3,11 @@ answers which write, each event taken once, the first answer wins, a deadline pa
 
 from __future__ import annotations
 
+import pytest
+
 from common.answers import Accepted, Awaiting, NotApplied, Pending, Rejected
-from common.messages import Event
-from common.writes import plan_write
+from common.messages import BadInput, Event
+from common.writes import plan_write, stand_in
 
 RAIL = plan_write("mapp-1", "cmd/rail/5V_CH2", b'{"on": false}')
 
@@ -55,3 +57,19 @@ def test_a_write_past_its_deadline_is_no_longer_waited_for():
     assert awaiting.overdue(now=2.0) == [soon]
     assert awaiting.withdraw(soon) is None and len(awaiting) == 1
     assert awaiting.hear("mapp-1", ["event", "power"], event("command", seq=9)) is later
+
+
+def test_a_stand_in_for_the_crew_makes_only_what_the_crew_makes():
+    """The crew's rail commands and its stop (a delete of the traverse) are the crew's when the
+    instructor stands in; a traverse sent, an input or a fault is refused in words."""
+    rail = plan_write("mapp-1", "cmd/rail/5V_CH2", b'{"on": false}')
+    stop = plan_write("mapp-1", "input/drive/traverse", None)
+    assert (stand_in(rail).actor, stand_in(stop).actor, rail.actor) == ("crew", "crew", None)
+    route = plan_write("mapp-1", "input/drive/traverse", b'{"waypoints": [{"x_m": 1, "y_m": 1, "z_m": 0}]}')
+    sun = plan_write("mapp-1", "input/sun_angle", b"30")
+    heat = plan_write("mapp-1", "fault/battery/heating", b"1")
+    for write, words in ((route, "does not send it a traverse"),
+                         (sun, "send input/sun_angle as the instructor"),
+                         (heat, "cannot write fault/battery/heating")):
+        with pytest.raises(BadInput, match=words):
+            stand_in(write)

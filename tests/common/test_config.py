@@ -10,7 +10,8 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from common.config import ConfigError, budget_warnings, load_rover, parse_rover
+from common.budget import budget_warnings
+from common.config import ConfigError, load_rover, parse_rover
 from tests.harness import ROOT, ROVERS, lunaris_cmd
 
 MAPP = (ROVERS / "mapp.yaml").read_text()
@@ -38,13 +39,13 @@ BROKEN_MAPP = broken(
 EXPECTED = [
     "battery.ocv_curve.volts: expected 11 values, got 10",
     "battery.cells_series: expected an integer, got a string",
-    "loads[4].rail: no rail named '5V_CH9'",
+    "loads[4] (nav_camera).rail: no rail named '5V_CH9'",
     "bogus: unknown field",
     "battery.initial_soc: must be <= 1.0, got 1.5",
     "battery.thermal: expected min_c < max_c < cutoff_c, got -20, 80, 75",
     "solar.panels: name 'left' is used more than once",
     "battery.capacity_j: missing required field",
-    "radios[0].a_m: must be finite, got nan",
+    "radios[0] (lander).a_m: must be finite, got nan",
 ]
 
 
@@ -80,6 +81,21 @@ def test_not_yaml_and_not_a_mapping():
         parse_rover("rover: [", "x.yaml")
     with pytest.raises(ConfigError, match="file: expected a mapping, got a list"):
         parse_rover("- 1\n- 2\n", "x.yaml")
+
+
+def test_a_yaml_mistake_names_the_file_and_a_key_given_twice_is_one():
+    """Found by a vehicle engineer: a syntax error named the file "<unicode string>", a second
+    tick_hz below the first was taken without a word, and a typo read as two unrelated
+    problems (an unknown field, a missing one)."""
+    with pytest.raises(ConfigError) as err:
+        parse_rover("rover:\n  id: x\nrails: [1, 2\n", "scout.yaml")
+    assert "in scout.yaml, line 3" in str(err.value) and "<unicode string>" not in str(err.value)
+    with pytest.raises(ConfigError, match=r"'tick_hz' is given twice in one mapping \(lines 7 and 9\)"):
+        parse_rover(MAPP.replace("tick_hz: 10\n", "tick_hz: 10\n\ntick_hz: 0.5\n", 1), "scout.yaml")
+    with pytest.raises(ConfigError) as err:
+        parse_rover(MAPP.replace("max_discharge_a:", "max_dischage_a:"), "scout.yaml")
+    assert "battery.max_dischage_a: unknown field (did you mean 'max_discharge_a'?)" in err.value.problems
+    assert "battery.max_discharge_a: missing required field" in err.value.problems
 
 
 def test_lunaris_check_lists_every_problem_and_exits_non_zero(tmp_path):
@@ -119,6 +135,22 @@ def test_check_warns_of_a_rail_its_loads_can_trip(tmp_path):
         assert budget_warnings(load_rover(ROVERS / shipped)) == []
 
 
+def test_check_warns_of_a_pack_that_cannot_carry_its_loads_or_never_charges():
+    """Found by a vehicle engineer: a BMS limit below the parked demand, and a pack no panel
+    could charge, both passed check without a word. MAPP parked at night: 3 + 12 W on 12V
+    (0.93), 10 W on 5V_CH1 and 6 W on 5V_CH2 (0.90), 1.5 + 6.5 W on the 3.3 V rails (0.88):
+    43.0 W on the bus; at half charge 4 x 3.85 V = 15.4 V, so 2.79 A."""
+    text = (ROVERS / "mapp.yaml").read_text()
+    weak = parse_rover(text.replace("max_discharge_a: 30", "max_discharge_a: 2"), "weak")
+    (said,) = budget_warnings(weak)
+    assert said.startswith("battery.max_discharge_a: the loads at their nominal power need 43.0 W")
+    assert "2.79 A from the pack at half charge (15.4 V), above max_discharge_a 2 A" in said
+    assert budget_warnings(parse_rover(text.replace("max_discharge_a: 30", "max_discharge_a: 2.8"),
+                                       "enough")) == []
+    (said,) = budget_warnings(parse_rover(text.replace("max_charge_w: 150", "max_charge_w: 0"), "x"))
+    assert said == "battery.max_charge_w: 0, so neither the panels nor the umbilical ever charge the pack"
+
+
 def test_the_drive_section_and_radio_sites():
     mapp = load_rover(ROVERS / "mapp.yaml")
     d = mapp.drive
@@ -141,7 +173,7 @@ def test_the_drive_section_and_radio_sites():
         "drive.mass_kg: must be > 0.0, got 0",
         "drive.drivetrain_efficiency: must be <= 1.0, got 1.5",
         "drive.max_grade_deg: must be < 90.0, got 90",
-        "radios[0].site.y_m: missing required field",
+        "radios[0] (lander).site.y_m: missing required field",
     ])  # the load is checked once the section is well formed:
     with pytest.raises(ConfigError) as info:
         parse_rover(broken(MAPP, ("load: drive_motors", "load: wheels")))
@@ -222,10 +254,11 @@ def test_lunaris_check_names_every_problem_of_a_file_in_one_run(tmp_path):
                          cwd=ROOT, timeout=60)
     assert run.returncode == 1
     assert "4 problem(s)" in run.stderr, run.stderr
-    for want in ("rails[0].current_limit_a: missing required field",
-                 "rails[1].efficiency: must be <= 1.0, got 1.5",
+    for want in ("rails[0] (12V).current_limit_a: missing required field",
+                 "rails[1] (5V_CH1).efficiency: must be <= 1.0, got 1.5",
                  "battery.ocv_curve.volts: expected 11 values, got 10",
-                 "loads[4].rail: no rail named '5V_CH9' (rails: 12V, 5V_CH1, 5V_CH2, 3V3_CH1, 3V3_CH2)"):
+                 "loads[4] (nav_camera).rail: no rail named '5V_CH9' "
+                 "(rails: 12V, 5V_CH1, 5V_CH2, 3V3_CH1, 3V3_CH2)"):
         assert want in run.stderr, (want, run.stderr)
 
 
@@ -241,8 +274,8 @@ def test_a_radio_s_load_and_the_umbilical_s_cable():
                            ("rail: 5V_CH1,  nominal_w: 4.0,  max_w: 8.0,  std_w: 0.6}",
                             "rail: 5V_CH1,  nominal_w: -4.0,  max_w: 8.0,  std_w: 0.6}")))
     assert sorted(info.value.problems) == sorted([
-        "loads[3].nominal_w: must be >= 0.0, got -4.0",  # not well formed: its name still counts
-        "radios[0].load: no load named 'walkie_talkie' (loads: drive_motors, survival_heater, "
+        "loads[3] (uhf_radio).nominal_w: must be >= 0.0, got -4.0",  # not well formed: its name still counts
+        "radios[0] (lander).load: no load named 'walkie_talkie' (loads: drive_motors, survival_heater, "
         "flight_computer, uhf_radio, nav_camera, hazard_cameras, imu, sun_sensor, "
         "nir_spectrometer, thermal_imager)",
         "umbilical.follows_rover: a cable that follows the rover needs its length, cable_m",

@@ -140,6 +140,9 @@ def test_humane_keeps_plain_words_and_reads_msgspec_messages():
     assert humane("Expected `float` <= 1.0 - at `$.fraction`", {"fraction": 30}) == \
         "fraction must be at most 1 (got 30)"
     assert humane("fraction must be at most 1 (got 30)") == "fraction must be at most 1 (got 30)"
+    # the value not at hand (a forged telemetry payload, []) is not said to be null
+    assert humane("Expected `object`, got `array`") == "the input must be a JSON object, not a list"
+    assert humane("Expected `object`, got `null`", None) == "the input must be a JSON object (got null)"
 
 
 @pytest.mark.parametrize(("parts", "expected"), [
@@ -288,3 +291,13 @@ def test_fault_code_table():
     assert battery_fault_code(["over_temperature", "depleted"]) == 5  # the most severe wins
     assert battery_fault_code(["heating", "over_temperature"]) == 1
     assert battery_fault_code(["heating", "resistance", "capacity_loss", "disconnect"]) == 0
+
+
+def test_a_trainee_name_refused_names_every_character_it_cannot_have():
+    """Found by an instructor: "Ana <3;/x>" was refused naming '<', '3'... the first three
+    only, and ';' never."""
+    from common.messages import trainee_problem
+
+    assert trainee_problem("Ana Silva-O'Neil & co.") is None and trainee_problem("Zoë 2") is None
+    said = trainee_problem("Ana <b>;/x\x07")
+    assert said is not None and said.endswith("this one has '<', '>', ';', '/', a control character")

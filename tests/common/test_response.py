@@ -470,3 +470,47 @@ def test_a_crew_action_heard_before_the_injection_at_its_tick_is_the_faults():
     inject(r, 3.0, "load/nav_camera/short")
     f = fault_of(r, "load/nav_camera/short")
     assert f.first_symptom_t_s == 3.0 and [a.target for a in f.crew_actions] == ["5V_CH2"]
+
+
+def test_a_reset_within_a_session_ends_its_faults_and_keeps_what_came_before_from_the_next():
+    """Faults injected by hand, the crew acting on them, then a drill that begins with a reset
+    in the same session (the clock back at 0, a new epoch). Found by an instructor: the
+    drill's fault showed as acted upon with the crew's actions from before the reset (at times
+    later than its injection), and the faults before the reset were resolved by the reset's
+    clearings, at times before their own injection."""
+    r = Response(R)
+    for t in ticks(0, 40):
+        clock(r, t, session=A)
+        _pdm(r, t, 3.5, "on")
+    inject(r, 40.0, "battery/heating", {"heat_w": 30}, session=A)
+    inject(r, 41.0, "load/nav_camera/short", {"resistance_ohm": 0.1}, session=A)
+    _pdm(r, 41.1, 250.0, "tripped")
+    ev(r, 41.1, "fault_raised", "rail/5V_CH2/tripped", actor="twin", severity="critical", session=A)
+    crew(r, 86.0, "cmd/rail/5V_CH2", params={"on": False, "reset": False, "state": "off"})
+    crew(r, 90.0, "cmd/rail/5V_CH2", params={"on": None, "reset": True, "state": "off"})
+    # the drill: a reset (epoch 1, the clock at 0), then its own short at 46 s
+    ev(r, 95.0, "session", "control/reset", message="session reset", session=A)
+    for t in ticks(0.0, 46.0):
+        clock(r, t, epoch=1, session=A)
+        _pdm(r, t, 3.5, "on")
+    clear(r, 0.0, "battery/heating", session=A)  # the reset's clearings, heard after its tick
+    clear(r, 0.0, "load/nav_camera/short", session=A)
+    ev(r, 0.1, "fault_resolved", "rail/5V_CH2/tripped", actor="twin", session=A)
+    inject(r, 46.0, "load/nav_camera/short", {"resistance_ohm": 0.05}, actor="scenario", session=A)
+    _pdm(r, 46.1, 250.0, "tripped")
+    ev(r, 46.1, "fault_raised", "rail/5V_CH2/tripped", actor="twin", severity="critical", session=A)
+    crew(r, 60.0, "cmd/rail/5V_CH2", params={"on": False, "reset": True, "state": "off"})
+
+    (s,) = r.sessions()
+    heating, before, drill = s.faults
+    assert (before.fault, before.injected_t_s, drill.injected_t_s) == ("load/nav_camera/short", 41.0, 46.0)
+    # before the reset: the crew's two actions, unresolved and no longer in effect after it
+    assert [a.t_s for a in before.crew_actions] == [86.0, 90.0]
+    assert [a.t_s for a in heating.crew_actions] == [86.0, 90.0]
+    for f in (heating, before):
+        assert f.resolved_t_s is None and f.cleared_t_s is None and not f.active, f
+    # the drill's short: its own symptom and only the action after the reset
+    assert drill.first_symptom_t_s == 46.1 and drill.active
+    assert [a.t_s for a in drill.crew_actions] == [60.0]
+    assert drill.response_s == pytest.approx(13.9)
+    assert [f.fault for f in r.live().faults if f.active] == ["load/nav_camera/short"]

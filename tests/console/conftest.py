@@ -8,10 +8,7 @@ folder (printed at the end), and into ``docs/images`` with ``LUNARIS_DOC_IMAGES=
 
 from __future__ import annotations
 
-import json
 import os
-import subprocess
-import urllib.request
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -24,19 +21,16 @@ from selenium.webdriver.support.ui import WebDriverWait
 from common import keys
 from common.connection import make_config
 from testbed.browser import available, open_browser, size_viewport
-from testbed.twin import free_port
+from testbed.console import Console, start_console
 from tests.harness import (
     ALL_SERVICES,
     ROOT,
     Probe,
     Twin,
-    env_without_zenoh_config,
     free_endpoint,
-    lunaris_cmd,
     open_router,
     static_rover,
     stop_process,
-    wait_for,
 )
 
 R = "mapp-1"
@@ -46,43 +40,6 @@ DOC_IMAGES = ROOT / "docs" / "images"
 if not available():
     pytest.skip("Debian's chromium and chromium-driver are not installed (make system-deps as root)",
                 allow_module_level=True)
-
-
-@dataclass
-class Console:
-    url: str
-    proc: subprocess.Popen
-    log: Path
-
-    def get(self, path: str) -> tuple[int, dict]:
-        try:
-            with urllib.request.urlopen(self.url + path, timeout=5) as r:
-                return r.status, json.loads(r.read())
-        except urllib.error.HTTPError as exc:
-            return exc.code, json.loads(exc.read() or b"{}")
-
-
-def start_console(endpoint: str, folder: Path, *extra: str) -> Console:
-    """``lunaris console`` on a free loopback port; returns once it shows the rover live."""
-    port = free_port()
-    folder.mkdir(parents=True, exist_ok=True)
-    log = folder / f"console-{port}.log"
-    with open(log, "ab") as out:
-        proc = subprocess.Popen(lunaris_cmd("console", "--http", f"127.0.0.1:{port}", "--connect", endpoint,
-                                            "--recordings", str(folder / "recordings"), *extra),
-                                stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=ROOT,
-                                env=env_without_zenoh_config())
-    c = Console(f"http://127.0.0.1:{port}", proc, log)
-
-    def up() -> bool:
-        assert proc.poll() is None, log.read_text()
-        try:
-            urllib.request.urlopen(c.url + "/favicon.ico", timeout=1)
-            return True
-        except OSError:
-            return False
-    wait_for(up, 30, "the console to answer", poll_s=0.2)
-    return c
 
 
 # the page shows the twin: the battery's charge, as "97.3 %"
@@ -130,14 +87,10 @@ def console_site(folder: Path, *console_args: str, rover: Path = MAPP,
 def console_page(site: Live, ready: str = SOC_SHOWN) -> Iterator:
     """Chromium at 1280x800 on the console's page, once ``ready`` (a script returning
     something truthy) says the page shows the twin."""
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
+    with open_browser(1280, 800) as driver:
         driver.get(site.console.url + "/")
         WebDriverWait(driver, 20).until(lambda d: d.execute_script(ready))
         yield driver
-    finally:
-        driver.quit()
 
 
 @pytest.fixture
@@ -186,12 +139,8 @@ def artefacts(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def browser(live) -> Iterator:
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
+    with open_browser(1280, 800) as driver:
         yield driver
-    finally:
-        driver.quit()
 
 
 def settle(driver) -> None:

@@ -23,7 +23,7 @@ from selenium.webdriver.common.by import By
 from common import keys
 from tests.console.conftest import MAPP, Live, console_page, console_site, shoot
 from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
-from tests.console.pages import WebDriverWait, view
+from tests.console.pages import WebDriverWait, click, view
 from tests.harness import (
     ROOT,
     env_without_zenoh_config,
@@ -113,8 +113,11 @@ def test_a_drill_and_a_crew_that_responds_turn_the_expectations_met_on_the_page(
     assert done.returncode == 0, done.stdout + done.stderr
     view(page, "crew")
     env = env_without_zenoh_config()
-    crew = subprocess.Popen([sys.executable, "-m", "tests.lunaris.crew", ep, R, "5V_CH2", "15"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
+    # the crew acts once the test has seen the expectations pending (at x20 the crew had
+    # acted before the page had shown them)
+    crew = subprocess.Popen([sys.executable, "-m", "tests.lunaris.crew", ep, R, "5V_CH2", "15",
+                             "--after-go"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=env)
     drill = None
     try:
         assert crew.stdout is not None and crew.stdout.readline().startswith("crew: watching")
@@ -130,6 +133,9 @@ def test_a_drill_and_a_crew_that_responds_turn_the_expectations_met_on_the_page(
         pending = WebDriverWait(page, 30).until(lambda d: len(expectations(d)) == 2 and expectations(d),
                                                 "the drill's two expectations on the page")
         assert "true" not in pending.values(), pending  # before the crew acted: not met yet
+        assert crew.stdin is not None
+        crew.stdin.write("go\n")
+        crew.stdin.flush()
         met = WebDriverWait(page, 60).until(
             lambda d: set(expectations(d).values()) == {"true"} and expectations(d),
             "both expectations met on the page")
@@ -144,3 +150,54 @@ def test_a_drill_and_a_crew_that_responds_turn_the_expectations_met_on_the_page(
                 proc.wait(20)
         p.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})
         p.put(keys.cmd_rail(R, "5V_CH2"), {"on": True})
+
+
+def test_the_crew_view_follows_an_event_at_once(site, page):
+    """An event of the rover asks the crew's view again at once, not at the next poll: with the
+    page's clock held (Date.now frozen) the poll every 2 s never comes, and only the fault's
+    own events can bring it to the crew's response."""
+    p = site.probe
+    dust = keys.fault(R, "solar/right", "dust")
+    row = '#crew-response tr[data-fault="solar/right/dust"]'
+    view(page, "crew")
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#crew-response"),
+                                  "the crew's response")
+    assert not page.find_elements(By.CSS_SELECTOR, row)
+    page.execute_script("window.__now = Date.now; const held = Date.now(); Date.now = () => held;")
+    try:
+        p.put(dust, {"fraction": 0.4})
+        WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, row),
+                                      "the injected dust in the crew's response, with the clock held")
+    finally:
+        page.execute_script("if (window.__now) Date.now = window.__now;")
+        p.delete(dust)
+
+
+def test_the_instructor_standing_in_for_the_crew_is_counted_as_the_crew(site, page):
+    """A drill run without the crew's dashboard: with "Standing in for the crew" ticked, the
+    PDM's buttons are the crew's actions (the Crew view's response said "not yet" beside a drill
+    whose expectations were met from those buttons)."""
+    p = site.probe
+    fault = keys.fault(R, "load/imu", "open")
+    row = '#crew-response tr[data-fault="load/imu/open"]'
+    p.put(fault, b"")
+    try:
+        view(page, "crew")
+        WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, row), "the fault's row")
+        assert page.find_element(By.CSS_SELECTOR, row).get_attribute("data-acted") == "false"
+        view(page, "live")
+        box = WebDriverWait(page, 10).until(lambda d: d.find_element(By.ID, "as-crew"))
+        box.click()
+        WebDriverWait(page, 10).until(lambda d: d.find_element(By.ID, "as-crew").is_selected(), "ticked")
+        click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH2"]')
+        p.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("cmd/rail/3V3_CH2")
+                     and e["actor"] == "crew")
+        click(page, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH2"]')
+        p.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "on")
+        view(page, "crew")
+        WebDriverWait(page, 10).until(lambda d: d.find_element(
+            By.CSS_SELECTOR, row).get_attribute("data-acted") == "true", "the crew's action counted")
+    finally:
+        page.execute_script("const b = document.getElementById('as-crew'); if (b && b.checked) b.click();")
+        p.delete(fault)
+        p.put(keys.cmd_rail(R, "3V3_CH2"), {"on": True})

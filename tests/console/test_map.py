@@ -28,7 +28,7 @@ from common import keys
 from testbed.browser import size_viewport
 from tests.console.conftest import Live, console_page, console_site, save_shot, shoot
 from tests.console.page_checks import LAYOUT, TEXT, TOUCH, TOUCH_PX, field_names, vocabulary
-from tests.console.pages import WebDriverWait, answer, clear_answers, click, text, view
+from tests.console.pages import WebDriverWait, answer, clear_answers, click, fill, text, view
 from tests.harness import (
     ALL_SERVICES,
     ROVERS,
@@ -170,9 +170,7 @@ def test_waypoints_typed_and_clicked_are_previewed_sent_and_stopped(site, page):
     click(page, "#wp-add")
     for i, (x, y) in enumerate(((20, 10), (35, -5)), start=1):
         for k, v in (("east", x), ("north", y), ("up", 0)):
-            box = page.find_element(By.CSS_SELECTOR, f'#wp-table input[aria-label="waypoint {i} {k}"]')
-            box.clear()
-            box.send_keys(str(v))
+            fill(page, f'#wp-table input[aria-label="waypoint {i} {k}"]', str(v))
     # A third waypoint clicked near the map's east edge: past the lander's range (400 m east).
     svg = page.find_element(By.ID, "map-svg")
     width = svg.size["width"]
@@ -194,9 +192,7 @@ def test_waypoints_typed_and_clicked_are_previewed_sent_and_stopped(site, page):
     assert "outside" not in text(page, "#map-preview-note")
     assert re.search(r"If sent now, from where the rover is: [\d.,]+ m, at the rover's top speed",
                      text(page, "#wp-plan"))
-    speed = page.find_element(By.ID, "wp-speed")
-    speed.clear()
-    speed.send_keys("0.05")
+    fill(page, "#wp-speed", "0.05")
     WebDriverWait(page, 10).until(lambda d: "at 0.05 m/s" in text(d, "#wp-plan"))
     clear_answers(page)
     click(page, f'[data-action="traverse-go"][data-rover="{R}"]')

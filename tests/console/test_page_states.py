@@ -21,7 +21,8 @@ import pytest
 from selenium.webdriver.common.by import By
 
 from testbed.browser import open_browser
-from tests.console.conftest import free_port, save_shot
+from testbed.twin import free_port
+from tests.console.conftest import save_shot
 from tests.console.page_checks import TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, text
 from tests.console.test_server import FakeRover
@@ -49,12 +50,8 @@ def _console(endpoint: str, port: int, folder: Path) -> subprocess.Popen:
 
 @pytest.fixture
 def browser() -> Iterator:
-    driver = open_browser(1280, 800)
-    driver.set_page_load_timeout(30)
-    try:
+    with open_browser(1280, 800) as driver:
         yield driver
-    finally:
-        driver.quit()
 
 
 def plain(driver) -> list[str]:

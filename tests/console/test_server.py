@@ -260,6 +260,16 @@ def test_sign_ins_are_limited_per_user_and_per_address(session, accounts, monkey
         assert locked.status_code == 429 and "from this computer" in locked.text
 
 
+def test_after_signing_in_the_page_goes_back_to_this_console_only(session, accounts):
+    app = make_app(session, Accounts(accounts))
+    with client(app) as c:
+        for nxt, goes in (("/#crew", "/#crew"), ("//evil.example/", "/"), ("/\\evil.example/", "/"),
+                          ("https://evil.example/", "/")):
+            r = c.post("/login", data={"user": "ana", "password": "crater-rim-instructor", "next": nxt},
+                       follow_redirects=False)
+            assert r.status_code == 303 and r.headers["location"] == goes, (nxt, r.headers)
+
+
 def test_a_burst_of_guesses_sent_at_once_is_counted_before_it_is_checked(session, accounts, monkeypatch):
     """20 wrong passwords sent together: at most FREE are checked, the rest wait (429); before,
     every one was checked, the failures counted only after the checks."""
@@ -304,6 +314,17 @@ def test_weak_passwords_are_refused_when_a_user_is_added(tmp_path, password, wor
                                       "--accounts", str(tmp_path / "u.json"), "--password-stdin"),
                           input=password + "\n", capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert done.returncode != 0 and words in done.stderr
+
+
+def test_a_user_added_without_a_terminal_is_told_of_password_stdin(tmp_path):
+    import subprocess
+
+    from tests.harness import ROOT
+    done = subprocess.run(lunaris_cmd("console", "users", "add", "ana", "--role", "instructor",
+                                      "--accounts", str(tmp_path / "u.json")),
+                          stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "no terminal to ask the password on" in done.stderr and "--password-stdin" in done.stderr
 
 
 def test_a_removed_user_s_live_stream_is_closed_at_once(session, accounts, rover):
@@ -437,6 +458,11 @@ def test_a_recording_is_served_for_download_and_nothing_outside_its_folder(sessi
         r = c.get(entry["download"])
         assert r.status_code == 200 and r.content == data
         assert r.headers["content-type"] == "application/vnd.mcap"
+        # never sniffed into a page or a script, never framed by another site: every answer
+        for answer in (r, c.get("/"), c.get("/api/recordings"), c.get("/recordings/nothing.mcap"),
+                       c.get("/", headers={"host": "evil.example"})):
+            assert answer.headers["x-content-type-options"] == "nosniff", answer.url
+            assert answer.headers["x-frame-options"] == "SAMEORIGIN", answer.url
         assert r.headers["content-disposition"] == 'attachment; filename="drill-1.mcap"'
         for bad in ("leak.mcap", "notes.txt", "..%2Fsecret.mcap", "%2E%2E%2Fsecret.mcap",
                     "nothing.mcap", ".mcap", "drill-1.mcap%00.txt"):
@@ -447,12 +473,41 @@ def test_a_recording_is_served_for_download_and_nothing_outside_its_folder(sessi
         assert c.post("/api/recordings", json={"name": "live"}).status_code == 403  # reads only
 
 
+def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
+    """A day's recording of two trainees: the report of each, the last by default (found by an
+    instructor: ``?session=`` was ignored, the first trainee's debrief out of reach)."""
+    from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
+
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    tape = Tape()
+    two_trainees(tape)
+    tape.write(folder / "day.mcap")
+    app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
+    with client(app) as c:
+        last = c.get("/recordings/day.mcap/report")
+        assert last.status_code == 200 and f"Bob - session {S2} (this report)" in last.text
+        first = c.get(f"/recordings/day.mcap/report?session={S1}")
+        assert first.status_code == 200 and f"Ada - session {S1} (this report)" in first.text
+        assert "nav_camera" in first.text and "isolate the heater" not in first.text
+        assert c.get("/recordings/day.mcap/report?session=../x").status_code == 422
+        none = c.get("/recordings/day.mcap/report?session=20990101-000000")
+        assert none.status_code == 404 and f"sessions: {S1}, {S2}" in none.json()["message"]
+
+
 def test_a_recording_being_made_is_refused_until_it_is_stopped(session, rover, tmp_path, router):
     folder = tmp_path / "recordings"
     app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
     with client(app) as c:
+        for bad in ("../up", "a b", "", "x" * 200):  # a name that cannot be one: invalid, as any bad input
+            r = c.post("/api/recordings", json={"name": bad})
+            assert (r.status_code, r.json()["verdict"]) == (422, "invalid"), (bad, r.text)
+            assert "bad name" in r.json()["message"]
+        assert not folder.exists() or not list(folder.iterdir())  # nothing recorded
         started = c.post("/api/recordings", json={"name": "live"})
         assert started.status_code == 200, started.text
+        again = c.post("/api/recordings", json={"name": "other"})  # in the way: a conflict
+        assert (again.status_code, again.json()["verdict"]) == (409, "rejected"), again.text
         wait_for(lambda: (folder / "live.mcap.part").is_file(), 30, "lunaris record to open its file")
         r = c.get("/recordings/live.mcap")
         assert r.status_code == 409 and "still being recorded" in r.json()["message"]

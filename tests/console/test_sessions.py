@@ -125,11 +125,12 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
     seen = len(p.events(R))
     clear_answers(page)
     box = page.find_element(By.ID, "trainee-name")
-    box.send_keys("Ana <3")
+    box.send_keys("Ana <3;")
     click(page, f'[data-action="session-start"][data-rover="{R}"]')
-    WebDriverWait(page, 10).until(ec.alert_is_present()).accept()
     said = answer(page, "invalid")
-    assert "trainee's name is letters, digits, spaces" in said and "'<'" in said, said
+    assert "trainee's name is letters, digits, spaces" in said and "'<', ';'" in said, said
+    # refused before the page asks to end the running session for it (it asked first)
+    assert not ec.alert_is_present()(page)
     assert header(page)[1] == first
     p.put(keys.under(R, "control/rewind"), b"")  # a probe's put, after: the first thing heard
     p.wait_event(R, lambda e: e["key"] == keys.under(R, "control/rewind"))
@@ -151,6 +152,9 @@ def test_two_trainees_in_a_row_from_the_page(site, page, artefacts):
     cleared = lambda d: any(e["kind"] == "fault_cleared" for e in page_state(d)["events"])  # noqa: E731
     WebDriverWait(page, 10).until(cleared, "Ana's fault cleared in the log")
     mark(page, "Ana cleaned the left panel")
+    # who acted, in the log: the instructor's mark (the crew's calls read "by the crew")
+    line = next(x for x in log_text(page).splitlines() if "Ana cleaned the left panel" in x)
+    assert "by the instructor" in line, line
     view(page, "live")
     WebDriverWait(page, 20).until(lambda d: len((page_state(d)["plotted"] or [[]])[0]) >= 3, "Ana's plots")
     ana_t = max(page_state(page)["history"]["t"])
@@ -247,3 +251,18 @@ def test_a_value_of_the_last_session_heard_late_is_not_plotted(page):
     page.set_script_timeout(10)
     got = page.execute_async_script(FOLD, messages)
     assert got == {"t": [500.1, 502.0], "events": ["Ben begins"]}, got
+
+
+def test_a_long_mark_shows_its_start_in_the_log_and_the_whole_on_hover(site, page):
+    """A mark of 500 characters (the most it holds) filled the event log: its line shows the
+    first 240, the whole in its title."""
+    text = " ".join(f"note {i:02} of the crew's long pause at the rim;" for i in range(11))
+    assert 450 < len(text) <= 500, len(text)
+    site.probe.put(keys.control_mark(R), {"text": text})
+    view(page, "live")
+    line = WebDriverWait(page, 10).until(lambda d: next(
+        (e for e in d.find_elements(By.CSS_SELECTOR, '#events-list [data-kind="mark"]')
+         if e.get_attribute("title") == text), None), "the long mark in the event log")
+    shown = line.text
+    assert "note 00 of" in shown and "note 10 of" not in shown and "…" in shown, shown
+    assert len(shown) < 320, len(shown)

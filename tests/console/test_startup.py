@@ -16,7 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.console.conftest import MAPP, free_port
+from testbed.twin import free_port
+from tests.console.conftest import MAPP
 from tests.console.test_server import FakeRover
 from tests.harness import (
     ROOT,

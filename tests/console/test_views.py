@@ -31,7 +31,7 @@ from common import keys
 from testbed.browser import size_viewport
 from tests.console.conftest import Live, console_page, console_site, save_shot, settle, shoot
 from tests.console.page_checks import COVERED, LAYOUT, TEXT, TOUCH, TOUCH_PX, field_names, vocabulary
-from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
+from tests.console.pages import WebDriverWait, answer, clear_answers, click, fill, view
 from tests.harness import (
     ALL_SERVICES,
     ROOT,
@@ -92,7 +92,9 @@ def test_a_shipped_drill_is_played_from_the_page(site, page, artefacts):
     WebDriverWait(page, 10).until(ec.alert_is_present()).accept()
     assert "playing" in answer(page, "accepted").lower()
     # The drill resets the rover first (clock at 0, x1); once it plays, the clock goes x10.
-    WebDriverWait(page, 30).until(lambda d: step_status(d, 1) in ("waiting", "armed"), "the drill to start")
+    # (its first step shown, in whatever state: at x1 it fires at 30 s, which a loaded machine
+    # had reached before the page's first look)
+    WebDriverWait(page, 30).until(lambda d: step_status(d, 1), "the drill to start")
     wait_for(lambda: any(c.get("cause") == "reset" for c in p.samples(keys.clock(R))[seen:]), 10, "the reset")
     view(page, "session")
     click(page, f'[data-action="clock-scale"][data-scale="10"][data-rover="{R}"]')
@@ -125,6 +127,10 @@ def test_a_shipped_drill_is_played_from_the_page(site, page, artefacts):
     assert {outcome for _, _, outcome in got} <= {"accepted", "reached", "met"}, got
     text = page.find_element(By.ID, "sc-play").text
     assert "every step has played" in text
+    # the crew's score in words, with when each was met (it read "met / met")
+    assert "Expectations of the crew: 2 of 2 met" in text, text
+    met = page.find_element(By.CSS_SELECTOR, '#sc-play tr[data-step="3"] td.status').text
+    assert re.fullmatch(r"met at [\d:]+, .+ of its .+", met), met
     site.probe.put(keys.clock_control(R), {"time_scale": 1})
 
 
@@ -137,28 +143,22 @@ def test_every_view_fits_a_laptop_and_a_tablet_and_speaks_plainly(site, page, ar
     p.put(keys.fault(R, "load/nav_camera", "short"), b"")
     p.wait_event(R, lambda e: e["kind"] == "fault_raised" and "5V_CH2" in e["message"])
     view(page, "faults")
-    box = page.find_element(By.CSS_SELECTOR, "#f-params input[data-param]")
+    WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#f-params input[data-param]"))
     from selenium.webdriver.support.select import Select
     Select(page.find_element(By.ID, "f-comp")).select_by_value("battery")
     Select(page.find_element(By.ID, "f-kind")).select_by_value("heating")
-    box = page.find_element(By.CSS_SELECTOR, "#f-params input[data-param]")
-    box.clear()
-    box.send_keys("-5")
+    fill(page, '#f-params input[data-param="heat_w"]', "-5")
     click(page, '#f-buttons [data-action="fault-inject"]')
     answer(page, "invalid")
     view(page, "session")
     click(page, "#predict")
     WebDriverWait(page, 60).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#prediction table"))
-    name = page.find_element(By.ID, "snap-name")
-    name.clear()
-    name.send_keys("views-1")
+    fill(page, "#snap-name", "views-1")
     click(page, f'[data-action="snapshot-save"][data-rover="{R}"]')
     WebDriverWait(page, 10).until(lambda d: d.find_elements(By.CSS_SELECTOR, '[data-snapshot="views-1"]')
                                   or d.find_element(By.ID, "snap-refresh").click())
     view(page, "recordings")
-    rec = page.find_element(By.ID, "rec-name")
-    rec.clear()
-    rec.send_keys("views-1")
+    fill(page, "#rec-name", "views-1")
     click(page, "#rec-start")
     recording = lambda: site.console.get("/api/recordings")[1]["recording"]  # noqa: E731
     wait_for(lambda: "messages" in " ".join(recording()["lines"]), 30, "the recorder's progress")
@@ -290,3 +290,26 @@ def test_a_snapshot_name_is_checked_on_the_page(site, page):
     p.put(keys.under(R, "control/rewind"), b"")  # a probe's put, made after: the first thing heard
     p.wait_event(R, lambda e: e["key"] == keys.under(R, "control/rewind"))
     assert not [e for e in p.samples(keys.event(R))[seen:] if "snapshot" in e["key"]]
+
+
+def test_off_on_an_essential_rail_is_asked_first(site, page):
+    """The flight computer's rail (essential: never shed, in the rover file the console was
+    given) is switched off only once the instructor says yes; another rail at once."""
+    p = site.probe
+    view(page, "live")
+    seen = len(p.events(R))
+    cmd = keys.under(R, "cmd/rail/5V_CH1")
+    click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="5V_CH1"]')
+    alert = WebDriverWait(page, 10).until(ec.alert_is_present())
+    asked = alert.text
+    assert "5V_CH1" in asked and "essential" in asked and "flight_computer" in asked, asked
+    alert.dismiss()  # asked, and nothing sent: the next command is answered with none before it
+    click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH2"]')  # not asked
+    p.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("cmd/rail/3V3_CH2"))
+    assert not [e for e in p.events(R)[seen:] if e["key"] == cmd]
+    click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="5V_CH1"]')
+    WebDriverWait(page, 10).until(ec.alert_is_present()).accept()
+    p.wait_value(keys.rail_state(R, "5V_CH1"), lambda r: r["state"] == "off")
+    for rail in ("5V_CH1", "3V3_CH2"):
+        p.put(keys.under(R, f"cmd/rail/{rail}"), {"on": True})
+        p.wait_value(keys.rail_state(R, rail), lambda r: r["state"] == "on")

@@ -23,8 +23,9 @@ import zenoh
 import zenoh.ext as zext
 
 from common import keys
-from lunaris.deploy import IDENTITIES, SERVICES, render_router_config
-from services.bridge import DEFAULT_MAPPING, load_mapping
+from lunaris.deploy import IDENTITIES, SERVICES, render_router_config, router_config
+from lunaris.deploy_dashboard import FLEET_FILES, fleet_names
+from services.bridge import DEFAULT_MAPPING, load_mapping, open_keyexpr
 from tests.deploy.conftest import (
     DEPLOY,
     REPO,
@@ -159,7 +160,8 @@ def test_the_dashboard_sends_its_inbound_topic_and_nothing_else(router: Router) 
     # namespace (ros2dds) or ROS 2 domain (rmw_zenoh), the plain name on the dashboard's side.
     # A bridge serving both hears a topic of both on one key expression (its ros2dds one
     # here); a bridge serving one, on that rover's key (its rmw_zenoh one here).
-    bridge.declare_subscriber("*/curr_to_receiving_radio_m", inbound)
+    bridge.declare_subscriber(open_keyexpr(["mapp_1/curr_to_receiving_radio_m",
+                                            "ltv_1/curr_to_receiving_radio_m"]), inbound)
     bridge.declare_subscriber("json/**", inbound)
     bridge.declare_subscriber("1/curr_to_receiving_radio_m/std_msgs::msg::dds_::Float64MultiArray_/*",
                               inbound)
@@ -181,6 +183,35 @@ def test_the_dashboard_sends_its_inbound_topic_and_nothing_else(router: Router) 
     wait_for(lambda: len(_received(inbound)) >= 2, "the dashboard's rover positions")
     assert sorted(_received(inbound)) == [("SampleKind.PUT", b"dashboard"),
                                           ("SampleKind.PUT", b"rmw_zenoh")]
+
+
+@pytest.mark.timeout(60)
+def test_the_bridge_stops_the_rover_for_the_crew_and_cannot_drive_it(router: Router) -> None:
+    """The crew's stop is a delete of the traverse, its rail controls puts: the bridge may make
+    those, not a put of a traverse (an adversary with its credentials drove the LTV 187 m)."""
+    drive, power = router.open("lunaris-drive"), router.open("lunaris-power")
+    bridge, instructor = router.open("lunaris-bridge"), router.open("instructor")
+    traverse, rail = Collector(), Collector()
+    drive.declare_subscriber(keys.under(ROVER, "input/drive/traverse"), traverse)
+    power.declare_subscriber(keys.cmd_rail(ROVER, "5V_CH2"), rail)
+    _barrier(drive)
+    _barrier(power)  # their subscriptions are the router's before anything is sent
+    route = b'{"waypoints": [{"x_m": 200, "y_m": 50, "z_m": 0}], "speed_m_per_s": 0.5}'
+    bridge.put(keys.under(ROVER, "input/drive/traverse"), route)
+    bridge.delete(keys.under(ROVER, "input/drive/traverse"))
+    bridge.put(keys.cmd_rail(ROVER, "5V_CH2"), b'{"on": false}')
+    _barrier(bridge)
+    instructor.put(keys.under(ROVER, "input/drive/traverse"), b"instructor")  # heard after the rest
+    wait_for(lambda: len(_received(traverse)) >= 2 and _received(rail), "the writes let through")
+    assert _received(traverse) == [("SampleKind.DELETE", b""), ("SampleKind.PUT", b"instructor")]
+    assert _received(rail) == [("SampleKind.PUT", b'{"on": false}')]
+
+
+def test_a_connection_that_never_signs_in_is_closed_soon() -> None:
+    """A hundred TLS connections that never gave a password held every new session back 12 s
+    (Zenoh's 100 pending, 10 s each): the router closes one within 3 s and lets 1,000 wait."""
+    transport = router_config(load_mapping(DEFAULT_MAPPING), fleet_names(list(FLEET_FILES)))["transport"]
+    assert transport["unicast"] == {"accept_timeout": 3000, "accept_pending": 1000}
 
 
 # -- reading ---------------------------------------------------------------------------------

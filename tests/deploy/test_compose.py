@@ -20,6 +20,7 @@ import yaml
 
 from lunaris.deploy import check_secrets
 from lunaris.deploy_site import load_site
+from lunaris.processes import lunaris_cmd
 from tests.deploy.conftest import REPO, make_test_secrets
 
 SECRETS = REPO / "deploy" / "secrets"
@@ -313,3 +314,67 @@ def test_each_machine_of_the_site_is_a_profile_with_its_router_and_its_services(
                 else:
                     assert path.exists(), (name, source)
     assert all(s.get("profiles") for s in services.values()), "a service on every machine"
+
+
+def test_the_site_compose_file_is_written_from_the_site() -> None:
+    """docker-compose.site.yml is what `lunaris deploy compose` writes from deploy/site.yaml: it
+    was written by hand, and nothing said when the site changed and it did not."""
+    done = subprocess.run(lunaris_cmd("deploy", "compose", "--site", "deploy/site.yaml", "--check"),
+                          cwd=REPO, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+
+
+OWN_SITE = """\
+rovers: [config/rovers/mapp.yaml, config/rovers/ltv.yaml]
+routers:
+  - name: base
+    hosts: [base.example.org, 10.0.0.5]
+    runs: [faults, console, clock, battery, loads, power, solar, radio, drive]
+    people: [instructor, debrief]
+  - name: dash
+    hosts: [dash.example.org]
+    connect: [base]
+    runs: [bridge]
+    people: [dashboard, observer]
+"""
+
+
+def test_a_site_of_ones_own_gets_its_compose_file(tmp_path: Path) -> None:
+    """Two machines, two rovers: a profile each, every service of both rovers on the base, a
+    zenoh-bridge-ros2dds per rover beside the dashboard; docker-compose reads it; --check says
+    when the site has changed since."""
+    if DOCKER_COMPOSE is None:
+        pytest.skip("docker-compose is not installed (apt-get install docker-compose)")
+    site, out = tmp_path / "site.yaml", tmp_path / "docker-compose.site.yml"
+    site.write_text(OWN_SITE)
+
+    def compose(*extra: str) -> subprocess.CompletedProcess:
+        return subprocess.run(lunaris_cmd("deploy", "compose", "--site", str(site), "--output", str(out),
+                                          *extra), cwd=REPO, capture_output=True, text=True, timeout=60)
+    done = compose()
+    assert done.returncode == 0 and "wrote" in done.stdout, done.stderr
+    assert "--site site.yaml" in out.read_text()  # what the machines run: the site beside it
+    result = subprocess.run([DOCKER_COMPOSE, "-f", str(out), "config"], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=60, env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+                                                        "HOME": str(tmp_path)})
+    assert result.returncode == 0, result.stderr
+    services = yaml.safe_load(result.stdout)["services"]
+    assert {n: s["profiles"] for n, s in services.items()} == {
+        **{f"base-{w}": ["base"] for w in ("preflight", "router", "faults", "console", "clock", "battery",
+                                            "loads", "power", "solar", "radio", "drive")},
+        **{f"dash-{w}": ["dash"] for w in ("preflight", "router", "bridge", "zenoh-bridge-ros2dds-mapp-1",
+                                            "zenoh-bridge-ros2dds-ltv-1")}}
+    battery = services["base-battery"]["command"]
+    assert [battery[i + 1] for i, a in enumerate(battery) if a == "--rover"] == [
+        "config/rovers/mapp.yaml", "config/rovers/ltv.yaml"]
+    bridge = services["dash-bridge"]["command"]
+    assert bridge[bridge.index("--bridge-config") + 1] == "config/bridge/default.yaml"
+    ports = {name: sorted(str(p["target"]) if isinstance(p, dict) else p.split(":")[-1].split("/")[0]
+                          for p in services[f"{name}-router"]["ports"]) for name in ("base", "dash")}
+    assert ports == {"base": ["7447", "7448"], "dash": ["7447"]}  # dash opens the link to base
+    assert services["base-router"]["networks"]["default"]["aliases"] == ["base.example.org"]
+    assert compose("--check").returncode == 0
+    site.write_text(OWN_SITE.replace("runs: [bridge]", "runs: [bridge, console]").replace(
+        "faults, console,", "faults,"))
+    stale = compose("--check")
+    assert stale.returncode == 1 and "is stale: run lunaris deploy compose" in stale.stderr, stale.stderr

@@ -13,6 +13,7 @@ import pytest
 import zenoh
 
 from common import keys
+from services.bridge import open_keyexpr
 from tests.deploy.conftest import Collector, Router, wait_for
 
 ROVER = "mapp-1"
@@ -40,9 +41,11 @@ def test_the_dashboard_calls_set_enabled_and_cannot_put_a_rail_command(router: R
         bridge.put(keys.cmd_rail(ROVER, "5V_CH2"), b'{"on": false}', attachment=b"actor=crew")
         q.reply(q.key_expr, b"\x00\x01\x00\x00\x01")
         q.drop()
-    # a bridge serving the fleet: one queryable per service open in the rover's chunk
-    bridge.declare_queryable("*/pdm/rail_5V_CH2/set_enabled", serve)
-    bridge.declare_queryable(SET_ENABLED_RMW.replace("0/", "*/", 1), serve, complete=True)
+    # a bridge serving the fleet: one queryable per service of every rail and rover, as it
+    # opens them (the real bridge's, under the generated rules: test_delivery.py)
+    bridge.declare_queryable(open_keyexpr([SET_ENABLED_DDS, "ltv_1/pdm/rail_12V/set_enabled"]), serve)
+    bridge.declare_queryable(open_keyexpr([SET_ENABLED_RMW, SET_ENABLED_RMW.replace(
+        "0/pdm/rail_5V_CH2", "1/pdm/rail_12V", 1)]), serve, complete=True)
     # the dashboard cannot serve a service itself: its answer never reaches a caller
     dashboard.declare_queryable("mapp_1/pdm/rail_5V_CH2/reset", lambda q: q.reply(q.key_expr, b"forged"))
     caller = router.open("dashboard")
@@ -67,7 +70,7 @@ def test_the_dashboard_calls_only_the_mappings_services(router: Router) -> None:
     rover's namespace refused: the fleet's rovers are the deployment's (mapp-1, ltv-1)."""
     bridge, dashboard = router.open("lunaris-bridge"), router.open("dashboard")
     asked = Collector()
-    for key in ("*/pdm/rail_5V_CH2/set_enabled", "*/pdm/rail_5V_CH2/set_state"):
+    for key in ("$*_1/pdm/rail_5V_CH2/set_enabled", "$*_1/pdm/rail_5V_CH2/set_state"):
         bridge.declare_queryable(key, lambda q: (asked(str(q.key_expr)),
                                                  q.reply(q.key_expr, b"\x00\x01\x00\x00\x01")))
     assert _answers(dashboard, "mapp_1/pdm/rail_5V_CH2/set_state") == []

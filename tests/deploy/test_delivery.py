@@ -243,3 +243,34 @@ def test_events_travel_on_their_owners_keys_and_the_journal_relays_them(
     fault.delete()
     assert [k for k, _, _ in crew.samples() if "/event" in k] == []
     del subs
+
+
+SET_BOOL = ("std_srvs::srv::dds_::SetBool_/"
+            "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a")
+
+
+def test_the_crews_calls_from_its_dashboard_reach_the_real_bridge(deployment: Deployment) -> None:
+    """The crew switches a rail from its dashboard (SPEC §12a), under the generated rules: the
+    ``dashboard`` identity calls ``set_enabled`` in the ros2dds and the rmw_zenoh flavours, the
+    bridge (its own identity, the queryables it really declares) answers, the rail follows.
+    Found: the bridge declared ``pdm/*/set_enabled``, which the rules (``pdm/rail_$*/...``)
+    refused, and every rail call went unanswered; a stand-in queryable in
+    test_crew_controls.py had not shown it."""
+    dep = deployment
+    debrief, dashboard = dep.open("debrief"), dep.open("dashboard")
+    got = Tap()
+    sub = debrief.declare_subscriber(keys.rail_state(ROVER, "3V3_CH2"), got)
+    wait_for(lambda: live_services(debrief, ROVER) >= set(SERVICES), 90, "every service live")
+    calls = (("pdm/rail_3V3_CH2/set_enabled", {}),
+             (f"0/pdm/rail_3V3_CH2/set_enabled/{SET_BOOL}", {"target": zenoh.QueryTarget.ALL_COMPLETE}))
+    for (key, kw), on in zip(calls, (False, True), strict=True):
+        request = rosmsg.encode_service("std_srvs/srv/SetBool", "Request", {"data": on})
+        replies = wait_for(lambda k=key, kw=kw, r=request: [
+            x.ok.payload.to_bytes() for x in dashboard.get(k, payload=r, timeout=5.0, **kw)
+            if x.ok is not None], STEP_S, f"the bridge's answer to {key}")
+        answer = rosmsg.decode_service("std_srvs/srv/SetBool", "Response", replies[0])
+        state = "on" if on else "off"
+        assert answer.success and f"the rail is now {state}" in answer.message, answer
+        wait_for(lambda s=state: [json.loads(p)["state"] for p in got.payloads(
+            keys.rail_state(ROVER, "3V3_CH2"))][-1:] == [s], STEP_S, f"3V3_CH2 {state}")
+    del sub

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -36,6 +37,21 @@ def test_the_secrets_are_random_private_and_complete(tmp_path: Path) -> None:
         assert path.stat().st_mode & 0o077 == 0, f"{path} is readable by others"
     assert check_secrets(folder) == []
     assert lunaris("deploy", "check", str(folder)).returncode == 0
+
+
+def test_the_secrets_are_made_in_a_folder_given_relative_to_where_it_runs(tmp_path: Path) -> None:
+    """As the README says it (``lunaris deploy secrets deploy/secrets ...``), run from the
+    folder above. Found: openssl ran in the certificate's folder with the CA's relative path,
+    and both forms failed ("Could not open file ... deploy/secrets/ca/ca.crt")."""
+    site = tmp_path / "site.yaml"
+    shutil.copy(REPO / "deploy" / "site.yaml", site)
+    for args in (("one", "--host", "127.0.0.1"), ("three", "--site", str(site))):
+        out = subprocess.run([sys.executable, "-m", "lunaris.cli", "deploy", "secrets", *args],
+                             cwd=tmp_path, capture_output=True, text=True, timeout=60,
+                             env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert out.returncode == 0, out.stderr
+    assert check_secrets(tmp_path / "one") == []
+    assert lunaris("deploy", "check", str(tmp_path / "three"), "--site", str(site)).returncode == 0
 
 
 def test_demo_passwords_are_refused_by_the_check_and_by_every_client(tmp_path: Path) -> None:

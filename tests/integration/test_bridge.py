@@ -408,8 +408,13 @@ def test_the_dashboard_position_moves_the_radio_and_back(dashboard, probe, flavo
 def test_a_bad_dashboard_message_is_rejected(dashboard, probe):
     twin, tap = dashboard
     probe.session.put("curr_to_receiving_radio_m", b"\x00\x01\x00\x00\xff")
-    probe.wait_event(R, lambda e: e["kind"] == "rejected" and e["key"] == "curr_to_receiving_radio_m"
-                     and "not a CDR std_msgs/msg/Float64MultiArray" in e["message"])
+    bad = probe.wait_event(R, lambda e: e["kind"] == "rejected" and e["key"] == "curr_to_receiving_radio_m"
+                           and "not a CDR std_msgs/msg/Float64MultiArray (5 bytes)" in e["message"])
+    assert bad["actor"] == "crew"  # the crew's refused action: in its response (it said "twin")
+    assert "Error" not in bad["message"]  # no Python internals on the crew's dashboard
+    probe.session.put("curr_to_receiving_radio_m", b"\x00\x01\x00\x00" + b"\x00" * 70_000)
+    probe.wait_event(R, lambda e: e["kind"] == "rejected" and "70004 bytes: more than an input ever holds"
+                     in e["message"])
     probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [1.0]}))
     probe.wait_event(R, lambda e: e["kind"] == "rejected" and "expected 2 values" in e["message"])
     probe.session.put("json/curr_to_receiving_radio_m", json.dumps({"data": [-2e9, 0.0]}))
@@ -636,8 +641,15 @@ def test_the_crew_switches_and_resets_a_rail_from_its_dashboard(dashboard, probe
     assert again["success"] is True and "tripped again" in again["message"], again
     assert "short" not in again["message"] and "injected" not in again["message"]
     probe.delete(keys.fault(R, "load/nav_camera", "short"))
+    # switched off while tripped: the answer says what to do next (an integrator's crew was
+    # told only "the rail is now tripped", and its drill's "5V_CH2 off" waited for a reset)
+    held = _call(probe, flavour, set_enabled, setbool, {"data": False})
+    assert held["success"] is True and "stays tripped until it is reset" in held["message"], held
+    assert "a reset leaves it off" in held["message"]
+    off = _call(probe, flavour, reset, trigger, {})
+    assert off["success"] is True and "the rail is now off" in off["message"], off
     n = len(probe.events(R))
-    back = _call(probe, flavour, reset, trigger, {})
+    back = _call(probe, flavour, set_enabled, setbool, {"data": True})
     assert back["success"] is True and "the rail is now on" in back["message"], back
     probe.wait_value(rail, lambda v: v["state"] == "on")
     _crew_event(probe, n, "on")

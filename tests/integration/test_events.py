@@ -60,8 +60,10 @@ def test_each_service_publishes_on_its_own_key_and_the_journal_relays_it_unchang
     assert relayed == own  # unchanged: the same source_id and seq, the same words
     (journal,) = p.get_json(keys.faults_journal(R))
     assert [e for e in journal if e["key"] == key] == [own]
-    # nothing but the faults service publishes on the rover's event key
-    assert {e["source"] for e in on(p, keys.event(R))} >= {"battery", "faults"}
+    # nothing but the faults service publishes on the rover's event key, its own events
+    # relayed there too (the journal's opening, once the first tick has said the session)
+    wait_for(lambda: on(p, keys.event(R), lambda e: e["source"] == "faults"), 10,
+             "the faults service's own event relayed")
     assert not [k for k in p.history if k.startswith(keys.event(R) + "/")
                 and any(e.get("source") != k.rsplit("/", 1)[1] for e in p.samples(k))]
     write(p.session, key, None)

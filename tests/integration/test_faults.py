@@ -122,6 +122,12 @@ def test_a_shorted_load_trips_its_rail_and_reset_restores_it_after_clearing(prob
         probe.wait_value(keys.load_power(R, load), lambda v: not v["on"] and v["power_w"] == 0.0)
     probe.wait_event(R, lambda e: e["kind"] == "fault_raised" and e["key"].endswith("rail/5V_CH2/tripped")
                      and e["severity"] == "critical")
+    # the cause before its effects in the loads' events (and so in the journal): the short, then
+    # the load's over-current it raised (it read over-current raised, then the short)
+    wait_for(lambda: any(e["kind"] == "fault_raised" for e in probe.samples(keys.event_of(R, "loads"))),
+             10, "the load's over-current")
+    said = [(e["kind"], e["key"].rsplit("/", 1)[-1]) for e in probe.samples(keys.event_of(R, "loads"))]
+    assert said.index(("fault_injected", "short")) < said.index(("fault_raised", "over_current")), said
     probe.put(keys.cmd_rail(R, "5V_CH2"), {"reset": True})  # still shorted: trips again
     probe.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("5V_CH2"))
     probe.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "tripped")

@@ -11,7 +11,7 @@ import pytest
 
 from common import keys
 from common.config import load_rover
-from services.battery.prediction import percentiles, predict, start_of
+from services.battery.prediction import assumptions, percentiles, predict, start_of
 from services.composed import ComposedTwin
 from tests.harness import ROOT, Probe, lunaris_cmd, static_rover
 
@@ -42,7 +42,9 @@ def test_the_live_twin_answers_from_its_state(mapp_twin):
     p.wait_value(keys.power_summary(R), lambda v: v["generation_w"] > 0)
     (answer,), errors = ask(p, QUERY)
     assert errors == []
-    assert answer["notes"] == []  # every rail and the loads' faults were heard
+    # every rail and the loads' faults were heard: only what every prediction assumes, said
+    assert answer["notes"] == assumptions(load_rover(static_rover("mapp.yaml")))
+    assert "held over the whole horizon" in answer["notes"][0] and "capacity 3%" in answer["notes"][1]
     assert answer["samples"] == 200 and answer["horizon_s"] == pytest.approx(3600.0, abs=1.0)
     assert answer["t_s"] > 0.0 and answer["computed_in_s"] > 0.0 and answer["step_s"] == 0.4
     soc = answer["soc_at_horizon"]

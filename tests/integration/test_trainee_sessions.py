@@ -181,6 +181,8 @@ def test_restarts_of_the_faults_service_and_of_the_clock_keep_the_session(twin):
     dana = begin(p, "Dana")
     p.put(keys.control_mark(R), {"text": "before the restarts"})
     p.wait_event(R, lambda e: e["kind"] == "mark" and e["session"] == dana)
+    # seen on event/faults, the mark is in the journal already: the kill -9 cannot lose it
+    # (tests/services/test_faults_own_events.py)
     for service in ("faults", "clock"):
         proc = t.procs[service]
         proc.kill()

@@ -233,7 +233,14 @@ def test_lunaris_up_restarts_a_killed_service_and_the_battery_resumes(tmp_path, 
             # A fresh pack would be at soc 1.0. The service saves every 0.2 s of wall time
             # (10 s of sim time at x50, ~0.001 of charge at ~50 W), so at most that is lost.
             assert resumed["soc"] < drained["soc"] + 0.002 < 0.995
+            # junk on the keys up's status line reads: the services say it in words, up's
+            # output shows no traceback (it printed one per junk sample)
+            p.session.put(keys.battery_state(R), b"[]")
+            p.session.put(keys.rail_state(R, "12V"), b"junk")
+            p.wait_value(keys.battery_state(R), lambda b: isinstance(b, dict)
+                         and b["t_s"] > resumed["t_s"] + 2.0, timeout_s=30)
     finally:
         stop_process(up, timeout_s=15)
     out = "".join(lines) + (up.stdout.read() or "")
     assert "exited with" in out and "[up] stopped" in out
+    assert "Traceback" not in out, out

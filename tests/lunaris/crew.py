@@ -2,12 +2,13 @@
 shows (a rail's state) and acts as the bridge does for the crew's service calls (SPEC 12a): a
 write on ``cmd/rail/<rail>`` carrying ``actor=crew``.
 
-    python -m tests.lunaris.crew ENDPOINT ROVER RAIL [HOLD_S]
+    python -m tests.lunaris.crew ENDPOINT ROVER RAIL [HOLD_S [REACT_S]] [--after-go]
 
 When the rail trips it calls set_enabled false then reset (the rail reads off); once the rail
 has read off for HOLD_S seconds of simulated time (the instructor's note: the camera is
 isolated) it calls set_enabled true; a rail that trips again is safed again. It prints each
-call, and stops on SIGINT or SIGTERM.
+call, and stops on SIGINT or SIGTERM. With ``--after-go`` it acts only once a line has come on
+its standard input (a test that must see the drill before the crew has acted says go).
 """
 
 from __future__ import annotations
@@ -24,6 +25,12 @@ from common.connection import make_config, write
 
 
 def main(argv: list[str]) -> int:
+    go = threading.Event()
+    if "--after-go" in argv:
+        argv = [a for a in argv if a != "--after-go"]
+        threading.Thread(target=lambda: (sys.stdin.readline(), go.set()), daemon=True).start()
+    else:
+        go.set()
     endpoint, rover, rail = argv[:3]
     hold_s = float(argv[3]) if len(argv) > 3 else 10.0
     # a crew takes a moment to read its dashboard: it acts this long (sim s) after seeing a
@@ -58,6 +65,8 @@ def main(argv: list[str]) -> int:
                 lock.wait(0.2)
                 seen, states[:] = list(states), []
             for t, state in seen:
+                if not go.is_set():
+                    continue
                 if state == "tripped" and not safing:
                     tripped_at = t if tripped_at is None else tripped_at
                     if t - tripped_at >= react_s:

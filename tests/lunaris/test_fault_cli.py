@@ -30,6 +30,8 @@ def test_inject_list_and_clear_are_confirmed_by_the_twin(live):
     row = next(line for line in listed.stdout.splitlines() if "solar/left/dust" in line)
     assert '{"fraction": 0.4}' in row
     assert "warning" in row and "injected" in row
+    journal = next(line for line in listed.stdout.splitlines() if "fault_injected" in line)
+    assert "[solar, by the instructor]" in journal, journal  # who acted (the crew apart)
     as_json = json.loads(run_tool("fault", "list", R, "--json", "--connect", ep).stdout)
     assert [f["key"] for f in as_json["active"]] == [keys.fault(R, "solar/left", "dust")]
 

@@ -26,6 +26,17 @@ def test_rail_off_on_and_a_rejection(live):
     assert solar.returncode == 1 and json.loads(solar.stdout)["kind"] == "rejected"
 
 
+def test_the_instructor_stands_in_for_the_crew(live):
+    """A drill run without the crew's dashboard: ``--as-crew`` makes the command the crew's (its
+    event says so, and the crew's response counts it); without it, the instructor's."""
+    ep = live.endpoint
+    done = run_tool("rail", R, "3V3_CH2", "off", "--as-crew", "--connect", ep, "--json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["actor"] == "crew"
+    done = run_tool("rail", R, "3V3_CH2", "on", "--connect", ep, "--json")
+    assert done.returncode == 0 and json.loads(done.stdout)["actor"] == "instructor"
+
+
 def test_clock_pause_resume_scale(live):
     p, ep = live.probe, live.endpoint
     done = run_tool("clock", R, "pause", "--connect", ep)

@@ -176,6 +176,19 @@ def test_the_report_draws_the_path_coloured_by_the_drive_power(tmp_path: Path):
     assert list(path_ax.collections[0].get_array()) == [9.5, 10.5, 11.5, 12.5, 13.5]  # hottest last
 
 
+def test_a_parked_rover_gets_no_path(tmp_path: Path):
+    """Its one point drew a path plot (4.96 to 5.04 m, a colour bar 2.7 to 3.3 W) for a rover that
+    never moved."""
+    path = tmp_path / "s.mcap"
+    parked = [(f"lunaris/{R}/drive/state", encode(DriveState(
+        10.0 + i, 5.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0, True, "parked", 0, 0.0, 0.0)),
+        False, 1_700_000_000_000_000_100 + i) for i in range(5)]
+    path.write_bytes(_record(_samples() + parked))
+    fig = draw(load_session(path)[R], "test")
+    assert len(fig.axes) == 9  # the timeline, the score sheet, 5 plots, radios, the twin axis
+    assert not [ax for ax in fig.axes if ax.get_xlabel() == "x, east [m]"]
+
+
 def _event(t: float, kind: str, key: str, message: str, wall: int, params=None, session: str = ""):
     ev = Event(t_s=t, severity="info", source="x", kind=kind, key=f"lunaris/{R}/{key}", message=message,
                params=params, source_id="s", seq=int(t * 10) + len(message), session=session)
@@ -237,3 +250,65 @@ def test_labels_never_overlap_and_the_rest_are_counted():
     for row in range(3):
         ts = sorted(t for t, _, r in placed if r == row)
         assert all(b - a >= 18 for a, b in zip(ts, ts[1:], strict=False))  # 16 chars + 2 apart
+
+
+def test_a_label_near_the_end_ends_on_the_axis():
+    """A label at the axis's end began there and was cut off ("ended: ev"): it begins early
+    enough to end on the axis, and still overlaps no other on its row."""
+    placed, dropped = place_labels([(10.0, "a" * 20), (99.0, "ended: every step has played")], 100.0, 100, 1)
+    assert dropped == 0
+    (_, _, _), (start, text, _) = placed
+    assert start + len(text) <= 100 and start >= 10 + 22
+
+
+def test_the_score_sheet_says_a_crew_acting_before_the_symptom_as_before():
+    """Found by an instructor: "first crew action +-1.4 s" and "21.5 - (-)"."""
+    from lunaris.report_draw import _since, _t_since
+
+    assert _since(20.1, 21.5) == "-1.4 s" and _since(23.0, 21.5) == "+1.5 s"
+    assert _since(None, 21.5) == "-"
+    assert _t_since(None, 21.5) == "-" and _t_since(23.0, 21.5) == "23.0 (+1.5 s)"
+
+
+def test_a_recording_begun_after_a_short_still_ties_the_rail_trip_to_it(tmp_path: Path):
+    """A recording made after the short begins with the journal's history (the short, the
+    load's alarm raised and cleared at once as the trip cut the load, the rail's trip) and only
+    then the loads' telemetry, which says which rail feeds the camera. The rail trip is the
+    short's alarm all the same: resolved when the trip was reset (48.0), not at the injection
+    (30.1), when the load's own alarm cleared."""
+    wall = 1_700_000_000_000_000_000
+    short = f"lunaris/{R}/fault/load/nav_camera/short"
+
+    def event(t: float, source: str, kind: str, key: str, seq: int) -> tuple:
+        ev = Event(t, "warning", source, kind, f"lunaris/{R}/{key}", kind, None, source_id=source, seq=seq,
+                   session="20260101-000000")
+        return (f"lunaris/{R}/event", encode(ev), False, wall + seq)
+    history = [
+        event(30.1, "loads", "fault_raised", "load/nav_camera/over_current", 1),
+        event(30.1, "power", "fault_raised", "rail/5V_CH2/tripped", 2),
+        event(30.1, "loads", "fault_injected", "fault/load/nav_camera/short", 3),
+        event(30.1, "loads", "fault_resolved", "load/nav_camera/over_current", 4),
+        event(48.0, "power", "fault_resolved", "rail/5V_CH2/tripped", 5),
+    ]
+    telemetry = []
+    for i in range(3):
+        t = 60.0 + i * 0.1
+        telemetry += [
+            (f"lunaris/{R}/clock", encode(Clock(t, 0.1, 600 + i, 1.0, False, session="20260101-000000")),
+             False, wall + 100 + i),
+            (f"lunaris/{R}/load/nav_camera/power", encode(LoadPower(t, 0.0, "5V_CH2", True, ["short"])),
+             False, wall + 100 + i),
+            (f"lunaris/{R}/load/imu/power", encode(LoadPower(t, 1.0, "3V3_CH1", True, [])), False,
+             wall + 100 + i),
+        ]
+    buf = io.BytesIO()
+    rec = Recorder(buf, "test")
+    for s in history + telemetry:
+        rec.write(*s)
+    rec.finish()
+    path = tmp_path / "late.mcap"
+    path.write_bytes(buf.getvalue())
+    (session,) = load_recording(path, plots=False)[R].response.sessions()
+    (fault,) = session.faults
+    assert fault.key == short and fault.injected_t_s == 30.1
+    assert fault.resolved_t_s == 48.0, (fault.resolved_t_s, fault.resolved_by)

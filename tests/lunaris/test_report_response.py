@@ -177,6 +177,12 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     html = page.read_text()
     assert f"Score sheet: session {S2}" in html and "battery/heating" in html and "isolate the heater" in html
     assert "met at 30.1" in html and "nav_camera" not in html
+    # every trainee's report a link away, and who acted in the events (found by an instructor:
+    # only the last session's report could be opened from the console, and the crew's actions
+    # read like the instructor's)
+    assert f'<a href="?session={S1}">Ada - session {S1}</a>' in html
+    assert f"<b>Bob - session {S2} (this report)</b>" in html
+    assert "<td>crew</td><td>command</td>" in html and "<td>scenario</td><td>fault_injected</td>" in html
     png = tmp_path / "first.png"
     done = run_tool("report", str(path), "--session", S1, "-o", str(png))
     assert done.returncode == 0 and png.read_bytes()[:4] == b"\x89PNG"
@@ -208,3 +214,19 @@ def test_a_recording_is_read_fast_and_whole_and_a_cut_one_as_far_as_it_goes(tmp_
     (tmp_path / "junk.mcap").write_text("not mcap")
     with pytest.raises(ValueError, match="not an MCAP file"):
         list(read_messages(tmp_path / "junk.mcap"))
+
+
+def test_the_json_gives_times_without_float_noise(tmp_path):
+    """Sim times add a tenth of a second at a time: 30.100000000000158 is said 30.1."""
+    tape = Tape()
+    t = 0.0
+    for _ in range(301):
+        tape.tick(t, 0)
+        t += 0.1
+    assert t != round(t, 6)  # the noise the twin's clock has
+    tape.event(t, "fault_injected", "fault/load/nav_camera/short", params={"resistance_ohm": 0.05},
+               session=S1, source="loads")
+    tape.tick(t, 0)
+    (only,) = _report(tape.write(tmp_path / "noise.mcap"))
+    (fault,) = only["faults"]
+    assert fault["injected_t_s"] == round(t, 6) == 30.1

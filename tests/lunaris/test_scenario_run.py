@@ -216,7 +216,10 @@ def test_the_shipped_shorted_camera_drill_played_with_a_scripted_crew_is_scored(
     (short,) = [f for f in drill["faults"] if f["key"] == keys.fault(R, "load/nav_camera", "short")]
     assert short["injected_by"] == "scenario"
     inj, symptom, acted = short["injected_t_s"], short["first_symptom_t_s"], short["first_crew_action_t_s"]
-    assert 29.0 <= inj <= 40.0  # at_s 30, on the first tick after it (2 s ticks at x20)
+    # at_s 30, on the first tick after it (2 s ticks at x20), stamped with the last tick the
+    # faults service had heard: the scenario's, or the one before it if that one is still on
+    # its way to the faults service (CI: 28.1)
+    assert 27.9 <= inj <= 40.0
     assert symptom is not None and inj <= symptom <= inj + 4.0  # the trip, within two ticks
     assert acted is not None and symptom <= acted <= symptom + 60.0
     actions = [(a["action"], a["target"], a["accepted"]) for a in short["crew_actions"]]

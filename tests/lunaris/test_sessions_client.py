@@ -213,6 +213,28 @@ def test_watch_names_the_trainee_and_shows_the_session_s_events_only():
         assert "ana's drill" not in text and "Ana" not in text, text
 
 
+def test_watch_lists_what_came_after_a_reset_within_a_session_as_the_latest():
+    """A drill's reset within Ben's session starts the clock again: its events (at 30 s) are
+    the latest, not the snapshot saved at 102 s before it (watch sorted by sim time alone)."""
+    m = Mirror(R, clock=FakeClock())
+    m.feed(keys.clock(R), tick(100.0, S1))
+    for seq, kind, t, message in ((1, "mark", 102.6, "snapshot saved"),
+                                  (2, "fault_injected", 101.0, "before the reset"),
+                                  (3, "session", 102.9, "session reset")):
+        e = ev(seq, S1, kind, "faults", t_s=t, message=message)
+        if kind == "session":
+            e = msgspec.structs.replace(e, key=keys.under(R, "control/reset"))
+        m.feed(keys.event_of(R, "faults"), msgspec.json.encode(e))
+    m.feed(keys.clock(R), tick(0.0, S1, epoch=2))
+    m.feed(keys.event_of(R, "loads"), msgspec.json.encode(ev(1, S1, "fault_raised", "loads", t_s=30.1,
+                                                             message="after the reset")))
+    m.feed(keys.event_of(R, "faults"), msgspec.json.encode(ev(4, S1, "mark", "faults", t_s=30.0,
+                                                              message="mark: the drill")))
+    said = [e.message for _, e in snapshot_of(m).events]
+    assert said == ["before the reset", "snapshot saved", "session reset", "mark: the drill",
+                    "after the reset"], said
+
+
 def test_the_console_sends_every_page_a_snapshot_empty_of_the_last_session():
     async def run() -> tuple[dict, dict]:
         hub = Hub(asyncio.get_running_loop(), flush_s=0.0, clock=FakeClock())

@@ -35,8 +35,13 @@ def kill9(twin: Twin, service: str) -> None:
 
 
 def restart(twin: Twin, probe: Probe, service: str, rover: str = R) -> subprocess.Popen:
-    """kill -9 a service, start it again, wait for its token."""
+    """kill -9 a service, start it again, wait for its token: the new one's (the killed
+    one's is waited out first; a full run found the old token still there, and a query
+    sent at once went unanswered while the new process was still starting)."""
     kill9(twin, service)
+    token = keys.service(rover, service)
+    wait_for(lambda: not [r for r in probe.session.liveliness().get(token) if r.ok is not None], 10,
+             f"the killed {service}'s token to go")
     proc = twin.start(service)
     probe.wait_services(rover, (service,))
     return proc

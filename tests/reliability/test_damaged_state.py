@@ -144,11 +144,16 @@ def test_another_rovers_intact_state_is_kept(twin_factory, probe_solo, tmp_path)
     state = twin.state_dir / "battery-state.json"
     wait_for(lambda: json.loads(state.read_text())[two]["state"]["t_s"] == paused["t_s"], 10,
              f"the state of {two} saved paused")
+    key, seen = keys.battery_state(one), [0]
     restart_damaged(twin, p, "battery", lambda d: edit_json(
-        state, lambda s: s[one]["state"].update(temperature_c="warm")), rover=one)
+        state, lambda s: s[one]["state"].update(temperature_c="warm")), rover=one,
+        killed=lambda: seen.__setitem__(0, len(p.samples(key))))
     damage_event(p, f"battery state of {one} damaged", "temperature_c", rover=one)
     assert not events(p, "state_damaged", two)
-    p.wait_value(keys.battery_state(one), lambda b: b["energy_j"] > CAPACITY_J - 200)
+    # reset to the rover file (full): its first state after the restart, a tick's drain at most
+    # (at x50 the pack drains 4 kJ a second: a later one is well below full)
+    wait_for(lambda: len(p.samples(key)) > seen[0], 10, f"the battery's state of {one}")
+    assert p.samples(key)[seen[0]]["energy_j"] > CAPACITY_J - 1000
     b = p.wait_value(keys.battery_state(two), lambda b: b["t_s"] == paused["t_s"])
     assert b["energy_j"] == pytest.approx(kept["energy_j"], abs=1e-6)
 
@@ -266,3 +271,28 @@ def test_a_restore_is_all_or_nothing_and_names_the_damaged_part(twin_factory, pr
     # dust only: the fault shows in the instructors' record and as less power)
     p.wait_value(keys.faults_active(R, "solar"), lambda a: [f["params"] for f in a["faults"]]
                  == [{"fraction": 0.4}])
+
+
+def test_a_state_saved_with_another_rover_file_is_not_resumed_and_said(twin_factory, probe_solo, tmp_path):
+    """The rover file edited between two runs on one state folder (a bigger pack): the battery
+    starts from the file as it is now, says so, and keeps the old state aside. Found by a
+    vehicle engineer: the old energy was resumed against the new capacity (7,196 kJ of
+    10,000 kJ: a charge that matched neither file), without a word."""
+    p = probe_solo
+    p.watch("lunaris/**")
+    rover = tmp_path / "mapp.yaml"
+    rover.write_text(MAPP.read_text())
+    twin = twin_factory([rover], services=("clock", "battery", "loads", "power"))
+    p.wait_services(R, twin.services)
+    p.put(keys.clock_control(R), {"time_scale": 50})
+    p.wait_value(keys.battery_state(R), lambda b: b["energy_j"] < CAPACITY_J - 3000)
+    state = twin.state_dir / "battery-state.json"
+    wait_for(lambda: json.loads(state.read_text())[R].get("file"), 10, "the file's fingerprint saved")
+    bigger = 6.0e5
+    restart_damaged(twin, p, "battery", lambda d: rover.write_text(
+        rover.read_text().replace("capacity_j: 5.3e5", f"capacity_j: {bigger:.1e}")))
+    said = wait_for(lambda: next((e for e in events(p, "state_damaged") if "another version of the "
+                                  "rover file" in e["message"]), None), 10, "the battery saying so")
+    assert said["severity"] == "warning" and "started from the rover file" in said["message"]
+    assert sorted(twin.state_dir.glob("battery-state.json.old-rover-file-*")), "the old state kept"
+    p.wait_value(keys.battery_state(R), lambda b: b["capacity_j"] == bigger and b["energy_j"] > bigger - 1000)

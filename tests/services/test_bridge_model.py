@@ -643,13 +643,20 @@ def test_attachment_layout():
 
 def test_one_key_expression_hears_a_topic_of_several_rovers():
     assert bd.open_keyexpr(["mapp_01/curr_to_receiving_radio_m",
-                            "mapp_03/curr_to_receiving_radio_m"]) == "*/curr_to_receiving_radio_m"
+                            "mapp_03/curr_to_receiving_radio_m"]) == "mapp_0$*/curr_to_receiving_radio_m"
     assert bd.open_keyexpr(["0/solar_left_dust/std_msgs::msg::dds_::Float64_",
                             "4/solar_left_dust/std_msgs::msg::dds_::Float64_"]) == \
         "*/solar_left_dust/std_msgs::msg::dds_::Float64_"
     assert bd.open_keyexpr(["fleet/a/x", "fleet/b/x"]) == "fleet/*/x"
     assert bd.open_keyexpr(["mapp_1/x"]) == "mapp_1/x"  # one rover: its own key
     assert bd.open_keyexpr(["a/x", "b/c/x"]) is None
+    # what they share around a sub-chunk wildcard: the generated rules allow the bridge
+    # pdm/rail_$*/set_enabled (a plain * was refused, and the crew's calls went unanswered)
+    assert bd.open_keyexpr(["pdm/rail_12V/set_enabled", "pdm/rail_5V_CH2/set_enabled",
+                            "pdm/rail_3V3_CH1/set_enabled"]) == "pdm/rail_$*/set_enabled"
+    assert bd.open_keyexpr(["mapp_1/x", "ltv_1/x"]) == "$*_1/x"
+    assert bd.open_keyexpr(["ab/x", "abab/x"]) == "ab$*/x"  # head and tail never overlap
+    assert bd.open_keyexpr(["a$*/x", "b/x"]) == "*/x"  # a wildcard already
 
 
 # -- the crew's controls: services in the mapping (SPEC §12a) -----------------------------------

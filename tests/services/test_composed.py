@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import subprocess
 
 import msgspec
@@ -57,6 +58,20 @@ def test_a_long_run_sheds_in_order_then_depletes(mapp):
     assert budget.final_soc < 0.05 + 1e-9  # held near empty: rails cycle around recovery
 
 
+def test_a_demand_the_pack_cannot_give_is_counted_not_averaged_away(mapp):
+    """Found by a vehicle engineer: a BMS limit below the loads' draw ran 'never depleted' with
+    nothing said of the demand never met. The static MAPP draws ~76 W of loads, ~83 W on the
+    bus; without the sun, at a 2 A limit on a ~16.5 V pack (~33 W) every tick is ~50 W short:
+    ~2.5 Wh in 3 min. With the shipped 30 A, none."""
+    raw = msgspec.to_builtins(mapp)
+    raw["battery"]["max_discharge_a"] = 2.0
+    raw["solar"]["sun_angle_deg"] = 90.0
+    budget = run_budget(msgspec.convert(raw, Rover), 0.05, seed=3)
+    assert budget.short_s == pytest.approx(180.0)  # the whole 0.05 h
+    assert 2.2 < budget.unmet_j / 3600 < 2.8
+    assert run_budget(mapp, 0.05, seed=3).short_s == 0.0
+
+
 def test_a_short_trips_the_rail_and_darkens_its_loads(mapp):
     twin = ComposedTwin(mapp, seed=1)
     twin.set_faults("load", "nav_camera", [Short(resistance_ohm=0.05)])
@@ -65,6 +80,40 @@ def test_a_short_trips_the_rail_and_darkens_its_loads(mapp):
     assert twin.power.switches["5V_CH2"].tripped
     assert twin.loads.power("hazard_cameras") == (0.0, False)
     assert twin.battery.demand_w < 100  # the short never reached the battery
+
+
+def test_a_run_s_series_is_sampled_on_its_grid_and_at_its_end(mapp):
+    """Every 100 s of a 720 s run, and at its end: the sheds of the run above, where the
+    budget says they happen (3V3_CH2 below 25 % at 389.6 s, 5V_CH2 below 15 % at 454.1 s)."""
+    seen: list[tuple[float, float, list[str]]] = []
+    budget = run_budget(small_pack(mapp, 2e4), 0.2, seed=3, sample=lambda t: seen.append(
+        (t.t_s, t.battery.soc, sorted(n for n, sw in t.power.switches.items() if sw.shed))),
+        sample_every_s=100)
+    assert [round(t, 6) for t, _, _ in seen] == [100, 200, 300, 400, 500, 600, 700, 720]
+    assert seen[-1][1] == budget.final_soc
+    assert [shed for _, _, shed in seen[2:5]] == [[], ["3V3_CH2"], ["3V3_CH2", "5V_CH2"]]
+    assert 300 < budget.shed_at_s["3V3_CH2"] < 400 < budget.shed_at_s["5V_CH2"] < 500
+
+
+def test_lunaris_sim_writes_a_series_for_a_spreadsheet(tmp_path):
+    rover = tmp_path / "mapp.yaml"
+    rover.write_text(static_rover("mapp.yaml").read_text().replace(
+        "{name: 3V3_CH2,", "{name: 3V3_CH2, initially_on: false,"))
+    assert "initially_on: false" in rover.read_text()
+    out = tmp_path / "run.csv"
+    run = subprocess.run(lunaris_cmd("sim", str(rover), "--hours", "0.5", "--csv", str(out),
+                                     "--every", "600"), capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert f"series            3 rows, one every 600 s, in {out}" in run.stdout  # the end on the grid
+    rows = list(csv.DictReader(out.open()))
+    assert [float(r["t_s"]) for r in rows] == [600.0, 1200.0, 1800.0]
+    assert {r["rails_not_on"] for r in rows} == {"3V3_CH2:off"}
+    assert all(float(r["energy_j"]) == pytest.approx(float(r["soc"]) * 5.3e5, abs=1) for r in rows)
+    final = float(run.stdout.split("state of charge")[1].split()[0])
+    assert float(rows[-1]["soc"]) == pytest.approx(final, abs=5e-5)
+    bad = subprocess.run(lunaris_cmd("sim", str(rover), "--csv", str(out), "--every", "0"),
+                         capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert bad.returncode == 2 and "--every must be > 0" in bad.stderr
 
 
 def test_lunaris_sim_prints_a_budget():
@@ -119,6 +168,18 @@ def test_run_traverse_drives_to_the_end_and_books_the_energy(driving):
     assert b.peak_drive_w == pytest.approx(9.5) and b.power_limited_s == 0.0
     profile = power_profile(driving, north(1.0, driving), dt_s=1.0)
     assert profile == [pytest.approx(9.5)] * 10
+
+
+def test_run_traverse_says_where_the_rover_leaves_a_radios_footprint(driving):
+    """Found by a vehicle engineer: a traverse answered YES with the rover beyond both radio
+    footprints at its far end, and nothing said. MAPP starts at (5, 0); the lander's ellipse
+    (400 x 250 m around the origin) ends at y = 250 * sqrt(1 - (5 / 400)^2) = 249.98 m: 300 m
+    north at 0.1 m/s leaves it at ~250 m along, then 50 m (500 s) out of range."""
+    b = run_traverse(driving, north(300.0, driving), reserve_soc=0.2)
+    cov = dict(b.coverage)["lander"]
+    assert cov.first_out is not None and cov.first_out.y_m == pytest.approx(249.98, abs=0.02)
+    assert cov.out_s == pytest.approx(500.2, abs=0.3)
+    assert dict(run_traverse(driving, north(10.0, driving)).coverage)["lander"] == (0.0, None)
 
 
 def test_run_traverse_says_where_the_reserve_is_crossed(driving):

@@ -233,3 +233,19 @@ def test_a_traverse_profile_without_noise_is_the_composed_twin_driving_it():
     assert_allclose(out.soc_at_horizon, budget.final_soc, rtol=1e-4)
     parked = predict(start_of(ComposedTwin(rover)), len(ticks) / rover.tick_hz, 1, step_ticks=1)
     assert out.soc_at_horizon[0] < parked.soc_at_horizon[0] - 0.005  # the drive cost shows
+
+
+def test_the_notes_say_what_every_prediction_assumes_and_a_spread_of_none():
+    """Found by a vehicle engineer: a rover file without uncertainty gave p05 = p95 with
+    nothing saying the spread was zero."""
+    from common.config import parse_rover
+    from services.battery.prediction import assumptions
+    from testbed.twin import ROVERS
+
+    text = (ROVERS / "mapp.yaml").read_text()
+    held, spread = assumptions(parse_rover(text, "mapp"))
+    assert held.startswith("held over the whole horizon: the sun and the generation as now")
+    assert spread.startswith("each future draws its own capacity 3%, resistance 15%, generation 10%")
+    cut = text[:text.index("  uncertainty:")] + text[text.index("  max_discharge_a:"):]
+    assert assumptions(parse_rover(cut, "certain"))[1] == (
+        "the rover file gives no battery.uncertainty: the futures differ by the loads' noise only")

@@ -15,6 +15,27 @@ import {changed, store} from "./state.js";
  *   event?: import("./types.js").Event | null}} Answer
  */
 
+/**
+ * The console no longer knows this page's user (signed out in another tab, removed from the
+ * accounts, the console restarted): to the sign-in page, back to this view after it. The page
+ * stayed as it was, "reconnecting" for ever, and an action said "undefined: sign in first".
+ */
+export function toSignIn() {
+  location.assign(`/login?next=${encodeURIComponent(location.pathname + location.search + location.hash)}`);
+}
+
+/**
+ * An answer's JSON, after the sign-in check.
+ * @param {Response} res
+ * @returns {Promise<any>}
+ */
+async function read(res) {
+  if (res.status === 401) toSignIn();
+  const data = await res.json();
+  if (res.status === 401) data.verdict ??= "forbidden";
+  return data;
+}
+
 /** The key's chunks, each made safe for a URL path (a name may hold any character). */
 const path = (/** @type {string} */ tail) => tail.split("/").map(encodeURIComponent).join("/");
 
@@ -24,15 +45,16 @@ const path = (/** @type {string} */ tail) => tail.split("/").map(encodeURICompon
  * @param {string} tail the key under lunaris/<rover>/
  * @param {string} [body] the payload, JSON
  * @param {string} [rover]
+ * @param {boolean} [asCrew] the instructor standing in for the crew: counted as the crew's
  * @returns {Promise<Answer>}
  */
-export async function send(method, tail, body, rover = store.rover ?? "") {
+export async function send(method, tail, body, rover = store.rover ?? "", asCrew = false) {
   /** @type {Answer} */
   let data;
   try {
-    const res = await fetch(`/api/rovers/${encodeURIComponent(rover)}/keys/${path(tail)}`, {
+    const res = await fetch(`/api/rovers/${encodeURIComponent(rover)}/keys/${path(tail)}${asCrew ? "?as=crew" : ""}`, {
       method, headers: {"Content-Type": "application/json"}, body: method === "PUT" ? (body ?? "") : undefined});
-    data = await res.json();
+    data = await read(res);
   } catch (err) {
     data = {verdict: "no answer", message: `the console did not answer (${err})`};
   }
@@ -52,7 +74,7 @@ export async function post(url, body) {
   try {
     const res = await fetch(url, {method: "POST", headers: {"Content-Type": "application/json"},
                                   body: JSON.stringify(body)});
-    data = await res.json();
+    data = await read(res);
   } catch (err) {
     data = {verdict: "no answer", message: `the console did not answer (${err})`};
   }
@@ -70,7 +92,7 @@ export async function post(url, body) {
 export async function query(url) {
   try {
     const res = await fetch(url);
-    const data = await res.json();
+    const data = await read(res);
     return res.ok ? {ok: true, data}
       : {ok: false, message: String(data.message ?? res.statusText), status: res.status, data};
   } catch (err) {

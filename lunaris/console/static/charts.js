@@ -151,10 +151,10 @@ export function syncCharts(box, rover) {
     series: [{}, line("charge %", "#1b7f3b", "%", 2), line("temperature °C", "#8e3fb0", "C", 1.5)],
     axes: [timeAxis, valueAxis("%", "%", 3), valueAxis("°C", "C", 1)]},
   [w.t, w.soc, w.temperature_c], box);
-  box.append(legend([["loads", "loads W"], ["generation", "solar generation W"]]));
+  box.append(legend([["loads", "loads W"], ["generation", "generation W"]]));
   const power = new uPlot({width, height: 120, legend: {show: false}, cursor: {show: false},
     scales: {x, W: {range: atLeast(5, {share: 0.1})}},
-    series: [{}, line("loads W", "#c0262d", "W", 1.5), line("solar generation W", "#e0a800", "W", 1.5)],
+    series: [{}, line("loads W", "#c0262d", "W", 1.5), line("generation W", "#e0a800", "W", 1.5)],
     axes: [timeAxis, valueAxis("W", "W", 3)]},
   [w.t, w.load_w, w.generation_w], box);
   drawn.plots = [soc, power];

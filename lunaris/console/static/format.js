@@ -140,7 +140,7 @@ const FIELD_WORDS = /** @type {Record<string, FieldWords>} */ ({
   fault_code: {label: "fault code"},
   load_power_w: {label: "loads", unit: "W", digits: 1},
   bus_power_w: {label: "bus draw", unit: "W", digits: 1},
-  generation_w: {label: "solar generation", unit: "W", digits: 1},
+  generation_w: {label: "generation", unit: "W", digits: 1},
   net_battery_power_w: {label: "battery balance", unit: "W", digits: 1},
   bus_voltage_v: {label: "bus voltage", unit: "V", digits: 2},
   sun_angle_deg: {label: "sun angle", unit: "°", digits: 0},

@@ -14,7 +14,7 @@ import {html, render} from "./vendor/lit-html/lit-html.js";
 import {keyed} from "./vendor/lit-html/directives/keyed.js";
 import {syncCharts, updateCharts} from "./charts.js";
 import {clockBar, linkState, roverTabs, traineeBar, viewTabs, who} from "./header.js";
-import {changed, onChange, parts, store} from "./state.js";
+import {changed, followAddress, fromAddress, onChange, parts, store} from "./state.js";
 import {connect} from "./stream.js";
 import {VIEWS} from "./views/index.js";
 import {linkBanner, routerBanner} from "./widgets.js";
@@ -81,11 +81,13 @@ async function start() {
   store.me = await (await fetch("/api/me")).json();
   store.cat = await (await fetch("/api/catalogue")).json();
   byId("main").replaceChildren();
+  fromAddress();
   onChange(draw);
   connect();
   changed();
   setInterval(everySecond, 1000);
   window.addEventListener("resize", changed);
+  window.addEventListener("popstate", followAddress);
 }
 
 start();

@@ -82,6 +82,8 @@ export const store = {
   streamError: "",
   /** @type {string | null} */
   rover: /** @type {string | null} */ (null),
+  /** @type {string | null} the rover the page's address names, shown once the stream brings it */
+  wanted: /** @type {string | null} */ (null),
   view: "live",
   /** @type {Me | null} */
   me: /** @type {Me | null} */ (null),
@@ -91,6 +93,8 @@ export const store = {
   pending: new Set(),
   /** the span of sim time the plots show, in seconds (one of SPANS) */
   span: 900,
+  /** the instructor stands in for the crew: the rail buttons count as the crew's actions */
+  asCrew: false,
 };
 
 /** @type {Set<() => void>} */
@@ -216,11 +220,43 @@ export const linkLost = (rover) => store.links[rover]?.state === "lost";
 /** @param {string} rover */
 export function pickRover(rover) {
   store.rover = rover;
+  store.wanted = null;
+  remember();
   redraw();
 }
 
 /** @param {string} view */
 export function pickView(view) {
   store.view = view;
+  remember();
   redraw();
+}
+
+/**
+ * The view and the rover in the page's address (`#crew/mapp-1`): a reload, a link or the way
+ * back from the sign-in page opens them again (a reload always went back to Live). Each choice
+ * is a step of the browser's history: Back shows the view before (it left the console).
+ */
+function remember() {
+  const rover = store.rover ? `/${encodeURIComponent(store.rover)}` : "";
+  const address = `#${encodeURIComponent(store.view)}${rover}`;
+  if (location.hash !== address) history.pushState(null, "", address);
+}
+
+/** The address changed under the page (Back, Forward, a link, typed): show what it asks. */
+export function followAddress() {
+  fromAddress();
+  if (store.wanted && rovers().includes(store.wanted)) [store.rover, store.wanted] = [store.wanted, null];
+  redraw();
+}
+
+/** What the address asks for, read at the start: the view (an unknown one shows the first). */
+export function fromAddress() {
+  try {
+    const [view, rover] = location.hash.slice(1).split("/").map(decodeURIComponent);
+    if (view) store.view = view;
+    if (rover) store.wanted = rover;
+  } catch {
+    // an address no page of ours made: the first view
+  }
 }

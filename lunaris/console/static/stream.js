@@ -6,6 +6,7 @@
 // them either: an event of another session is never kept, and a plot's point from before the
 // new session's beginning (a value published just before it, heard just after) is dropped.
 
+import {toSignIn} from "./api.js";
 import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, clock, powerSummary, rovers, store} from "./state.js";
 
 /** @typedef {import("./state.js").BatteryState} BatteryState */
@@ -25,13 +26,24 @@ import {EVENTS_KEPT, HISTORY_KEPT, battery, changed, clock, powerSummary, rovers
  *   links?: Record<string, RoverLink>, sessions?: Record<string, Session>}} LiveMessage
  */
 
-/** Open the stream; the browser reconnects by itself (and the console sends a snapshot again). */
+/** How long the page waits to open the stream again once the browser gave up on it [ms]. */
+const RETRY_MS = 2000;
+
+/**
+ * Open the stream; the browser reconnects by itself after a lost connection (and the console
+ * sends a snapshot again). An answer that is no stream (401: signed out elsewhere; a console
+ * restarting) ends the browser's tries: a page signed out goes to the sign-in page, any other
+ * opens the stream again after a while.
+ */
 export function connect() {
   const es = new EventSource("/api/live");
   es.onmessage = (m) => receive(JSON.parse(m.data));
   es.onerror = () => {
     store.streamError = "reconnecting to the console…";
     changed();
+    if (es.readyState !== EventSource.CLOSED) return;
+    fetch("/api/me").then((res) => (res.status === 401 ? toSignIn() : undefined), () => undefined);
+    setTimeout(connect, RETRY_MS);
   };
 }
 
@@ -78,6 +90,7 @@ export function receive(msg) {
     if (kept.length > EVENTS_KEPT) kept.shift();
   }
   const all = rovers();
+  if (store.wanted && all.includes(store.wanted)) [store.rover, store.wanted] = [store.wanted, null];
   if (!store.rover || !all.includes(store.rover)) store.rover = all[0] ?? null;
   changed();
 }

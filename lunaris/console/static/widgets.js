@@ -132,7 +132,7 @@ export function faultsCard(rover, clear) {
 /** What an event is, in words (its kind). */
 const KIND = /** @type {Record<string, string>} */ ({
   rejected: "refused", fault_injected: "fault injected", fault_cleared: "fault cleared", fault_raised: "alarm",
-  fault_resolved: "alarm over", command: "command", input: "input", clock: "clock", session: "session",
+  fault_resolved: "alarm ended", command: "command", input: "input", clock: "clock", session: "session",
   scenario: "drill", internal_error: "twin error", mark: "mark"});
 
 /** @param {import("./state.js").TwinEvent} e its message, in plain words, without repeating its kind */
@@ -140,6 +140,8 @@ const said = (e) => {
   if (e.kind === "session") return plainMessage(e.message.replace(/^session (?=\d{8}-\d{6} )/, ""), e.key);
   const text = plainMessage(e.message, e.key);
   if (e.kind === "mark") return text.replace(/^mark: /, "");
+  if (e.kind === "rejected") return text.replace(/^rejected: /, "");  // "refused rejected: ..." read twice
+  if (e.kind === "fault_resolved") return text.replace(/^resolved /, "");  // "alarm ended resolved ..."
   return e.kind === "fault_injected" || e.kind === "fault_cleared" ? text.replace(/^(injected|cleared) /, "") : text;
 };
 
@@ -172,6 +174,16 @@ function markRow(rover) {
 }
 
 /**
+ * Who acted, when a person or a scenario did (the twin's own events say nothing more): the
+ * crew's actions from its dashboard read apart from the instructor's own.
+ * @param {import("./types.js").Event} e
+ */
+const byWhom = (e) => (e.actor && e.actor !== "twin" ? ` · by the ${e.actor}` : "");
+
+/** The most of an event's words the log shows on its line (a mark may hold 500). */
+const LOG_CHARS = 240;
+
+/**
  * The newest 120 of its running session's events, newest first (times are sim time), and the
  * instructor's mark.
  * @param {string} rover
@@ -179,9 +191,12 @@ function markRow(rover) {
 export function eventsCard(rover) {
   const evs = (store.events[rover] ?? []).slice(-120).reverse(), s = store.sessions[rover];
   return html`<section class="card"><h2>Event log <small>${s?.trainee ? `${s.trainee}'s session · ` : ""}newest first · sim time</small></h2>
-    ${markRow(rover)}<div id="events-list" class="events">${evs.length ? evs.map((e) => html`<div class="sev-${e.severity}" data-kind=${e.kind}>
-      <span class="t">${clockText(e.t_s)}</span><b>${KIND[e.kind] ?? words(e.kind)}</b> ${said(e)}
-      <small>[${e.source}]</small></div>`) : html`<p>No event yet.</p>`}</div></section>`;
+    ${markRow(rover)}<div id="events-list" class="events">${evs.length ? evs.map((e) => {
+    const text = said(e), long = text.length > LOG_CHARS;  // a long mark: its start, the whole on hover
+    return html`<div class="sev-${e.severity}" data-kind=${e.kind} data-actor=${e.actor ?? ""} title=${long ? text : nothing}>
+      <span class="t">${clockText(e.t_s)}</span><b>${KIND[e.kind] ?? words(e.kind)}</b> ${long ? `${text.slice(0, LOG_CHARS - 1)}…` : text}
+      <small>[${e.source}${byWhom(e)}]</small></div>`;
+  }) : html`<p>No event yet.</p>`}</div></section>`;
 }
 
 /** @param {string} rover a banner while the console says the rover's link is lost, and why */

@@ -3,12 +3,14 @@
 // mapping publishes) and the controls it may call; how it responds (SPEC 12d, `GET
 // /api/rovers/<rover>/response`): each fault of the session with its first symptom, the
 // crew's actions and its resolution, the drill's expectations met or missed; beside them the
-// faults the instructor put in effect. Asked again every CREW_S seconds while the view shows.
+// faults the instructor put in effect. Asked again as soon as an event of the rover comes (a
+// fault injected, an alarm raised, the crew's call answered), and every CREW_S seconds while
+// the view shows (what telemetry alone changes).
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {query} from "../api.js";
 import {clockText, dur, faultName, fieldLabel, num, partName, plainMessage, words} from "../format.js";
-import {changed} from "../state.js";
+import {changed, store} from "../state.js";
 import {checkFaults, faultsCard} from "../widgets.js";
 import {clearFault} from "./live.js";
 
@@ -43,10 +45,16 @@ const CREW_S = 2;
 const seen = /** @type {Record<string, Result<CrewView>>} */ ({});
 const responses = /** @type {Record<string, Result<LiveResponse>>} */ ({});
 const asked = /** @type {Record<string, number>} */ ({});
+/** The rover's newest event when the view was last asked: a newer one asks again at once. */
+const heard = /** @type {Record<string, object | undefined>} */ ({});
+
+/** @param {string} rover @returns {object | undefined} the newest event of the rover the page holds */
+const newest = (rover) => store.events[rover]?.at(-1);
 
 /** @param {string} rover */
 async function load(rover) {
   asked[rover] = Date.now();
+  heard[rover] = newest(rover);
   const r = encodeURIComponent(rover);
   [seen[rover], responses[rover]] = await Promise.all([query(`/api/rovers/${r}/crew`), query(`/api/rovers/${r}/response`)]);
   changed();
@@ -144,8 +152,15 @@ function reading(t) {
     return (m.name ?? []).map((/** @type {string} */ k, /** @type {number} */ i) =>
       `${fieldLabel(k)} ${n(m.position?.[i], 2)}`).join(" · ");
   }
+  if (t.type.endsWith("/Odometry")) {  // where the rover is and where it heads, as a dashboard shows it
+    const p = m.pose?.pose?.position ?? {}, q = m.pose?.pose?.orientation ?? {};
+    const yaw = Math.atan2(2 * ((q.w ?? 1) * (q.z ?? 0) + (q.x ?? 0) * (q.y ?? 0)),
+                           1 - 2 * ((q.y ?? 0) ** 2 + (q.z ?? 0) ** 2)) * 180 / Math.PI;
+    return `x ${n(p.x, 1)} m, y ${n(p.y, 1)} m, z ${n(p.z, 1)} m; yaw ${n(yaw, 0)}° from east`;
+  }
   if ("data" in m) {
     if (typeof m.data === "boolean") return m.data ? "yes" : "no";
+    if (Array.isArray(m.data)) return m.data.map((/** @type {unknown} */ v) => (typeof v === "number" ? num(v, 2) : String(v))).join(" · ");
     const unit = UNITS.find(([re]) => re.test(t.topic))?.[1] ?? "";
     if (typeof m.data !== "number") return String(m.data);
     const v = m.data, digits = Number.isInteger(v) || Math.abs(v) >= 100 ? 0 : 2;  // as a dashboard shows it
@@ -198,6 +213,7 @@ export const crew = {
   label: "Crew",
   /** @param {{rover: string}} ctx */
   render: ({rover}) => {
+    if (asked[rover] !== undefined && newest(rover) !== heard[rover]) load(rover);  // an event came
     const res = seen[rover];
     return html`<div class="grid two">
       <div class="col">${alarmsCard(res)}${responseCard(responses[rover])}${faultsCard(rover, clearFault)}</div>

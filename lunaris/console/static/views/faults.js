@@ -4,7 +4,7 @@
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {keyed} from "../vendor/lit-html/directives/keyed.js";
-import {send} from "../api.js";
+import {answer, send} from "../api.js";
 import {faultEffect, faultName, paramWords, partName, plainNumber, PART_WORDS, words} from "../format.js";
 import {redraw, store} from "../state.js";
 import {actionButton, checkFaults, eventsCard, faultsCard} from "../widgets.js";
@@ -40,24 +40,65 @@ function range(q) {
   return out.join(", ");
 }
 
+/**
+ * A share typed as a percentage, as the page shows it once injected ("dust cover 50 %"): the
+ * form said "Dust cover" with 0 to 1, and an instructor's 50 was refused. The catalogue's hint
+ * ("0 to 1: 0.25 takes a quarter ...") read in percent.
+ * @param {string} hint
+ */
+const percentHint = (hint) => hint.replace(/^0 to 1: ([0-9.]+)/, (_, x) => `0 to 100: ${plainNumber(Number(x) * 100)}`);
+
+/** @param {number | undefined} v @param {number} k */
+const scaled = (v, k) => (v === undefined ? v : v * k);
+
 /** @param {string} component @param {string} kind @param {CatalogueParam} q one value of the form */
 function param(component, kind, q) {
   const w = paramWords(component, kind, q.name);
-  const unit = w?.unit && w.unit !== "fraction" ? ` [${w.unit}]` : "";
-  const hint = w?.hint ?? range(q);
-  return html`<label>${w?.label ?? words(q.name)}${unit}
-    <small>${hint}${q.default !== null ? `; empty: ${plainNumber(q.default)}` : ""}</small>
-    <input type="number" step="any" data-param=${q.name} min=${q.ge ?? q.gt ?? nothing} max=${q.le ?? q.lt ?? nothing}></label>`;
+  const pct = w?.unit === "fraction", k = pct ? 100 : 1;
+  const unit = pct ? " [%]" : w?.unit ? ` [${w.unit}]` : "";
+  const shown = {...q, ge: scaled(q.ge, k), gt: scaled(q.gt, k), le: scaled(q.le, k), lt: scaled(q.lt, k)};
+  const limits = range(shown), hint = w?.hint ? (pct ? percentHint(w.hint) : w.hint) : limits;
+  const label = `${w?.label ?? words(q.name)}${unit}`;
+  return html`<label>${label}
+    <small>${hint}${q.default !== null ? `; empty: ${plainNumber(q.default * k)}` : ""}</small>
+    <input type="number" step="any" data-param=${q.name} data-scale=${k} data-label=${label}
+      data-range=${limits} min=${shown.ge ?? shown.gt ?? nothing} max=${shown.le ?? shown.lt ?? nothing}></label>`;
+}
+
+/** @param {HTMLElement} from an element of the form @returns {HTMLInputElement[]} its values */
+const inputs = (from) => /** @type {HTMLInputElement[]} */ (
+  [...from.closest("section")?.querySelectorAll("#f-params input[data-param]") ?? []]);
+
+/**
+ * What is wrong with a value typed, in words ("" when nothing is), before anything is sent: text
+ * where a number goes (the browser hands the page nothing for it: it was sent as no value, and
+ * the twin answered "extra heat is missing"), a number out of the form's range.
+ * @param {HTMLElement} from
+ */
+function problem(from) {
+  for (const input of inputs(from)) {
+    if (input.validity.badInput) return `${input.dataset.label} must be a number`;
+    if (input.validity.rangeOverflow || input.validity.rangeUnderflow) {
+      return `${input.dataset.label} must be ${input.dataset.range} (got ${input.value})`;
+    }
+  }
+  return "";
+}
+
+/** @param {string} rover @param {{component: string, kind: string}} target */
+function inject(rover, target) {
+  const from = /** @type {HTMLElement} */ (document.getElementById("f-buttons"));
+  const why = problem(from);
+  if (why) return answer("invalid", `not sent: ${why}`);
+  return send("PUT", `fault/${target.component}/${target.kind}`, body(from), rover);
 }
 
 /** @param {HTMLElement} from an element of the form @returns {string} its values as the JSON body */
 function body(from) {
   /** @type {Record<string, number>} */
   const out = {};
-  const box = from.closest("section")?.querySelector("#f-params");
-  for (const el of box?.querySelectorAll("input[data-param]") ?? []) {
-    const input = /** @type {HTMLInputElement} */ (el);
-    if (input.value.trim() !== "") out[input.dataset.param ?? ""] = Number(input.value);
+  for (const input of inputs(from)) {
+    if (input.value.trim() !== "") out[input.dataset.param ?? ""] = Number(input.value) / Number(input.dataset.scale ?? 1);
   }
   return JSON.stringify(out);
 }
@@ -90,7 +131,7 @@ function faultForm(rover, p) {
       ? kind.params.map((q) => param(form.component, form.kind, q))
       : html`<span class="help">This fault takes no value.</span>`)}</div>
     <div class="row" id="f-buttons">${actionButton({action: "fault-inject", label: "Inject", rover, target, cls: "primary",
-      run: () => send("PUT", `fault/${target.component}/${target.kind}`, body(/** @type {HTMLElement} */ (document.getElementById("f-buttons"))), rover)})}
+      run: () => inject(rover, target)})}
       ${actionButton({action: "fault-clear", label: "Clear", rover, target, run: () => clearFault(target.component, target.kind)})}</div>`;
 }
 

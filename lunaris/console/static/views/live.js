@@ -3,9 +3,10 @@
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
-import {SPANS, battery, load, powerSummary, rail, redraw, store} from "../state.js";
+import {SPANS, battery, load, mayAct, powerSummary, rail, redraw, store} from "../state.js";
 import {emptyWords} from "../format.js";
 import {actionButton, checkFaults, eventsCard, faultsCard, field} from "../widgets.js";
+import {loadRovers, railInfo} from "./map.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 
@@ -55,7 +56,8 @@ function powerCard(r, p) {
   return html`<section class="card"><h2>Power</h2><dl class="kv">
       <dt>loads</dt><dd>${field(r, t, "load_power_w", "w")}</dd>
       <dt>bus draw</dt><dd>${field(r, t, "bus_power_w", "w")} <small>loads and converter losses</small></dd>
-      <dt>solar generation</dt><dd>${field(r, t, "generation_w", "w")}</dd>
+      <dt>generation</dt><dd>${field(r, t, "generation_w", "w")} <small>the panels after their converter${
+        p.umbilical ? ", and the umbilical" : ""}</small></dd>
       <dt>battery balance</dt><dd>${field(r, t, "net_battery_power_w", "w")} <small>${balanceWords(r)}</small></dd>
       <dt>bus voltage</dt><dd>${field(r, t, "bus_voltage_v", "v")}</dd>
       ${p.umbilical ? html`<dt>umbilical</dt><dd>${field(r, "umbilical/state", "connected", "conn")} ·
@@ -94,12 +96,31 @@ function driveCard(r, p) {
 function railSwitch(r, n) {
   /** @param {string} action @param {string} label @param {Record<string, boolean>} body */
   const b = (action, label, body) => actionButton({action, label, rover: r, target: {rail: n},
-                                                   run: () => send("PUT", `cmd/rail/${n}`, JSON.stringify(body), r)});
+                                                   run: () => mayCut(r, n, body) && send("PUT", `cmd/rail/${n}`, JSON.stringify(body), r, store.asCrew)});
   return html`${b("rail-on", "On", {on: true})} ${b("rail-off", "Off", {on: false})} ${b("rail-reset", "Reset", {reset: true})}`;
+}
+
+/**
+ * Off on an essential rail (never shed: the flight computer's, the radio's) is asked first;
+ * known from the rover file the console was given (`GET /api/rovers`), else not asked.
+ * @param {string} r @param {string} n @param {Record<string, boolean>} body
+ */
+function mayCut(r, n, body) {
+  const info = railInfo(r, n);
+  if (body.on !== false || !info?.essential) return true;
+  const loads = info.loads.length ? info.loads.join(", ") : "its loads";
+  return confirm(`Switch off ${n} of ${r}? It is an essential rail, never shed: ${loads} lose power.`);
+}
+
+/** @param {Event} ev the stand-in box changed */
+function standIn(ev) {
+  store.asCrew = /** @type {HTMLInputElement} */ (ev.target).checked;
+  redraw();
 }
 
 /** @param {string} r @param {Parts} p */
 function pdmCard(r, p) {
+  const solar = p.rails.find((n) => rail(r, n)?.current_limit_a === null);
   const rows = p.rails.map((n) => {
     const t = `rail/${n}/state`;
     const loads = p.loads.filter((l) => load(r, l)?.rail === n).map((l) => {
@@ -111,13 +132,18 @@ function pdmCard(r, p) {
     return html`<tr class="rail"><td>${n}</td><td>${field(r, t, "state", "text")}</td>
       <td class="num">${field(r, t, "voltage_v", "num2")}</td><td class="num">${field(r, t, "current_a", "num3")}</td>
       <td class="num">${field(r, t, "power_w", "num2")}</td><td class="num">${field(r, t, "current_limit_a", "limit")}</td>
-      <td class="switch">${rail(r, n)?.current_limit_a === null ? html`<small>solar panels' rail</small>`
+      <td class="switch">${n === solar ? html`<small>solar panels' rail</small>`
         : railSwitch(r, n)}</td></tr>${loads}`;
   });
   return html`<section class="card"><h2>Power distribution (PDM)</h2><table class="pdm">
     <tr><th>rail / load</th><th>state</th><th class="num">V</th><th class="num">A</th><th class="num">W</th>
     <th class="num">limit A</th><th>switch</th></tr>${rows}</table>
-    <p class="help">A rail over its current limit trips: it stays off until Reset.</p></section>`;
+    ${mayAct() ? html`<label class="check stand-in"><input type="checkbox" id="as-crew" .checked=${store.asCrew}
+      @change=${standIn}> Standing in for the crew: these buttons count as the crew's actions (its response,
+      the debrief)</label>` : nothing}
+    <p class="help">A rail over its current limit trips: it stays off until Reset. ${solar
+      ? `${solar} reads the panels' output, before its converter; the generation above is what reaches the bus.`
+      : ""}</p></section>`;
 }
 
 /** The plots, and the span of sim time they show. */
@@ -141,7 +167,10 @@ export const live = {
     <div class="col">${pdmCard(r, p)}${plotsCard()}</div>
     <div class="col">${faultsCard(r, clearFault)}${eventsCard(r)}</div></div>`,
   /** @param {{rover: string}} ctx */
-  enter: ({rover}) => checkFaults(rover, true),
+  enter: ({rover}) => {
+    checkFaults(rover, true);
+    return loadRovers();
+  },
   /** @param {{rover: string}} ctx */
   tick: ({rover}) => checkFaults(rover),
 };

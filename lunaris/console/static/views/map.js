@@ -26,13 +26,16 @@ import {addWaypoint, clicksAddWaypoints, drivePanel, loadTraverses, metres, path
  * A radio as `GET /api/rovers` gives it (from the rover file).
  * @typedef {{name: string, follows_drive: boolean | null, why: string, site?: XY | null, a_m?: number,
  *   b_m?: number, offset_x_m?: number, offset_y_m?: number}} RadioInfo
- * @typedef {{id: string, live: boolean, drives: boolean | null, drives_why: string, radios: RadioInfo[]}} RoverInfo
+ * A switchable rail as `GET /api/rovers` gives it (from the rover file).
+ * @typedef {{name: string, essential: boolean, loads: string[]}} RailInfo
+ * @typedef {{id: string, live: boolean, drives: boolean | null, drives_why: string, radios: RadioInfo[],
+ *   rails: RailInfo[]}} RoverInfo
  */
 
 /** `GET /api/rovers`, as last asked. */
 let described = /** @type {Record<string, RoverInfo>} */ ({});
 
-/** @returns {Promise<void>} what the console knows of every rover's radios (rover files) */
+/** @returns {Promise<void>} what the console knows of every rover's radios and rails (rover files) */
 export async function loadRovers() {
   const res = await query("/api/rovers");
   if (res.ok) {
@@ -43,6 +46,9 @@ export async function loadRovers() {
 
 /** @param {string} rover @param {string} name @returns {RadioInfo | undefined} */
 export const radioInfo = (rover, name) => described[rover]?.radios.find((r) => r.name === name);
+
+/** @param {string} rover @param {string} name @returns {RailInfo | undefined} */
+export const railInfo = (rover, name) => described[rover]?.rails?.find((r) => r.name === name);
 
 /**
  * Where a radio stands and its footprint: the telemetry's own numbers, else the rover file's.

@@ -84,6 +84,12 @@ function status(rec, saved) {
     last.replace(/^lunaris [\w ]+: /, "") || "no reason given"}.</p>`;
 }
 
+/**
+ * The offered name selected when the box is entered: typing replaces it (it was appended to).
+ * @param {FocusEvent} e
+ */
+const selectAll = (e) => /** @type {HTMLInputElement} */ (e.target).select();
+
 export const recordings = {
   name: "recordings",
   label: "Recordings",
@@ -95,7 +101,8 @@ export const recordings = {
           (plots and the event log) that opens here; the recording itself is an MCAP file in the console's folder${
           r?.folder ? html` (<code>${r.folder}</code>)` : nothing}, to download from the list and open in Foxglove or
           PlotJuggler.</p>
-        <div class="row"><label>Name<input type="text" id="rec-name" value=${offered}></label>
+        <div class="row"><label>Name<input type="text" id="rec-name" value=${offered}
+          @focus=${selectAll}></label>
           <button type="button" class="primary" id="rec-start" ?disabled=${!r || !!rec.running || !may}
             @click=${() => start(name())}>Start recording</button>
           <button type="button" class="danger" id="rec-stop" ?disabled=${!rec.running || !may}

@@ -9,8 +9,10 @@ import {changed, mayAct, rovers} from "../state.js";
 
 /**
  * `GET /api/scenarios`.
+ * @typedef {{label: string, condition: string, within_s: number, met: boolean | null, met_t_s: number | null,
+ *   deadline_t_s: number | null}} ExpectStatus
  * @typedef {{index: number, label: string, trigger: string, status: string, outcome: string,
- *   fired_t_s: number | null, detail?: string}} StepStatus
+ *   armed_t_s?: number | null, fired_t_s: number | null, detail?: string, expect?: ExpectStatus | null}} StepStatus
  * @typedef {{scenario: string, rover: string, t_rel_s: number, finished: boolean, end_reason: string,
  *   waiting: string, steps: StepStatus[]}} PlayStatus
  * @typedef {{file: string | null, running?: boolean, exit?: number | null, lines?: string[],
@@ -38,9 +40,9 @@ async function play(body) {
 function ask(s) {
   const start = s.start ?? "";
   const resets = /reset/i.test(start), restores = /snapshot/i.test(start);
-  if ((resets || restores) && !confirm(`Play "${s.name}" on ${s.rover}? It starts ${start}: ${resets
-    ? `${s.rover} goes back to its rover file, every injected fault is cleared and the clock goes back to 0.`
-    : `${s.rover} goes back to where the snapshot was saved.`}`)) return;
+  if ((resets || restores) && !confirm(`Play "${s.name}" on ${s.rover}? ${resets
+    ? `It starts from a reset: ${s.rover} goes back to its rover file, every injected fault is cleared and the clock goes back to 0.`
+    : `It starts ${start}: ${s.rover} goes back to where the snapshot was saved.`}`)) return;
   play({file: s.file});
 }
 
@@ -112,6 +114,29 @@ function lastWords(lines) {
   return line.replace(/^\[t\+\s*[\d.]+ s\]\s*/, "").replace(/^lunaris [\w ]+: /, "").trim();
 }
 
+/**
+ * An expect step's score in words, with its times (drill time): met when and within how much of
+ * its time, missed, or what it waits for. It read "met / met".
+ * @param {StepStatus} r
+ */
+function expectWords(r) {
+  const e = /** @type {ExpectStatus} */ (r.expect), armed = r.armed_t_s ?? null;
+  if (e.met === true && e.met_t_s !== null) {
+    return `met at ${clockText(e.met_t_s)}${armed === null ? "" : `, ${dur(e.met_t_s - armed)} of its ${dur(e.within_s)}`}`;
+  }
+  if (e.met === false) return `missed: not within ${dur(e.within_s)}`;
+  return e.deadline_t_s !== null ? `watching, until ${clockText(e.deadline_t_s)}` : `${dur(e.within_s)} once armed`;
+}
+
+/** @param {StepStatus[]} steps the crew's score, once the drill has finished ("" without expectations) */
+function score(steps) {
+  const ex = steps.filter((r) => r.expect);
+  if (!ex.length) return nothing;
+  const met = ex.filter((r) => r.expect?.met === true).length;
+  return html`<p id="sc-score" class=${met === ex.length ? "st-on" : "sev-critical"}><b>Expectations of the crew:
+    ${met} of ${ex.length} met</b> (the Crew view and the debrief report give their times)</p>`;
+}
+
 /** @param {Playing} playing */
 function progress(playing) {
   if (!playing.file) return html`<p class="help">No drill is playing.</p>`;
@@ -125,7 +150,7 @@ function progress(playing) {
     : playing.running ? "Playing" : "Stopped";
   return html`<p><b>${how}</b>: “${st.scenario}” on ${st.rover}, ${dur(st.t_rel_s)} of sim time into the drill${
     st.finished && st.end_reason !== "interrupted" ? html`: ${st.end_reason}.` : "."}</p>
-    ${st.finished ? nothing : html`<p class="help" id="sc-waiting">${waiting(st)}</p>`}
+    ${st.finished ? score(st.steps) : html`<p class="help" id="sc-waiting">${waiting(st)}</p>`}
     ${!st.finished && !playing.running ? html`<p class="error">The drill stopped: ${lastWords(lines)}.</p>` : nothing}
     <table class="steps"><tr><th class="num">#</th><th>step</th><th>status</th><th class="num">at (drill time)</th></tr>
       ${st.steps.map((r) => html`<tr data-step=${r.index + 1} data-label=${r.label} data-status=${r.status}
@@ -133,8 +158,9 @@ function progress(playing) {
         <td class="num">${r.index + 1}</td>
         <td class="wrap">${r.label}<br><small>${triggerText(r.trigger)}</small>${said.has(r.index) && r.fired_t_s !== null
           ? html`<br><small class="note">${said.get(r.index)}</small>` : nothing}</td>
-        <td class="status ${stepClass(r.status, r.fired_t_s)}">${STATUS[r.status] ?? words(r.status)}${r.outcome
-          ? html`<br><small>${OUTCOME[r.outcome] ?? words(r.outcome)}</small>` : nothing}</td>
+        <td class="status ${stepClass(r.status, r.fired_t_s)}">${r.expect ? expectWords(r)
+          : html`${STATUS[r.status] ?? words(r.status)}${r.outcome
+          ? html`<br><small>${OUTCOME[r.outcome] ?? words(r.outcome)}</small>` : nothing}`}</td>
         <td class="num">${r.fired_t_s === null ? "" : clockText(r.fired_t_s)}</td></tr>`)}</table>`;
 }
 

@@ -166,6 +166,18 @@ const said = (a) => (a === undefined ? nothing : html`<p id="session-answer" cla
   data-verdict=${a.verdict}><b>${WORDS[/** @type {keyof typeof WORDS} */ (a.verdict)] ?? a.verdict}:</b>
   ${plainMessage(a.message, "control/session")}</p>`);
 
+/**
+ * Why a name cannot be a trainee's, in the twin's words ("" when it can; the twin checks it
+ * again: common.messages.trainee_problem): letters of any script, digits, spaces and - _ . ' &.
+ * @param {string} name
+ */
+function traineeProblem(name) {
+  const bad = [...new Set([...name].filter((c) => !/[\p{L}\p{N} \-_.'&]/u.test(c)))];
+  if (!bad.length) return "";
+  const said = bad.map((c) => (/\p{Cc}/u.test(c) ? "a control character" : `'${c}'`));
+  return `a trainee's name is letters, digits, spaces and - _ . ' &; this one has ${[...new Set(said)].join(", ")}`;
+}
+
 /** @param {string} r the running session, and a new trainee's */
 function traineeCard(r) {
   const s = runningSession(r), snaps = answers.snapshots[r];
@@ -174,6 +186,12 @@ function traineeCard(r) {
     box("trainee-name")?.setAttribute("aria-invalid", String(!name));
     if (!name) {
       answer("invalid", "type the trainee's name (or the crew's) first");
+      return;
+    }
+    const why = traineeProblem(name);  // before asking to end the running session for it
+    if (why) {
+      box("trainee-name")?.setAttribute("aria-invalid", "true");
+      answer("invalid", `not sent: ${why}`);
       return;
     }
     const ending = s?.trainee ? `${s.trainee}'s session ends` : "The running session ends";
