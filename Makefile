@@ -19,7 +19,7 @@ TEST_STAMP = $(VENV)/.installed
 NODE_STAMP = node_modules/.installed
 START := $(shell date +%s)
 
-.PHONY: run test lint typecheck reference bench system-deps clean
+.PHONY: run test check lint typecheck reference bench system-deps clean
 
 $(RUN_STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -71,15 +71,19 @@ reference: $(TEST_STAMP)
 	$(BIN)/python -m lunaris.reference
 
 # ruff, mypy, then every test with coverage (services' subprocesses included) on WORKERS
-# pytest-xdist workers, a module's tests on one worker (its shared twin started once); the
-# coverage table and total are printed at the end, and below 90 % the run fails. The last line
-# says how long make test took, set-up included.
+# pytest-xdist workers, a module's tests on one worker (its shared twin started once), through
+# tools/run_tests.py: a test that fails is run once more on its own and the run passes only if
+# it passes then, each such test named FLAKY at the end. The coverage table and total are
+# printed (below 90 % the run fails), then how long make test took, set-up included, how many
+# service processes the tests started, and the count of tests.
 test: $(TEST_STAMP) system-deps lint typecheck
 	rm -f .coverage .coverage.*
-	@status=0; $(BIN)/pytest -n $(WORKERS) --dist loadgroup --cov --cov-report=term || status=$$?; \
-	  took=$$(( $$(date +%s) - $(START) )); \
-	  echo "make test took $$((took / 60)) min $$((took % 60)) s ($$took s, $(WORKERS) workers)"; \
-	  exit $$status
+	$(BIN)/python tools/run_tests.py --since $(START) --coverage -- \
+	  -n $(WORKERS) --dist loadgroup --cov --cov-report=term --cov-fail-under=0
+
+# lint, types and every test that starts no process (the unit tests), on WORKERS workers
+check: $(TEST_STAMP) $(NODE_STAMP) lint typecheck
+	$(BIN)/python tools/run_tests.py --since $(START) -- -m unit -n $(WORKERS) -q
 
 bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py

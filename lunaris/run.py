@@ -34,6 +34,7 @@ __all__ = ["ALREADY_RUNNING", "CONFIG_ERROR", "SERVICES", "SUPERVISOR_ENV", "add
 CONFIG_ERROR = 2  # exit status: a rover file, mapping or option that cannot work (do not retry)
 ALREADY_RUNNING = 3  # exit status: another instance serves these rovers (do not retry)
 SUPERVISOR_ENV = "LUNARIS_SUPERVISOR_PID"  # set by `lunaris up`: a service dies with it
+STARTS_ENV = "LUNARIS_COUNT_STARTS"  # a file each service's start adds a line to (make test counts)
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
 
@@ -89,6 +90,14 @@ def parse_shard(text: str | None) -> tuple[int, int]:
     return int(k), int(n)
 
 
+def _count_start(service: str) -> None:
+    """One line in :data:`STARTS_ENV`'s file, if it names one (``make test`` prints the count)."""
+    path = os.environ.get(STARTS_ENV)
+    if path:
+        with open(path, "a", encoding="utf-8") as f:  # one short append: whole lines, any writers
+            f.write(service + "\n")
+
+
 def main(args: argparse.Namespace) -> int:
     try:
         k, n = parse_shard(args.shard)
@@ -98,6 +107,7 @@ def main(args: argparse.Namespace) -> int:
     fleet = load_rovers(args.rover)
     rovers = served(args.service, fleet[k - 1::n])
     module = importlib.import_module(f"services.{args.service}.service")
+    _count_start(args.service)
     if not rovers:
         print(f"lunaris {args.service}: no rover to serve (none of {', '.join(args.rover)} "
               f"{'in shard ' + args.shard + ' ' if args.shard else ''}needs it); exiting",
