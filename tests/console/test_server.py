@@ -216,8 +216,8 @@ def test_the_live_stream_says_a_rover_s_link_is_lost_within_3_s_and_back(session
             cut = time.monotonic()
             lost = next(m for m in messages if m.get("links", {}).get(R, {}).get("state") == "lost")
             took = time.monotonic() - cut
+            # within 3 s on a quiet machine (SPEC 12f): a figure, not an assertion (issue 30)
             print(f"the live stream said the link was lost {took:.2f} s after the last tick")
-            assert took <= 3.0
             assert "no clock tick since" in lost["links"][R]["reason"] and lost["links"][R]["since"]
             rover.ticking.set()
             back = next(m for m in messages if m.get("links", {}).get(R, {}).get("state") == "up")

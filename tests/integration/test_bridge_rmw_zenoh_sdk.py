@@ -15,7 +15,6 @@ import math
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -119,11 +118,9 @@ def test_an_independent_rmw_zenoh_client_reads_every_topic_and_drives_the_radio(
             probe.wait_value(keys.radio_link(R, "lander"),
                              lambda v, r=in_range, d=distance_m: v["in_range"] is r
                              and math.isclose(v["x_m"], d, abs_tol=1e-6))
-            t0 = time.monotonic()
             wait_for(lambda r=in_range: client.find(
                 lambda i: i.get("topic") == "/final_comms_radio_bool" and "msg" in i)[-1]["msg"]["data"] is r,
                      10, f"the SDK to read /final_comms_radio_bool {in_range}")
-            assert time.monotonic() - t0 < 10
         # the crew's controls through the SDK's service client: a short trips 5V_CH2; the crew
         # safes the channel, the instructor clears the short, the crew resets and switches on
         rail = keys.rail_state(R, "5V_CH2")
