@@ -37,7 +37,11 @@ fault is in effect, of
 inputs; accepted, or refused with the twin's reason) from the injection until the fault is
 settled: cleared, its alarms cleared and the rails it affected back in their state before it
 (a rail the crew switched off to isolate a fault and never switched back keeps the window open
-to the session's end).
+to the session's end), and that act on what the fault touches (SPEC §13a): its component, the
+rail it sits on, the rails and loads its symptoms reached (:func:`unit_of` names each). Three
+faults at once and the crew switching one load's rail off: that is an action on the short of
+the load, none on the dust of a panel or the heating of the pack (found by an instructor: both
+listed it, "acted 1 min 42 s after the symptom").
 
 **Resolved** is when the alarms the fault caused had all cleared and the rails it affected
 (the load's rail, the failed rail) were back in their state before it - the latest such moment
@@ -75,6 +79,7 @@ from typing import Any
 import msgspec
 
 from common.events import session_opened
+from common.faults import NAMED_COMPONENTS
 from common.symptoms import (
     SMOOTH_POWER,
     SYMPTOMS,
@@ -224,7 +229,8 @@ class _Fault:
     resolved_t: float | None = None
     resolved_by: str = ""
     settled_t: float | None = None  # no more actions collected after this
-    actions: list[CrewAction] = field(default_factory=list)
+    actions: list[CrewAction] = field(default_factory=list)  # the crew's, while it was open
+    touches: set[str] = field(default_factory=set)  # what it touches: "load/cam", "rail/5V", "battery"
     era: int = 0  # its session's epochs before the one it was injected in (_Session.era)
 
     @property
@@ -238,12 +244,18 @@ class _Fault:
             return True
         return False
 
+    def acted(self) -> list[CrewAction]:
+        """The crew's actions on what it touches (SPEC 13a): another fault's rail switched off
+        while this one was in effect is no response to this one."""
+        return [a for a in self.actions if action_unit(a.key) in self.touches]
+
     def result(self, cls: type[FaultResponse] = FaultResponse, **extra: Any) -> Any:
-        first = self.actions[0].t_s if self.actions else None
+        acted = self.acted()
+        first = acted[0].t_s if acted else None
         return cls(
             key=self.key, injected_t_s=self.injected_t, first_symptom_t_s=self.symptom_t,
             first_crew_action_t_s=first, resolved_t_s=self.resolved_t,
-            crew_actions=list(self.actions), fault=self.path, kind=self.kind, params=dict(self.params),
+            crew_actions=acted, fault=self.path, kind=self.kind, params=dict(self.params),
             injected_by=self.actor, symptom=self.symptom, resolved_by=self.resolved_by,
             cleared_t_s=self.cleared_t, active=self.active,
             response_s=None if first is None or self.symptom_t is None else first - self.symptom_t,
@@ -272,6 +284,24 @@ class _Session:
 
 def _scopes(rover_prefix: str, component: str, name: str | None) -> tuple[str, ...]:
     return (rover_prefix + "/".join(p for p in (component, name) if p) + "/",)
+
+
+def unit_of(tail: str) -> str:
+    """The part of the rover a key under ``lunaris/<rover>/`` is about: ``rail/5V_CH2`` of
+    ``rail/5V_CH2/tripped`` or ``cmd/rail/5V_CH2``, ``solar/left`` of ``input/solar/left/dust``,
+    ``battery`` of ``battery/no_output``, ``drive`` of ``input/drive/traverse``."""
+    parts = tail.split("/")
+    if parts[0] in ("cmd", "input", "fault"):
+        parts = parts[1:]
+    if not parts or not parts[0]:
+        return ""
+    return "/".join(parts[:2]) if parts[0] in NAMED_COMPONENTS and len(parts) > 1 else parts[0]
+
+
+def action_unit(key: str) -> str:
+    """:func:`unit_of` a crew action's full key (``lunaris/<rover>/cmd/rail/5V``)."""
+    chunks = key.split("/", 2)
+    return unit_of(chunks[2]) if len(chunks) == 3 else ""
 
 
 class Response:
@@ -550,6 +580,8 @@ class Response:
             scopes += [self.prefix + f"load/{ld}/" for ld, r in self._load_rail.items() if r == name]
         f = _Fault(key, path, component, name, kind, dict(params), actor or "", t, tuple(scopes), rails,
                    era=s.era)
+        f.touches.add(unit_of(path))
+        f.touches.update("rail/" + r for r in rails)
         s.faults.append(f)
         if s is not self._current:  # of a session that ended, heard late: the twin moved on
             f.ended = True
@@ -618,6 +650,10 @@ class Response:
                 self._settle(f, t)
 
     def _caused(self, f: _Fault, key: str, t: float, message: str) -> None:
+        unit = unit_of(message)
+        f.touches.add(unit)  # what its symptoms reached, and a load's rail with it
+        if unit.startswith("load/") and unit[5:] in self._load_rail:
+            f.touches.add("rail/" + self._load_rail[unit[5:]])
         f.caused.add(key)
         f.caused_any = True
         f.found(t, f"alarm {message}")
@@ -716,6 +752,9 @@ class Response:
                 deadline_t_s=sim(deadline_rel), detail=str(_get(step, "detail", "")))))
         s = self._current
         state = _get(p, "state", "")
+        played_in = _get(p, "session", "") or ""
+        if played_in and s.id and played_in != s.id:
+            return  # a drill of another session: none of this one's (SPEC 13a)
         if state != "playing" and scenario not in s.pending:
             return  # the end of a run this session did not see play (a cached progress)
         if s.pending.get(scenario) != out:
@@ -754,7 +793,7 @@ class Response:
         s, now = self._current, self._t
         faults = [f.result(LiveFault, since_injection_s=(
             None if now is None or not f.active else max(0.0, now - f.injected_t)),
-            crew_acted=bool(f.actions)) for f in s.faults]
+            crew_acted=bool(f.acted())) for f in s.faults]
         return LiveResponse(self.rover, s.id, s.trainee, now, faults,
                             self._expectations(s), self.version)
 

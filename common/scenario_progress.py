@@ -57,3 +57,4 @@ class ScenarioProgress(msgspec.Struct, omit_defaults=False):
     end_reason: str = ""
     ok: bool | None = None  # at the end: every step fired and was accepted (expectations aside)
     actor: str = "scenario"
+    session: str = ""  # the trainee session it plays in (a drill belongs to it: SPEC 13a)

@@ -203,8 +203,9 @@ def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
                         color="tab:green" if a.accepted else "tab:red")
             if f.resolved_t_s is not None:
                 ax.plot([x1], [y], marker="s", color="tab:green", markersize=6)
-            text = (f"symptom {_since(f.first_symptom_t_s, f.injected_t_s)}, first crew action "
-                    f"{_since(f.first_crew_action_t_s, f.first_symptom_t_s or f.injected_t_s)}, "
+            since = _since(f.first_crew_action_t_s, f.first_symptom_t_s or f.injected_t_s)
+            acted = f"first crew action {since}" if f.crew_actions else "no response from the crew"
+            text = (f"symptom {_since(f.first_symptom_t_s, f.injected_t_s)}, {acted}, "
                     f"resolved {_since(f.resolved_t_s, f.injected_t_s)}; "
                     f"{len(f.crew_actions)} crew action(s)")
             ax.text(x0, y - 0.26, text, fontsize="x-small", va="bottom", clip_on=True)
@@ -327,7 +328,7 @@ def _score_html(score: SessionResponse | None) -> str:
         f"<td>{_t(f.first_crew_action_t_s)}</td>"
         f"<td>{_t_since(f.resolved_t_s, f.injected_t_s)}<br>"
         f"<small>{e(f.resolved_by)}</small></td>"
-        f"<td>{'<br>'.join(f'{a.t_s:.1f} {e(a.action)} {e(a.target)}' + ('' if a.accepted else ' <b>refused</b>: ' + e(a.message)) for a in f.crew_actions) or '-'}</td></tr>"  # noqa: E501
+        f"<td>{'<br>'.join(f'{a.t_s:.1f} {e(a.action)} {e(a.target)}' + ('' if a.accepted else ' <b>refused</b>: ' + e(a.message)) for a in f.crew_actions) or 'no response'}</td></tr>"  # noqa: E501
         for f in score.faults)
     expects = "\n".join(
         f"<tr class='{'met' if x.met else 'missed'}'><td>{e(x.label)}</td><td>{e(x.condition)}</td>"

@@ -17,6 +17,13 @@ outcome, :class:`common.messages.ExpectationMark`) and its end in the journal
 (``control/scenario``), and while it plays it is never silent for 10 s of wall time: it says
 what it waits for. At the end it puts the clock back to the speed
 it had (and, if asked, clears the faults it injected that are still active).
+
+A drill belongs to the trainee session it plays in (SPEC §13a): the first tick of another
+session (a new trainee, from the console, the CLI or ``control/session``) ends the run at once,
+"stopped: a new session began", and nothing more of it is written to the twin but the clock's
+speed put back (no expectation scored missed, no end mark, no fault cleared), so the next
+trainee's report holds none of it. Found by an instructor: a drill played on into the next
+trainee's session and scored it ("isolate the shorted camera ... waiting: 55 s left").
 """
 
 from __future__ import annotations
@@ -90,6 +97,8 @@ class Runner:
         self.last_clock: Clock | None = None
         self.clock_changed = False
         self.interrupted = False
+        self.session_id: str | None = None  # the trainee session it plays in
+        self.superseded = False  # another session began: the run ended with nothing more written
         self.ok: bool | None = None
         self.code: int | None = None  # the exit status, once ended: 0 all played, 1 not, 2 could not
         self.message = ""
@@ -116,7 +125,8 @@ class Runner:
         return ScenarioProgress(
             t_s=self.last_clock.t_s if self.last_clock else 0.0, scenario=sc.scenario.name,
             rover=self.rover, state=self.state, t_rel_s=p.t_rel, waiting=waiting,
-            message=self.message, steps=steps, end_reason=p.end_reason, ok=self.ok)
+            message=self.message, steps=steps, end_reason=p.end_reason, ok=self.ok,
+            session=self.session_id or "")
 
     # -- the run ----------------------------------------------------------------------------------------
 
@@ -186,6 +196,7 @@ class Runner:
             raise ToolError(f"no clock from {self.rover} within {self.wait_s:g} s: is its clock "
                             "service running?") from None
         self.first_clock = self.last_clock = first
+        self.session_id = first.session
         return first
 
     def _plan(self, tail: str, body: msgspec.Struct | dict | None) -> Write:
@@ -269,6 +280,12 @@ class Runner:
                     tick = self.ticks.get_nowait()
             except queue.Empty:
                 pass
+            if tick is not None and self._other_session(tick):
+                player.finish(f"stopped: a new session began ({tick.session})")
+                self.superseded = self.interrupted = True
+                yield self._say(f"stopped at sim t {tick.t_s:.1f} s: a new session began; "
+                                "the drill belonged to the one before")
+                break
             if tick is not None:
                 self.last_clock = tick
                 yield from self._step(tick)
@@ -278,20 +295,33 @@ class Runner:
                                  "link lost?), ") + (f"sim t {tick.t_s:.1f} s, " if tick else "")
                                 + player.waiting(self.mirror.lookup(self.rover)))
             self._publish()
-        yield from self._scores()  # the expectations the end scored (missed)
-        yield from self._wait_answers()
-        yield from self._finish_clock()
-        if self.clear_at_end:
-            yield from self._clear_injected()
+        if self.superseded:  # nothing of it in the next session but its clock (module text)
+            self.pending.clear()
+            yield from self._finish_clock()
+        else:
+            yield from self._scores()  # the expectations the end scored (missed)
+            yield from self._wait_answers()
+            yield from self._finish_clock()
+            if self.clear_at_end:
+                yield from self._clear_injected()
         self.ok = not self.interrupted and all(
             r.fired_t_s is not None and r.outcome not in ("rejected", "not applied")
             for r in player.results if self.scenario.steps[r.index].expect is None)
         self.code = 0 if self.ok else 1
         self.state = "ended"
-        self._mark("end", f"ended: {player.end_reason}; "
-                   + ("every step fired and was accepted" if self.ok else "not every step played"))
+        if not self.superseded:
+            self._mark("end", f"ended: {player.end_reason}; "
+                       + ("every step fired and was accepted" if self.ok else "not every step played"))
         self.message = f"ended: {player.end_reason}"
         self._publish(force=True)
+
+    def _other_session(self, tick: Clock) -> bool:
+        """Whether ``tick`` is of another trainee session than the run's (a clock older than
+        sessions names none: never)."""
+        if not self.session_id:
+            self.session_id = tick.session or None
+            return False
+        return bool(tick.session) and tick.session != self.session_id
 
     def _step(self, tick: Clock) -> Iterator[Progress]:
         player = self.player

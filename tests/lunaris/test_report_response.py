@@ -137,7 +137,7 @@ def test_two_trainees_in_one_recording_each_reported_with_nothing_of_the_other(t
         30.0, 30.0, 40.0)
     assert short["resolved_t_s"] is None  # the rail was off, not on, when the session ended
     assert [(a["t_s"], a["action"], a["target"], a["accepted"]) for a in short["crew_actions"]] == [
-        (40.0, "rail off", "5V_CH2", True), (41.0, "rail command", "5V_CH9", False),
+        (40.0, "rail off", "5V_CH2", True),  # (41.0: a refused command to 5V_CH9, not the short's)
         (42.0, "rail reset", "5V_CH2", True)]
     assert first["expectations"] == []
 
@@ -145,8 +145,10 @@ def test_two_trainees_in_one_recording_each_reported_with_nothing_of_the_other(t
     assert heating["key"] == P + "fault/battery/heating" and heating["injected_by"] == "scenario"
     # 0.05 C/s from 20 C: 0.2 C above the band after 4 s
     assert heating["first_symptom_t_s"] == pytest.approx(24.1, abs=0.15)
-    assert heating["first_crew_action_t_s"] == 30.0 and heating["resolved_t_s"] == 32.0
-    assert [(a["action"], a["target"]) for a in heating["crew_actions"]] == [("rail off", "12V")]
+    # the 12 V rail is nothing the pack's heating touches (SPEC 13a): no action on it, though the
+    # drill's own expectation (below) scores the rail's switching off
+    assert heating["first_crew_action_t_s"] is None and heating["resolved_t_s"] == 32.0
+    assert heating["crew_actions"] == [] and heating["response_s"] is None
     (expect,) = second["expectations"]
     assert (expect["label"], expect["met"], expect["at_t_s"], expect["within_s"]) == (
         "isolate the heater", True, 30.1, 600.0)
@@ -177,6 +179,7 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     html = page.read_text()
     assert f"Score sheet: session {S2}" in html and "battery/heating" in html and "isolate the heater" in html
     assert "met at 30.1" in html and "nav_camera" not in html
+    assert "<td>no response</td>" in html  # the heating: no crew action on what it touches
     # every trainee's report a link away, and who acted in the events (found by an instructor:
     # only the last session's report could be opened from the console, and the crew's actions
     # read like the instructor's)
@@ -193,7 +196,7 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     sheet = fig.axes[1]
     assert sheet.get_title(loc="left") == "score sheet: 1 fault(s); 0 of 0 expectation(s) met"
     assert [t.get_text() for t in sheet.get_yticklabels()] == ["load/nav_camera/short"]
-    assert any("3 crew action(s)" in t.get_text() for t in sheet.texts)
+    assert any("2 crew action(s)" in t.get_text() for t in sheet.texts)  # (not 5V_CH9: another rail)
 
 
 def test_a_recording_is_read_fast_and_whole_and_a_cut_one_as_far_as_it_goes(tmp_path):

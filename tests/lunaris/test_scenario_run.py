@@ -253,3 +253,45 @@ def test_scenario_check_and_start_errors(live, tmp_path):
     other.write_text("scenario: {name: x}\nrover: ltv-1\nsteps:\n  - {at_s: 1, sun_angle: 50}\n")
     done = run_tool("scenario", "run", str(other), "--connect", live.endpoint)
     assert done.returncode == 2 and "unknown rover 'ltv-1'" in done.stderr
+
+
+def test_a_drill_playing_when_the_next_session_begins_stops_and_scores_none_of_it(live, tmp_path):
+    """SPEC 13a: a drill belongs to its session. Found by an instructor: the shipped drill went
+    on into the next trainee's session and scored it ("isolate the shorted camera ... waiting:
+    55 s left"); the next session's report carried the drill's expectation, missed."""
+    p, ep = live.probe, live.endpoint
+    done = run_tool("session", "start", R, "--trainee", "ana", "--connect", ep)
+    assert done.returncode == 0, done.stdout + done.stderr
+    scenario = ROOT / "config" / "scenarios" / "shorted-camera.yaml"
+    recording = tmp_path / "two.mcap"
+    env = env_without_zenoh_config()
+    rec = subprocess.Popen(lunaris_cmd("record", str(recording), "--connect", ep, "--rover", R),
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    proc = None
+    try:
+        assert rec.stderr.readline().startswith("recording "), "the recorder did not start"
+        proc = subprocess.Popen(lunaris_cmd("scenario", "run", str(scenario), "--time-scale", "20",
+                                            "--connect", ep),
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT,
+                                env=env)
+        # the drill's short has tripped the camera's rail; nobody acts: its expectation waits
+        p.wait_value(keys.rail_state(R, "5V_CH2"), lambda v: v["state"] == "tripped", timeout_s=60)
+        done = run_tool("session", "start", R, "--trainee", "ben", "--connect", ep)
+        assert done.returncode == 0, done.stdout + done.stderr
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        for q in (proc, rec):
+            if q is not None and q.poll() is None:
+                q.send_signal(signal.SIGINT)
+                q.wait(20)
+    stopped = [line for line in out.splitlines() if "a new session began" in line]
+    assert stopped, out
+    # at the new session's first tick it heard (its clock starts again from 0 at x20: 2 s a tick)
+    assert float(stopped[0].split("stopped at sim t ")[1].split(" s")[0]) <= 4.0, stopped[0]
+
+    done = run_tool("report", str(recording), "--json")
+    assert done.returncode == 0, done.stderr
+    by_trainee = {s["trainee"]: s for s in json.loads(done.stdout)}
+    assert by_trainee["ben"]["expectations"] == [], by_trainee["ben"]["expectations"]
+    assert not [f for f in by_trainee["ben"]["faults"] if f["injected_by"] == "scenario"]
+    assert [f["fault"] for f in by_trainee["ana"]["faults"]] == ["load/nav_camera/short"]

@@ -77,7 +77,8 @@ function faultRow(f) {
       : html`${at(f.first_symptom_t_s)}<br><small>${plainMessage(f.symptom)}</small>`}</td>
     <td class="wrap">${acted ? html`<b class="st-on">acted</b>${f.response_s === null ? "" : ` ${dur(f.response_s)} after the symptom`}
       <br><small>${f.crew_actions.map(actionWords).join(" · ")}</small>`
-      : html`<span class="t ${f.first_symptom_t_s !== null && f.active ? "sev-warning" : "muted"}">not yet</span>`}</td>
+      : f.active ? html`<span class="t ${f.first_symptom_t_s !== null ? "sev-warning" : "muted"}">not yet</span>`
+        : html`<span class="t muted">no response</span>`}</td>
     <td class="wrap">${f.resolved_t_s === null ? (f.active ? "in effect" : "cleared")
       : html`${at(f.resolved_t_s)}${f.resolved_by ? html`<br><small>${plainMessage(f.resolved_by)}</small>` : nothing}`}</td></tr>`;
 }
