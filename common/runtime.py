@@ -889,17 +889,19 @@ class Runtime:
     # -- events and rejection ---------------------------------------------------------------
 
     def event(self, rover: str, severity: Severity, kind: EventKind, key: str, message: str,
-              params: dict | None = None, *, actor: str | None = None) -> None:
+              params: dict | None = None, *, actor: str | None = None, t_s: float | None = None) -> None:
         """Publish an event of a rover on this service's own key,
         ``lunaris/<rover>/event/<service>`` (the faults service journals it and relays it on
         ``lunaris/<rover>/event``). Events are never dropped under congestion (the journal is
-        complete). ``actor``: by default the actor of the write being handled, ``twin`` for
-        the twin's own (:data:`TWIN_KINDS`, or no write). ``session``: the trainee session
+        complete). ``t_s``: the sim time of what it tells when that was before now (a command
+        answered a tick after it was applied); by default the rover's time now. ``actor``: by
+        default the actor of the write being handled, ``twin`` for the twin's own
+        (:data:`TWIN_KINDS`, or no write). ``session``: the trainee session
         the service is in (:attr:`session_id`). ``(source_id, seq)`` names the event
         among the rover's. A rover this service does not serve (a rejection of a key naming
         an unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
         if self._held is not None:  # (events_after)
-            self._held.append(((rover, severity, kind, key, message, params), {"actor": actor}))
+            self._held.append(((rover, severity, kind, key, message, params), {"actor": actor, "t_s": t_s}))
             return
         if keys.has_wildcard(rover) or "/" in rover or not rover:  # never a key naming many
             print(f"{self.name}: no event for rover {rover!r}: {message}", file=sys.stderr, flush=True)
@@ -910,7 +912,9 @@ class Runtime:
         slot = rover if served else ""
         seq = self._event_seq[slot] = self._event_seq.get(slot, 0) + 1
         ekey = keys.event_of(rover, self.name)
-        ev = Event(t_s=self.t_s.get(rover, 0.0), severity=severity, source=self.name, kind=kind,
+        now = self.t_s.get(rover, 0.0)
+        ev = Event(t_s=now if t_s is None or t_s > now else t_s, severity=severity, source=self.name,
+                   kind=kind,
                    key=key, message=message, params=params, source_id=self._zid, seq=seq,
                    actor=actor, session=self._session_of(rover, kind, key) if served else "")
         if not served:

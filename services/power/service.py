@@ -56,6 +56,7 @@ class Held(NamedTuple):
     tick_t: float | None  # the rover's newest tick of loads when it came
     until: float  # monotonic time it is applied anyway
     actor: str = "instructor"  # who sent it (its answer says so)
+    applied: list[float] | None = None  # the stamp of the rails it changed, once published
 
 
 @dataclass
@@ -74,6 +75,7 @@ class Pdm(PerRover):
     # the resets applied whose answer waits for the loads to follow (tick_t: the tick they
     # were applied on)
     answering: list[Held] = field(default_factory=list)
+    unstamped: list[Held] = field(default_factory=list)  # applied, the rails not yet published
 
 
 class PowerNode(Node[Pdm]):
@@ -117,6 +119,10 @@ class PowerNode(Node[Pdm]):
             stamp = pdm.stamped
         pdm.stamped, t = stamp, stamp[1]
         pdm.published = pdm.newest
+        for c in pdm.unstamped:  # the time of the rails they changed: their events' time
+            if c.applied is not None:
+                c.applied.append(t)
+        pdm.unstamped.clear()
         for key, r in zip(pdm.rail_keys, readings, strict=True):
             self.publish(key, RailState(t, *r[1:]))  # the reading's fields but its name, in order
             if pdm.last_state.get(r.name) != r.state:
@@ -221,7 +227,7 @@ class PowerNode(Node[Pdm]):
         if cmd.on is None and not cmd.reset:
             raise BadInput('give {"on": true|false} or {"reset": true}')
         c = Held(s.key, s.parts[2], cmd, pdm.newest, time.monotonic() + RESET_HOLD_S,
-                 self.rt.actor(s))
+                 self.rt.actor(s), [])
         if cmd.reset or pdm.held:  # judged on the next tick's loads (in order)
             pdm.held.append(c)
             return
@@ -237,12 +243,17 @@ class PowerNode(Node[Pdm]):
         if any(c.cmd.reset and (r := readings.get(c.rail)) is not None and r.state == "on"
                for c in cmds):  # answered, in order, once the loads have seen the rail on
             until = time.monotonic() + RESET_HOLD_S
-            pdm.answering.extend(c._replace(tick_t=pdm.newest, until=until) for c in cmds)
+            waiting = [c._replace(tick_t=pdm.newest, until=until) for c in cmds]
+            pdm.answering.extend(waiting)
+            pdm.unstamped.extend(waiting)  # (the same lists of stamps as the commands')
             return
         self.answer(pdm, cmds)
 
     def answer(self, pdm: Pdm, cmds: list[Held]) -> None:
-        """Each command's event: the rail's state now, in words the crew can act on."""
+        """Each command's event: the rail's state now, in words the crew can act on, stamped
+        with the time of the rails it changed (SPEC 13a: a reset answered a tick of loads later
+        was stamped a tick after its effect, and the debrief had the fault settled before the
+        action that settled it)."""
         readings = {r.name: r for r in pdm.model.compute()[0]}
         for c in cmds:
             what = ", ".join(w for w in (None if c.cmd.on is None else f"on={c.cmd.on}".lower(),
@@ -258,7 +269,8 @@ class PowerNode(Node[Pdm]):
             elif now != "on" and why:
                 said += f" ({why})"
             self.rt.event(pdm.id, "info", "command", c.key, said,
-                          {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now}, actor=c.actor)
+                          {"on": c.cmd.on, "reset": bool(c.cmd.reset), "state": now}, actor=c.actor,
+                          t_s=c.applied[0] if c.applied else None)  # (given [] by on_command)
 
     # -- faults and state -------------------------------------------------------------------
 

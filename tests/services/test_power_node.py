@@ -10,7 +10,7 @@ import msgspec
 
 from common import keys
 from common.config import load_rover
-from common.messages import LoadPower, RailState
+from common.messages import LoadPower, RailCommand, RailState
 from common.runtime import Sample
 from services.power.service import PowerNode
 from testbed.twin import static_rover
@@ -32,6 +32,14 @@ class _Runtime:
         self.epoch = {ROVER: 0}
         self.faults = _Faults()
         self.published: list[tuple[str, Any]] = []
+        self.events: list[tuple[str, str, float]] = []  # (kind, message, t_s as the event says)
+
+    def event(self, rover: str, severity: str, kind: str, key: str, message: str,
+              params: dict | None = None, *, actor: str | None = None, t_s: float | None = None) -> None:
+        self.events.append((kind, message, self.t_s[rover] if t_s is None or t_s > self.t_s[rover] else t_s))
+
+    def actor(self, _sample: Any) -> str:
+        return "crew"
 
     def publish(self, key: str, msg: msgspec.Struct, **_: Any) -> None:
         self.published.append((key, msg))
@@ -114,3 +122,34 @@ def test_a_service_ahead_of_its_loads_stamps_their_tick_and_never_goes_back() ->
     _loads(node, names, 0.0)
     node.flush()
     assert _rail_times(rt)[-1] == 0.0
+
+
+def _command(node: PowerNode, rail: str, **cmd: Any) -> None:
+    key = keys.cmd_rail(ROVER, rail)
+    msg = RailCommand(**cmd)
+    node.on_command(node.rovers[ROVER], msg, Sample(key, ROVER, ["cmd", "rail", rail],
+                                                    msgspec.json.encode(msg), False))
+
+
+def test_a_reset_answered_a_tick_later_is_stamped_when_the_rail_came_back() -> None:
+    """SPEC 13a: a command's event carries the time of the tick it was applied at. Found by an
+    instructor: 'rail 5V: reset; the rail is now on' at 8.6 s, the rail on at 8.5 s, and the
+    debrief had the fault settled before the action that settled it."""
+    node, rt, names = _node()
+    rail = keys.rail_state(ROVER, "5V_CH2")
+    rt.t_s[ROVER] = 0.1
+    _loads(node, names, 0.1)
+    node.flush()
+    _command(node, "5V_CH2", on=False)
+    rt.t_s[ROVER] = 0.2
+    _loads(node, names, 0.2)
+    node.flush()
+    _command(node, "5V_CH2", on=True, reset=True)  # held for the next tick's loads
+    for t in (0.3, 0.4):
+        rt.t_s[ROVER] = t
+        _loads(node, names, t)
+        node.flush()
+    on_at = next(m.t_s for k, m in rt.published if k == rail and m.state == "on" and m.t_s > 0.1)
+    said = [(m, t) for kind, m, t in rt.events if kind == "command" and "reset" in m]
+    assert said == [("rail 5V_CH2: on=true, reset; the rail is now on", on_at)], (said, on_at)
+    assert on_at == 0.3  # applied on the tick after it came, answered at 0.4
