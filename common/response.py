@@ -166,8 +166,9 @@ class SessionResponse(msgspec.Struct, omit_defaults=False):
     faults: list[FaultResponse]
     expectations: list[Expectation]
     rover: str = ""
-    start_t_s: float | None = None  # the session's first sim time seen
+    start_t_s: float | None = None  # the session's first sim time seen (of its own clock ticks)
     end_t_s: float | None = None  # its last
+    started_wall: float | None = None  # when it began, UTC epoch seconds (the clock's word of it)
 
 
 class LiveFault(FaultResponse):
@@ -266,6 +267,7 @@ class _Fault:
 class _Session:
     id: str  # the clock's session id; "" until one is known
     trainee: str | None = None  # from the clock's event that opened it
+    started_wall: float | None = None  # from the same event
     faults: list[_Fault] = field(default_factory=list)
     active: dict[str, _Fault] = field(default_factory=dict)  # fault key -> the fault in effect
     raised: dict[str, float] = field(default_factory=dict)  # derived alarm key -> raised at
@@ -404,9 +406,10 @@ class Response:
             self._number(_UMBILICAL, t, get("power_w"))
         elif head == "scenario" and n == 2 and parts[1] == "progress":
             self._progress(payload)
-        if self._current.start_t is None:
-            self._current.start_t = t
-        return self._current.id
+        cur = self._current
+        if cur.start_t is None and not cur.id:  # a twin older than sessions: no tick names one
+            cur.start_t = t
+        return cur.id
 
     def _clock(self, t: float, get: Any) -> None:
         epoch, sid = get("epoch", 0) or 0, get("session", "") or ""
@@ -533,11 +536,13 @@ class Response:
         kind, key = _get(ev, "kind", ""), _get(ev, "key", "") or ""
         t = _get(ev, "t_s") or 0.0
         sid = _get(ev, "session", "") or ""
-        s = self._session_of(sid, self._t) if sid else self._current
+        s = self._session_of(sid, None) if sid else self._current  # its start: its own first tick
         params = _get(ev, "params") or {}
         opened = session_opened(ev)
         if opened is not None and opened[0] == s.id:  # the clock's word that it opened
             s.trainee = opened[1]
+            wall = params.get("started_wall") if isinstance(params, Mapping) else None
+            s.started_wall = float(wall) if isinstance(wall, int | float) else None
             self.version += 1
         if kind == "fault_injected":
             self._inject(s, key, t, params if isinstance(params, Mapping) else {}, _get(ev, "actor", ""))
@@ -775,7 +780,7 @@ class Response:
         return SessionResponse(
             session=s.id, trainee=s.trainee, faults=[f.result() for f in s.faults],
             expectations=self._expectations(s), rover=self.rover, start_t_s=s.start_t,
-            end_t_s=s.last_t)
+            end_t_s=s.last_t, started_wall=s.started_wall)
 
     def sessions(self, *, recorded_only: bool = False) -> list[SessionResponse]:
         """Every session seen, in order (``recorded_only``: those the clock ticked in, not

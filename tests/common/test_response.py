@@ -570,3 +570,24 @@ def test_the_progress_of_a_drill_played_in_another_session_is_none_of_this_ones(
     clock(r, 0.0, epoch=1, session=B)
     r.value(["scenario", "progress"], {**_progress(13.0, 11.0, None), "session": A})
     assert r.live().session == B and r.live().expectations == []
+
+
+def test_a_sessions_times_are_its_own_from_its_first_tick_with_its_wall_clock_start():
+    """SPEC 13a: one time base per session. Found by an instructor: Ben's session said it
+    began at 203.1 s, the time Ana's had reached, while his faults were at 17-44 s; one session
+    began at 165.8 and ended at 151.1."""
+    A, B = "20261129T050000Z", "20261129T051000Z"
+    r = Response(R)
+    for t in ticks(0.0, 203.1):
+        clock(r, t, session=A)
+    # the clock's word that B opened comes before B's first tick (and a late sample of A's)
+    ev(r, 203.1, "session", "control/session", actor="instructor", session=B, source="clock",
+       params={"session": B, "trainee": "Ben", "started_wall": 1795928400.5})
+    r.value(["battery", "state"], {"t_s": 203.2, "soc": 0.5})
+    for t in ticks(0.0, 44.0):
+        clock(r, t, epoch=1, session=B)
+    inject(r, 17.0, "load/imu/open", session=B)
+    a, b = r.sessions()
+    assert (a.session, a.start_t_s, a.end_t_s) == (A, 0.0, pytest.approx(203.0))
+    assert (b.session, b.trainee, b.start_t_s, b.started_wall) == (B, "Ben", 0.0, 1795928400.5)
+    assert b.end_t_s == pytest.approx(43.9) and b.start_t_s <= b.faults[0].injected_t_s <= b.end_t_s
