@@ -91,11 +91,13 @@ def parse_shard(text: str | None) -> tuple[int, int]:
 
 
 def _count_start(service: str) -> None:
-    """One line in :data:`STARTS_ENV`'s file, if it names one (``make test`` prints the count)."""
+    """One line in :data:`STARTS_ENV`'s file, if it names one (``make test`` prints the count):
+    the service and the test that started it (pytest's ``PYTEST_CURRENT_TEST``, inherited)."""
     path = os.environ.get(STARTS_ENV)
     if path:
+        test = os.environ.get("PYTEST_CURRENT_TEST", "").split(" ")[0]
         with open(path, "a", encoding="utf-8") as f:  # one short append: whole lines, any writers
-            f.write(service + "\n")
+            f.write(f"{service} {test}\n")
 
 
 def main(args: argparse.Namespace) -> int:

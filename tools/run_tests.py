@@ -94,7 +94,12 @@ def main(argv: list[str] | None = None) -> int:
         rc = subprocess.run([*pytest, "-p", "tools.pytest_outcomes", *pytest_args], cwd=ROOT,
                             env=env).returncode
         root, outcomes = read_outcomes(outcomes_file)
-        starts = starts_file.read_text(encoding="utf-8").split() if starts_file.exists() else []
+        lines = starts_file.read_text(encoding="utf-8").splitlines() if starts_file.exists() else []
+        starts = [line.split(" ")[0] for line in lines]
+        by_module: dict[str, int] = {}
+        for line in lines:
+            module = line.partition(" ")[2].split("::")[0] or "(no test)"
+            by_module[module] = by_module.get(module, 0) + 1
 
     failed = [n for n, o in outcomes.items() if o == "failed"]
     status = 0
@@ -124,6 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nmake test took {took // 60} min {took % 60} s ({took} s)")
     kinds = ", ".join(f"{s} {starts.count(s)}" for s in sorted(set(starts), key=starts.count, reverse=True))
     print(f"service processes started by the whole run: {len(starts)}{' (' + kinds + ')' if kinds else ''}")
+    most = sorted(by_module.items(), key=lambda kv: -kv[1])[:8]
+    if most:
+        print("  the most by test module: " + ", ".join(f"{m} {n}" for m, n in most))
     for nodeid in flaky:
         print(f"FLAKY: {nodeid} (failed in the whole run, passed run again on its own)")
     for nodeid in still:
