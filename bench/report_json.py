@@ -1,7 +1,7 @@
 """``lunaris report FILE.mcap --json`` of a one-hour session recording (SPEC §10 target: under 5 s).
 
 Makes the recording first, as ``lunaris record`` would have written it from a live MAPP twin
-at 10 Hz: the composed models (services/composed.py) stepped for an hour of simulated time,
+at 10 Hz: the composed models (services/composed/__init__.py) stepped for an hour of simulated time,
 every key the twin publishes each tick (clock, battery, 10 loads, 6 rails, the summary, 2
 panels, the umbilical, the radio link, the drive: 24 keys, ~864,000 messages), with a trainee's
 session in it (the clock's session id on every tick and event, SPEC 12c): a short on the

@@ -23,18 +23,16 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgspec
 import zenoh
 
 from common import keys
 from common.faults import Fault, FaultKey, params_from_dict, parse_fault_key, parse_params
+from common.host import Host, Sample
 from common.messages import ActiveFault, ActiveFaults, BadInput, Severity, encode
 from common.state_store import Damaged, not_finite
-
-if TYPE_CHECKING:
-    from common.runtime import Runtime, Sample
 
 __all__ = ["FaultApply", "FaultBook", "saved_fault"]
 
@@ -72,7 +70,7 @@ def saved_fault(raw: Any) -> tuple[ActiveFault, FaultKey, Fault]:
 
 
 class FaultBook:
-    def __init__(self, rt: Runtime):
+    def __init__(self, rt: Host):
         self.rt = rt
         self.injected: dict[str, dict[str, tuple[ActiveFault, Fault]]] = {r: {} for r in rt.rovers}
         self.derived: dict[str, dict[str, ActiveFault]] = {r: {} for r in rt.rovers}

@@ -58,6 +58,7 @@ __all__ = [
     "Short",
     "Stuck",
     "battery_fault_code",
+    "held_power_w",
     "check_component",
     "injected",
     "kind_of",
@@ -310,6 +311,29 @@ def injected(record: Iterable[ActiveFault], component: str, name: str | None = N
         fk = parse_fault_key(parts)
         out.append(params_from_dict(fk, fault.params))
     return out
+
+
+def held_power_w(faults: Iterable[FaultParams], rail_voltage_v: float) -> float | None:
+    """The power the faults in effect on one load hold it at while its rail is on [W]; None
+    when they hold it at nothing (no fault: it draws its samples). Several on one load: a
+    short dominates (``V^2 / R``), then an open circuit (0 W), then stuck (its ``power_w``).
+    A kind that is not a load's raises ValueError. The loads model applies it; the battery's
+    prediction from the live twin holds a faulty load at it (one rule for both)."""
+    short_ohm = stuck_w = None
+    is_open = False
+    for fault in faults:
+        match fault:
+            case Short(resistance_ohm=ohm):
+                short_ohm = ohm
+            case Open():
+                is_open = True
+            case Stuck(power_w=power_w):
+                stuck_w = power_w
+            case _:
+                raise ValueError(f"a load has no fault kind {kind_of(fault)!r}")
+    if short_ohm is not None:
+        return rail_voltage_v ** 2 / short_ohm
+    return 0.0 if is_open else stuck_w
 
 
 def supplies_device(load_on: bool, faults: Iterable[FaultParams]) -> bool:

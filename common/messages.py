@@ -26,6 +26,7 @@ from common.reasons import humane, json_error, shown
 
 __all__ = [
     "BARE_FIELD",
+    "COMMANDED_OFF",
     "ActiveFault",
     "ActiveFaults",
     "BadInput",
@@ -160,6 +161,9 @@ class LoadPower(_Msg):
     faults: list[str]
 
 
+COMMANDED_OFF = "commanded off"  # a RailState's reason when its rail was switched off by command
+
+
 class RailState(_Msg):
     t_s: float
     voltage_v: float
@@ -167,7 +171,7 @@ class RailState(_Msg):
     power_w: float
     current_limit_a: float | None
     state: RailStateName
-    reason: str = ""
+    reason: str = ""  # why it is not on, in words (COMMANDED_OFF, the trip's cause ...)
 
 
 class PowerSummary(_Msg):

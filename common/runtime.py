@@ -66,7 +66,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
-from typing import Any, Literal, NamedTuple
+from typing import Any, Literal
 
 import msgspec
 import zenoh
@@ -75,6 +75,7 @@ import zenoh.ext as zext
 from common import keys
 from common.connection import ACTORS, PRIORITY, WRITE_MAX_AGE_S, actor_of
 from common.fault_book import FaultBook
+from common.host import Handler, Sample
 from common.input_events import InputLog, InputNote
 from common.messages import BadInput, Clock, Event, EventKind, Severity, decode, encode, humane
 from common.reasons import shown
@@ -112,17 +113,6 @@ class AlreadyRunning(RuntimeError):
     """Another instance of the service serves the same rover, or holds its state."""
 
 
-class Sample(NamedTuple):
-    key: str
-    rover: str
-    parts: list[str]  # the key's chunks after lunaris/<rover>/
-    payload: bytes
-    deleted: bool
-    attachment: bytes | None = None
-    sent_at: float | None = None  # a write's Zenoh timestamp [s since the epoch]; None: none
-    age_s: float = 0.0  # how long after sent_at the write arrived here [s]
-
-
 # A fault cleared or an alarm resolved this soon after a session began is the ending session's
 # when it began in that one (see Runtime.event): the reset's consequences reach every service
 # within a tick or two (0.1 s each) of the clock's.
@@ -136,7 +126,6 @@ TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
 WriteRole = Literal["own", "follow", "gate"]
 
 
-Handler = Callable[[Sample], None]
 TickHandler = Callable[[str, Clock], None]
 
 

@@ -43,18 +43,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import msgspec
 import zenoh
 
 from common import keys
 from common.fault_book import saved_fault
+from common.host import Host, Sample
 from common.messages import Clock, SnapshotInfo, encode
 from common.state_store import Damaged, StateStore, kind_of, not_finite, quoted, shape_problem
-
-if TYPE_CHECKING:
-    from common.runtime import Runtime, Sample
 
 __all__ = ["RESTORE", "SNAPSHOT_NAME", "SessionKeeper", "StateCheck", "StateDamaged", "StateGet",
            "StateReset", "StateSet", "parse_control"]
@@ -83,7 +81,7 @@ def parse_control(parts: list[str]) -> tuple[str, str] | None:
 class SessionKeeper:
     """Persistence, reset, snapshots and restores of one service's state."""
 
-    def __init__(self, rt: Runtime, get: StateGet, set_: StateSet, reset: StateReset,
+    def __init__(self, rt: Host, get: StateGet, set_: StateSet, reset: StateReset,
                  after: Callable[[str], None] | None, persist_every_s: float | None,
                  check: StateCheck | None = None, damaged: StateDamaged | None = None,
                  files: dict[str, str] | None = None):

@@ -83,7 +83,7 @@ def _from_file(path: str, request: PredictionRequest, traverse: str | None = Non
     from common.traverse import load_traverse
     from services.battery.prediction import assumptions, percentiles, predict, start_of
     from services.composed import ComposedTwin
-    from services.drive.budget import power_profile
+    from services.composed.budget import power_profile
 
     try:
         rover = load_rover(path)

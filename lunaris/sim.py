@@ -18,7 +18,7 @@ import time
 from common.traverse import TraverseError, load_traverse
 from lunaris.run import load_rovers
 from services.composed import run_budget
-from services.drive.budget import TraverseBudget, run_traverse
+from services.composed.budget import TraverseBudget, run_traverse
 
 __all__ = ["add_arguments", "main"]
 

@@ -46,8 +46,9 @@ import zenoh.ext as zext
 
 from common import keys
 from common.config import Rover
-from common.faults import injected
+from common.faults import held_power_w, injected
 from common.messages import (
+    COMMANDED_OFF,
     ActiveFaults,
     BadInput,
     LoadPower,
@@ -61,8 +62,6 @@ from common.messages import (
 )
 from services.battery.model import BatteryModel
 from services.battery.prediction import MAX_STEPS, RailStart, Start, assumptions, percentiles, predict
-from services.loads.model import LoadsModel
-from services.power.model import COMMANDED_OFF
 
 __all__ = ["MAX_QUEUED", "MAX_WORK", "PredictionQueries", "rail_start", "steps_of"]
 
@@ -258,15 +257,18 @@ class PredictionQueries:
     def _fixed_loads(self, cfg: Rover, notes: list[str]) -> dict[str, float]:
         if not cfg.loads:
             return {}
-        loads = LoadsModel(cfg)
+        volts = {r.name: r.voltage_v for r in cfg.rails}
+        held: dict[str, float] = {}
         answered = False
         for reply in self.session.get(keys.faults_active(cfg.id, "loads"), timeout=GATHER_S):
             if reply.ok is None:
                 continue
             answered = True
             record = decode(reply.ok.payload.to_bytes(), ActiveFaults).faults
-            for name in loads.names:
-                loads.set_faults(name, injected(record, "load", name))
+            for load in cfg.loads:
+                p = held_power_w(injected(record, "load", load.name), volts[load.rail])
+                if p is not None:
+                    held[load.name] = p
         if not answered:
             notes.append("the loads service did not answer: no load fault assumed")
-        return {name: p for name in loads.names if (p := loads.fault_power(name)) is not None}
+        return held

@@ -21,7 +21,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from common.config import Rover
-from common.faults import FaultParams, Open, Short, Stuck, kind_of, supplies_device
+from common.faults import FaultParams, held_power_w, supplies_device
 
 __all__ = ["BLOCK_TICKS", "LoadsFleet", "LoadsModel", "sample_power"]
 
@@ -106,22 +106,7 @@ class LoadsModel:
         if name not in self.index:
             raise ValueError(f"no load {name!r}")
         faults = list(faults)
-        short_ohm = stuck_w = None
-        is_open = False
-        for fault in faults:
-            match fault:
-                case Short(resistance_ohm=ohm):
-                    short_ohm = ohm
-                case Open():
-                    is_open = True
-                case Stuck(power_w=power_w):
-                    stuck_w = power_w
-                case _:
-                    raise ValueError(f"a load has no fault kind {kind_of(fault)!r}")
-        if short_ohm is not None:
-            held: float | None = self.rail_voltage_v[self.rails[self.index[name]]] ** 2 / short_ohm
-        else:
-            held = 0.0 if is_open else stuck_w
+        held = held_power_w(faults, self.rail_voltage_v[self.rails[self.index[name]]])
         if held is None:
             self.held_w.pop(name, None)
         else:

@@ -17,11 +17,10 @@ from typing import NamedTuple
 
 from common.config import Rail, Rover, SolarRail
 from common.faults import Fail, FaultParams, kind_of
-from common.messages import RailStateName, Severity
+from common.messages import COMMANDED_OFF, RailStateName, Severity
 
 __all__ = ["COMMANDED_OFF", "PowerModel", "RailReading", "RailSwitch", "Summary"]
 
-COMMANDED_OFF = "commanded off"  # the reason of a rail switched off by command
 _ON: tuple[RailStateName, str] = ("on", "")
 
 

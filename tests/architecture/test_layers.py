@@ -14,19 +14,22 @@ The floors, from the ground up::
 3. **The CLI imports of the services only their public modules** (:data:`PUBLIC_TO_THE_CLI`):
    the bridge's face (``services.bridge``: the mapping format, the shipped mapping, a mapping
    over a fleet) and the models a tool runs in its own process, as ``lunaris sim`` and
-   ``lunaris predict`` run the composed twin (``services/composed.py``, ``drive/budget.py``,
-   ``battery/prediction.py``, any ``services/*/model.py``). Never a service's process
+   ``lunaris predict`` run the composed twin (the package ``services/composed``, its
+   ``budget.py``, ``battery/prediction.py``, any ``services/*/model.py``). Never a service's process
    (``service.py``, ``query.py``, the bridge's outlets) nor the rest of a package: a
    service runs in its own process, started by name (``lunaris run`` loads
    ``services.<name>.service`` with importlib: the one way in, and not an import).
 4. **The services stand apart.** A service's modules import of ``services`` only their own
-   package's; ``services/composed.py`` alone puts the services' models together.
+   package's; the package ``services/composed`` alone puts the services' models together.
 5. **No circles** among the modules of ``common``, ``services``, ``lunaris``, ``testbed``
    and ``bench``.
 
-Known exceptions (:data:`KNOWN_EXCEPTIONS`): edges in files other branches are changing now,
-each with the words of issue 24; each must still be there and still break a rule, so the
-lead removes it here when its branch lands.
+Known exceptions (:data:`KNOWN_EXCEPTIONS`): none. Issue 30 removed the last five: the
+circle ``runtime -> fault_book / session -> runtime`` (they depend on :mod:`common.host`, a
+protocol), the battery's query reading the loads' and PDM's models (one rule of a faulty load's
+power in :func:`common.faults.held_power_w`; the rail's reason word in :mod:`common.messages`),
+and the traverse budget beside the composed twin (``services/composed/budget.py``). An edge
+waived here must still be there and still break a rule.
 """
 
 from __future__ import annotations
@@ -42,33 +45,25 @@ from tests.harness import ROOT
 FLOORS = {"common": 0, "services": 1, "lunaris": 2, "testbed": 3, "bench": 4, "tests": 4}
 CIRCLE_FREE = ("common", "services", "lunaris", "testbed", "bench")
 RUNTIME = ("zenoh", "common.runtime")
-PURE = ("services.composed", "services.drive.budget", "services.battery.circuit",
+PURE = ("services.composed", "services.composed.budget", "services.battery.circuit",
         "services.battery.packs", "services.battery.prediction", "services.bridge",
         "services.bridge.mapping", "services.bridge.bindings", "services.bridge.convert",
         "services.bridge.cdr", "services.bridge.rmw_zenoh", "common.config", "common.conditions",
         "common.faults", "common.keys", "common.messages", "common.scenario", "common.traverse")
-PUBLIC_TO_THE_CLI = ("services.bridge", "services.composed", "services.drive.budget",
+PUBLIC_TO_THE_CLI = ("services.bridge", "services.composed", "services.composed.budget",
                      "services.battery.prediction")
 SERVICE_PACKAGES = ("battery", "bridge", "clock", "drive", "faults", "loads", "power", "radio",
                     "solar")
 
-_ISSUE = "issue 24, Edges across rooms: "
-KNOWN_EXCEPTIONS: dict[tuple[str, str], str] = {
-    ("services.drive.budget", "services.composed"):
-        _ISSUE + "`services/drive/budget.py` → `services/composed.py` (the models branch)",
-    ("services.battery.query", "services.loads.model"):
-        _ISSUE + "`battery/query.py` → the loads' and power models (the harden-input branch)",
-    ("services.battery.query", "services.power.model"):
-        _ISSUE + "`battery/query.py` → the loads' and power models (the harden-input branch)",
-    ("common.fault_book", "common.runtime"):
-        _ISSUE + "circles `runtime ↔ fault_book ↔ session` (harden-state, harden-input, models)",
-    ("common.session", "common.runtime"):
-        _ISSUE + "circles `runtime ↔ fault_book ↔ session` (harden-state, harden-input, models)",
-}
+KNOWN_EXCEPTIONS: dict[tuple[str, str], str] = {}  # none: issue 30 removed the last five
 
 
 def top(module: str) -> str:
     return module.split(".")[0]
+
+
+def top_two(module: str) -> str:
+    return ".".join(module.split(".")[:2])
 
 
 def is_model(module: str) -> bool:
@@ -142,10 +137,11 @@ def services_apart(g: Graph) -> list[str]:
         mine, theirs = service_of(i.importer), service_of(i.target)
         if mine is not None and theirs == mine:
             continue
-        if i.importer == "services.composed" and is_model(i.target):
+        if top_two(i.importer) == "services.composed" and (
+                is_model(i.target) or top_two(i.target) == "services.composed"):
             continue
         out.append(f"{i.where()}: {i.importer} imports {i.target}: a service imports of services/ "
-                   "only its own package, and services/composed.py alone puts the models together")
+                   "only its own package, and the package services/composed alone puts the models together")
     return out
 
 
@@ -262,6 +258,12 @@ VIOLATIONS = {
         "lunaris.pdm", "from services.bridge.service import serve\n"),
     "the services stand apart": ("services.radio.model", "from services.power.model import PowerModel\n"),
     "no circles": ("lunaris.deploy_dashboard", "from lunaris.deploy_secrets import client_config\n"),
+    "no circles, the runtime's either": ("common.fault_book", "from common.runtime import Runtime\n"),
+    "no circles, nor for the types alone": (
+        "common.session",
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from common.runtime import Runtime\n"),
+    "the services stand apart, the battery's query too": (
+        "services.battery.query", "from services.loads.model import LoadsModel\n"),
 }
 
 

@@ -14,7 +14,7 @@ from common.faults import Short
 from common.messages import DriveTraverse, TraverseWaypoint
 from common.traverse import plan
 from services.composed import ComposedTwin, run_budget
-from services.drive.budget import power_profile, run_traverse
+from services.composed.budget import power_profile, run_traverse
 from services.drive.model import umbilical_holds
 from tests.harness import ROOT, ROVERS, lunaris_cmd, static_rover
 

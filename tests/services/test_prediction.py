@@ -216,7 +216,7 @@ def test_a_traverse_profile_without_noise_is_the_composed_twin_driving_it():
     no uncertainty, the state of charge where the composed twin arrives (it drives the same
     traverse, its drive coupled to the pack) is the prediction's, to a part in 10^4."""
     from common.traverse import load_traverse
-    from services.drive.budget import power_profile, run_traverse
+    from services.composed.budget import power_profile, run_traverse
     from tests.harness import ROOT, ROVERS
 
     raw = msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml"))

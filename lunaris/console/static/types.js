@@ -201,6 +201,7 @@
  * @property {string} [end_reason]
  * @property {boolean | null} [ok]
  * @property {string} [actor]
+ * @property {string} [session]
  */
 /**
  * One trainee session of a rover, as ``get lunaris/<rover>/sessions`` lists it (oldest
