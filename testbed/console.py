@@ -25,6 +25,15 @@ class Console:
     def port(self) -> int:
         return int(self.url.rsplit(":", 1)[1])
 
+    def why_down(self) -> str:
+        """Why the console does not answer, in words: its exit status and its log's last lines
+        (a test that finds its port refused says this rather than 'connection refused')."""
+        status = self.proc.poll()
+        tail = "\n".join(self.log.read_text(errors="replace").splitlines()[-30:]) if self.log.exists() else ""
+        return (f"the console at {self.url} does not answer: "
+                + ("it is still running" if status is None else f"it exited with status {status}")
+                + f"; its log ({self.log}) ends:\n{tail}")
+
     def get(self, path: str) -> tuple[int, dict]:
         try:
             with urllib.request.urlopen(self.url + path, timeout=5) as r:

@@ -274,6 +274,15 @@ class Probe:
         return wait_for(check, timeout_s,
                         lambda: f"{key} to satisfy the condition (last: {self.value(key)!r})")[0]
 
+    def wait_sample(self, key: str, predicate: Callable[[Any], bool], timeout_s: float = 10.0) -> Any:
+        """The first sample of ``key`` since the history was last cleared that satisfies
+        ``predicate``: a state that lasts less than a poll of the latest value (a drill's dust
+        for 0.6 s of wall time, on a machine too busy to look then) is still seen."""
+        def check() -> Any:
+            return next(((v,) for v in self.samples(key) if v is not None and predicate(v)), None)
+        return wait_for(check, timeout_s,
+                        lambda: f"a sample of {key} to satisfy the condition (last: {self.value(key)!r})")[0]
+
     def events(self, rover: str) -> list[dict]:
         """The events of ``rover`` watched, in the order they arrived, each once: from the
         journal's stream (``event``) and from each service's own key (``event/<service>``, so
