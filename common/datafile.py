@@ -249,7 +249,11 @@ def _check(value: Any, t: Any, path: str, problems: list[str]) -> None:
     elif isinstance(t, mi.FloatType | mi.IntType):
         _check_number(value, t, path, problems)
     elif isinstance(t, mi.StrType):
-        if not isinstance(value, str):
+        if isinstance(value, bool):  # a file edited with a YAML 1.1 tool: on, off, yes, no
+            problems.append(f"{where}: a boolean where a name was expected: quote it (\"on\", not "
+                            "on: a YAML 1.1 tool such as PyYAML reads on, off, yes and no as true "
+                            "and false, and writes them back so)")
+        elif not isinstance(value, str):
             problems.append(f"{where}: expected a string, got {_kind(value)}")
         elif t.pattern is not None and re.search(t.pattern, value) is None:
             words = _PATTERN_WORDS.get(t.pattern, f"matching {t.pattern}")

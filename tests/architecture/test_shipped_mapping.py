@@ -57,3 +57,39 @@ def test_an_installed_lunaris_finds_the_shipped_mapping_away_from_the_repository
     assert not Path(found).is_symlink()
     from services.bridge import load_mapping
     assert mappings == len(load_mapping(SHIPPED).mappings)
+
+
+def test_every_shipped_yaml_file_reads_the_same_in_a_yaml_1_1_tool():
+    """Found by an integrator: the shipped mapping's field ``on`` is ``True`` to PyYAML (YAML
+    1.1), and the mapping edited with it (loaded and dumped back) was refused by ``lunaris
+    check``. Every shipped data file quotes the words such a tool reads otherwise; a file
+    edited so is refused with the fix in words."""
+    import yaml
+
+    from common.datafile import load_yaml
+    from services.bridge.mapping import parse_mapping
+    def booleans(a, b, where: str) -> list[str]:  # where PyYAML's a has a boolean and ours not
+        if isinstance(a, dict) and isinstance(b, dict):
+            out = [f"{where}.{ka}" for ka, kb in zip(a, b, strict=False) if isinstance(ka, bool)
+                   and not isinstance(kb, bool)]
+            return out + [x for (ka, va), vb in zip(a.items(), b.values(), strict=False)
+                          for x in booleans(va, vb, f"{where}.{ka}")]
+        if isinstance(a, list) and isinstance(b, list):
+            return [x for i, (va, vb) in enumerate(zip(a, b, strict=False))
+                    for x in booleans(va, vb, f"{where}[{i}]")]
+        return [where] if isinstance(a, bool) and not isinstance(b, bool) else []
+
+    for path in sorted((ROOT / "config").rglob("*.yaml")):
+        text = path.read_text()
+        assert booleans(yaml.safe_load(text), load_yaml(text, str(path)), path.name) == [], \
+            f"{path}: quote on/off/yes/no"
+    parse_mapping(yaml.safe_dump(yaml.safe_load(SHIPPED.read_text())), "edited.yaml")  # still valid
+    edited = SHIPPED.read_text().replace('field: "on"', "field: on").replace('{"on": data}', "{on: data}")
+    try:
+        parse_mapping(yaml.safe_dump(yaml.safe_load(edited)), "edited.yaml")
+    except Exception as exc:  # ConfigError, naming each place
+        said = str(exc)
+    else:
+        raise AssertionError("a mapping with booleans for names was taken")
+    assert "mappings[19].field: a boolean where a name was expected: quote it" in said, said
+    assert "request.True: a boolean where a name was expected" in said, said
