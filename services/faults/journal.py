@@ -7,7 +7,8 @@ mid-write, a line that is not an event, a folder in place of the file) never kee
 service down: the intact lines are kept, the file as found is moved aside
 (``.damaged-<time>``), a new one holds the intact lines, and :attr:`Journal.damage` says
 what was found, for the service to say in a ``critical`` event. A flood of rejections is
-summarised (:class:`~services.faults.model.FloodGate`). Every event is accounted for by its
+summarised, and so is a flood of the crew's accepted commands (two
+:class:`~services.faults.model.FloodGate`). Every event is accounted for by its
 ``(source_id, seq)`` (:class:`~services.faults.ledger.Ledger`): events replayed from the
 publishers' caches after a restart are recognised and not written twice, and those that
 never come back (beyond what a cache kept) are counted and said in a ``journal_gap`` event:
@@ -40,7 +41,7 @@ from common import keys
 from common.messages import Event, SessionInfo
 from common.state_store import set_aside, write_atomically
 from services.faults.ledger import Gap, Ledger
-from services.faults.model import FloodGate
+from services.faults.model import FloodGate, crew_commands
 from services.faults.sessions import SessionIndex
 
 __all__ = ["Journal"]
@@ -56,10 +57,12 @@ def _identity(ev: Event) -> tuple:
 
 class Journal:
     def __init__(self, path: Path | None = None, gate: FloodGate | None = None, rover: str = "",
-                 ledger: Ledger | None = None, hold_max: int = HOLD_MAX):
+                 ledger: Ledger | None = None, crew_gate: FloodGate | None = None,
+                 hold_max: int = HOLD_MAX):
         self.path = path
         self.rover = rover
         self.gate = gate or FloodGate()
+        self.crew_gate = crew_gate or crew_commands()
         self.ledger = ledger or Ledger()
         self.hold_max = hold_max
         self.held: list[bytes] = []  # lines the disk refused, in order, to write when it takes them
@@ -134,7 +137,7 @@ class Journal:
         self.sessions.note(ev)
         self._last_t_s = max(self._last_t_s, ev.t_s)
         params = ev.params or {}
-        if ev.kind == "rejected" and "summarised" in params:
+        if ev.kind in ("rejected", "command") and "summarised" in params:
             self.summarised += int(params["summarised"])
             for source_id, (lo, hi) in (params.get("seq") or {}).items():
                 self.ledger.account(source_id, ev.source, int(lo), int(hi), now_s)
@@ -167,7 +170,9 @@ class Journal:
         if self._known(ev):
             return []  # replayed from a cache after a restart
         self._account(ev, now_s)  # written now, or counted into a summary to come
-        return self._write(self.gate.offer(ev, now_s), now_s)
+        gate = self.crew_gate if self.crew_gate.folds(ev) else self.gate
+        other = self.gate if gate is self.crew_gate else self.crew_gate
+        return self._write(other.flush(now_s) + gate.offer(ev, now_s), now_s)
 
     def tick(self, now_s: float, flood_over: bool = False) -> list[Event]:
         """Write what the disk refused, if it takes it now; the summary of a flood that has
@@ -175,6 +180,7 @@ class Journal:
         within the ledger's wait; the events written (the held ones not again)."""
         written = self._write_held()
         written += self.gate.flush(now_s, force=flood_over)
+        written += self.crew_gate.flush(now_s, force=flood_over)
         written += [self._gap_event(gap) for gap in self.ledger.gaps(now_s)]
         return self._write(written, now_s)
 
