@@ -4,7 +4,8 @@
   of rejections is summarised, and the summary says so), in one segment per trainee session
   (SPEC §12c: each event says its ``session``), answered to
   ``get lunaris/<rover>/faults/journal``: the running session's events, ``?session=<id>``
-  another's (``?session=all``: every session's), ``?last=N`` the latest N of them.
+  another's (``?session=all``: every session's), ``?last=N`` the latest N of them (N a whole
+  number up to ``LAST_MAX``: anything else refused in words).
   ``get lunaris/<rover>/sessions`` lists the sessions (``id, trainee, start_t_s, end_t_s,
   started_wall``, oldest first). Each service
   publishes its events on its own key, ``lunaris/<rover>/event/<service>`` (which the access
@@ -82,6 +83,7 @@ from services.faults.journal import Journal
 __all__ = ["NODE", "Desk", "FaultsNode", "fault_owners"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
+LAST_MAX = 1_000_000  # ?last= of the journal query: at most this many events
 # The heads of the keys that instructors, scenarios and dashboards write.
 WRITABLE = ("fault/**", "input/**", "cmd/**", "clock/control/**", "control/**")
 CONTROLS = ("control/session, control/mark, control/reset, control/snapshot/<name>, "
@@ -335,8 +337,9 @@ class FaultsNode(Node[Desk]):
     def on_journal_query(self, q: zenoh.Query) -> None:
         with q:
             last = q.parameters.get("last")
-            if last is not None and not last.isdigit():
-                q.reply_err(f"last={last!r}: give a whole number of events")
+            if last is not None and not (last.isascii() and last.isdigit() and len(last) <= 7
+                                         and int(last) <= LAST_MAX):
+                q.reply_err(f"last={shown(last)}: give a whole number of events, 0 to {LAST_MAX:,}")
                 return
             asked = q.parameters.get("session")
             if asked is not None and asked != "all" and not SESSION_ID.match(asked):
