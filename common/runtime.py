@@ -132,7 +132,7 @@ _CLOSES = frozenset({"fault_cleared", "fault_resolved"})
 OPENED_KEPT = 4096  # (rover, key) of the faults in effect whose session is remembered
 
 # Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
-TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
+TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error", "disk_full"})
 WriteRole = Literal["own", "follow", "gate"]
 
 

@@ -48,6 +48,7 @@ __all__ = ["Journal"]
 
 _RECENT = 4096  # identities of the latest events, to recognise a replayed cache
 HOLD_MAX = 20_000  # events held in memory while the disk refuses them (~0.4 kB each: ~8 MB)
+_ANSWERS = ("mark", "session", "scenario")  # this service's answers to writes (a rejection aside)
 _KEPT = ("session",)  # held beyond HOLD_MAX (a session's trainee must survive), up to twice it
 
 
@@ -257,7 +258,7 @@ class Journal:
         """An answer of this service to a write (a mark, a session control), held: it says,
         to whoever wrote, that it is not recorded (SPEC 13e), and keeps saying so in the
         journal once written."""
-        if ev.source != "faults" or ev.actor in ("", "twin"):
+        if ev.source != "faults" or ev.actor in ("", "twin") or ev.kind not in _ANSWERS:
             return ev
         return msgspec.structs.replace(
             ev, message=f"not recorded: the disk is full ({self.disk_error}); {ev.message}; held "

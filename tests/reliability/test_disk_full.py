@@ -119,6 +119,7 @@ def _full_disk(p: Probe, twin: Twin, state: Path) -> None:
         full = p.wait_event(R, lambda e: e["kind"] == "disk_full" and e["severity"] == "critical",
                             timeout_s=15)
         assert "No space left on device" in full["message"] and full["params"]["full"] is True
+        assert full["actor"] == "twin" and full["message"].startswith(f"the journal of {R} cannot be written")
         unrecorded = [a for a in answers if not a.recorded]
         assert unrecorded, [a.message for a in answers]
         assert all(a.message.startswith("not recorded: the disk is full") for a in unrecorded)
