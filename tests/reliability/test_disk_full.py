@@ -9,7 +9,8 @@ freed and the twin restarted, the session had lost its trainee's name and every 
 Now: the faults service stays up, says at once (a ``critical`` ``disk_full`` event) that the
 journal cannot be written, answers a mark "not recorded: the disk is full", holds the
 events in memory and writes them, in order, as soon as space returns (an ``info``
-``disk_full`` event says so), without a restart; the session still names its trainee.
+``disk_full`` event says so), without a restart; the session still names its trainee, also
+once the faults service is restarted and reads its journal back.
 
 The state folder is a tmpfs of 512 KB mounted for the test (root only: skipped otherwise)
 and unmounted at its end, pass or fail; it is filled with a file the test deletes. The
@@ -33,7 +34,7 @@ from common.writes import plan_write
 from lunaris.client.mirror import Mirror
 from lunaris.client.writer import Writer
 from tests.harness import ALL_SERVICES, Probe, Twin
-from tests.reliability.conftest import MAPP, R
+from tests.reliability.conftest import MAPP, R, restart
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -148,3 +149,8 @@ def _full_disk(p: Probe, twin: Twin, state: Path) -> None:
     infos = p.get_json(keys.sessions(R))[0]
     mine = next(s for s in infos if s["id"] == session)
     assert mine["trainee"] == "Ana" and mine["events"] >= 23, infos
+    # and after a restart of the faults service, read back from the disk
+    restart(twin, p, "faults")
+    again = next(s for s in p.get_json(keys.sessions(R))[0] if s["id"] == session)
+    assert again["trainee"] == "Ana" and again["events"] >= mine["events"]
+    assert sum(e["kind"] == "mark" for e in journal(p)) == 22
