@@ -44,6 +44,12 @@ class Accepted:
     def message(self) -> str:
         return self.event.message
 
+    @property
+    def recorded(self) -> bool:
+        """False when the answer says the write could not be recorded (the journal's disk
+        full, SPEC 13e: "not recorded: the disk is full ..."): applied, not on disk."""
+        return (self.event.params or {}).get("recorded") is not False
+
 
 @dataclass(frozen=True)
 class Rejected:

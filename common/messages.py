@@ -304,10 +304,12 @@ class DriveRoute(_Msg):
 
 
 # What an event says happened: a refused input, a fault's life, an accepted command or
-# input, a change of the clock, a bug in a service, events the journal never received.
+# input, a change of the clock, a bug in a service, events the journal never received, the
+# state folder's disk full or nearly (``disk_full``: critical when the journal cannot be
+# written, warning when space runs low, info when it is back).
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error", "state_damaged", "journal_gap", "mark"]
+                    "internal_error", "state_damaged", "journal_gap", "mark", "disk_full"]
 
 
 class Event(_Msg):

@@ -122,7 +122,7 @@ _CLOSES = frozenset({"fault_cleared", "fault_resolved"})
 OPENED_KEPT = 4096  # (rover, key) of the faults in effect whose session is remembered
 
 # Events that are the twin's own whoever's write set them off: protection, derived faults, bugs.
-TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error"})
+TWIN_KINDS = frozenset({"fault_raised", "fault_resolved", "internal_error", "disk_full"})
 WriteRole = Literal["own", "follow", "gate"]
 
 
@@ -169,7 +169,7 @@ class Runtime:
         self._claim_started = 0.0  # monotonic time they were declared
         self._claim_refused = ""  # the state directory is another instance's: why, in words
         self._event_seq: dict[str, int] = {}  # per served rover; "" for the rovers not served
-        self._own_events: Callable[[str, Event], None] | None = None  # see record_own_events
+        self._own_events: Callable[[str, Event], Event] | None = None  # see record_own_events
         self._held: list[tuple[tuple, dict]] | None = None  # see events_after
         self._last_tick: dict[str, tuple[int, int, float]] = {}  # rover -> the tick handled last
         self._acting: str | None = None  # the actor of the sample being handled
@@ -659,10 +659,11 @@ class Runtime:
         """Hold a declared Zenoh entity for the life of the service."""
         self._keep.append(entity)
 
-    def record_own_events(self, record: Callable[[str, Event], None]) -> None:
+    def record_own_events(self, record: Callable[[str, Event], Event]) -> None:
         """Hand each event of a served rover to ``record(rover, event)`` before it is
         published: the faults service journals its own events so (heard back from Zenoh a
-        moment later, a kill in that moment lost one, with no gap to show for it)."""
+        moment later, a kill in that moment lost one, with no gap to show for it). What it
+        returns is published (the same event, or one saying it could not be recorded)."""
         self._own_events = record
 
     def on_wildcard(self, handler: Handler) -> None:
@@ -912,7 +913,7 @@ class Runtime:
                                    priority=PRIORITY)
             return
         if self._own_events is not None:
-            self._own_events(rover, ev)
+            ev = self._own_events(rover, ev)
         if ekey not in self._publishers:
             self._declare_publisher(ekey, max(EVENT_CACHE, EVENT_HISTORY // len(self.rovers)),
                                     reliable=True)

@@ -167,7 +167,7 @@ class Twin:
 
     def __init__(self, endpoint: str, rover_files: list[str | Path], state_dir: Path,
                  services: tuple[str, ...] = ALL_SERVICES, seed: int = 1,
-                 extra: dict[str, list[str]] | None = None):
+                 extra: dict[str, list[str]] | None = None, log_dir: Path | None = None):
         self.endpoint = endpoint
         self.rover_files = [str(f) for f in rover_files]
         self.state_dir = state_dir
@@ -177,13 +177,14 @@ class Twin:
         self.procs: dict[str, subprocess.Popen] = {}
         self.router: subprocess.Popen | None = None  # a benchmark's router, run as a process
         self.logs: dict[str, Path] = {}
+        self.log_dir = log_dir or state_dir  # elsewhere for a state folder on a disk made full
 
     def start(self, service: str) -> subprocess.Popen:
         """``service`` may be ``kind-k`` (``bridge-2``): another process of that kind, whose
         arguments (``--shard 2/3``) come from ``extra``."""
         args = run_args(service, self.rover_files, self.state_dir, connect=self.endpoint,
                         seed=self.seed, extra=self.extra.get(service, []))
-        log = self.state_dir / f"{service}.log"
+        log = self.log_dir / f"{service}.log"
         self.logs[service] = log
         with open(log, "ab") as out:
             proc = subprocess.Popen(lunaris_cmd(*args), stdout=out, stderr=subprocess.STDOUT,
@@ -193,6 +194,7 @@ class Twin:
 
     def __enter__(self) -> Twin:
         self.state_dir.mkdir(parents=True, exist_ok=True)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
         try:
             for service in self.services:
                 self.start(service)

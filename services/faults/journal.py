@@ -7,12 +7,23 @@ mid-write, a line that is not an event, a folder in place of the file) never kee
 service down: the intact lines are kept, the file as found is moved aside
 (``.damaged-<time>``), a new one holds the intact lines, and :attr:`Journal.damage` says
 what was found, for the service to say in a ``critical`` event. A flood of rejections is
-summarised (:class:`~services.faults.model.FloodGate`). Every event is accounted for by its
+summarised, and so is a flood of the crew's accepted commands (two
+:class:`~services.faults.model.FloodGate`). Every event is accounted for by its
 ``(source_id, seq)`` (:class:`~services.faults.ledger.Ledger`): events replayed from the
 publishers' caches after a restart are recognised and not written twice, and those that
 never come back (beyond what a cache kept) are counted and said in a ``journal_gap`` event:
 every event journalled one by one, summarised, or counted lost. Without a state directory
 the journal is kept in memory for the life of the service.
+
+A disk that refuses a line (full: ``ENOSPC``, or any other ``OSError``) never stops the
+service: the append is cut back to the last whole line (no torn line is left for the next
+start to set aside), the events are held in memory (``HOLD_MAX`` of them; a session's
+opening and closing events beyond that too) and written, in order, at the first
+:meth:`Journal.tick` that can write them; those that could not be held are counted, by
+source, in a ``journal_gap`` event written with them. :attr:`Journal.disk_error` says, in
+words, why the journal is not being written (None while it is). The events held are
+answered to the queries as if written. An answer of the faults service to a write (a mark)
+that is held says so: "not recorded: the disk is full (...)", ``params.recorded`` false.
 
 The journal is in segments, one per trainee session (:class:`~services.faults.sessions.SessionIndex`):
 :meth:`Journal.lines` gives one session's events, :meth:`Journal.session_infos` the sessions.
@@ -21,7 +32,7 @@ The journal is in segments, one per trainee session (:class:`~services.faults.se
 from __future__ import annotations
 
 import os
-from collections import deque
+from collections import Counter, deque
 from pathlib import Path
 
 import msgspec
@@ -30,12 +41,15 @@ from common import keys
 from common.messages import Event, SessionInfo
 from common.state_store import set_aside, write_atomically
 from services.faults.ledger import Gap, Ledger
-from services.faults.model import FloodGate
+from services.faults.model import FloodGate, crew_commands
 from services.faults.sessions import SessionIndex
 
 __all__ = ["Journal"]
 
 _RECENT = 4096  # identities of the latest events, to recognise a replayed cache
+HOLD_MAX = 20_000  # events held in memory while the disk refuses them (~0.4 kB each: ~8 MB)
+_ANSWERS = ("mark", "session", "scenario")  # this service's answers to writes (a rejection aside)
+_KEPT = ("session",)  # held beyond HOLD_MAX (a session's trainee must survive), up to twice it
 
 
 def _identity(ev: Event) -> tuple:
@@ -44,11 +58,18 @@ def _identity(ev: Event) -> tuple:
 
 class Journal:
     def __init__(self, path: Path | None = None, gate: FloodGate | None = None, rover: str = "",
-                 ledger: Ledger | None = None):
+                 ledger: Ledger | None = None, crew_gate: FloodGate | None = None,
+                 hold_max: int = HOLD_MAX):
         self.path = path
         self.rover = rover
         self.gate = gate or FloodGate()
+        self.crew_gate = crew_gate or crew_commands()
         self.ledger = ledger or Ledger()
+        self.hold_max = hold_max
+        self.held: list[bytes] = []  # lines the disk refused, in order, to write when it takes them
+        self.disk_error: str | None = None  # why the journal is not written now (None: it is)
+        self.dropped: Counter[str] = Counter()  # per source, events that could not be held
+        self._dropped_t_s: list[float] = []  # the sim time of the first and last dropped
         self._memory: list[bytes] = []
         self._recent: deque[tuple] = deque(maxlen=_RECENT)  # events without a source_id
         self._recent_set: set[tuple] = set()
@@ -90,15 +111,25 @@ class Journal:
             return
         torn = bool(tail.strip()) and (not good or good[-1] is not tail)
         moved = set_aside(path)
+        where = None
         try:
             write_atomically(path, b"".join(line + b"\n" for line in good))
-        except OSError as exc:  # the next event starts a new file
-            print(f"journal: cannot write {path} ({exc})", flush=True)
+        except OSError as exc:
+            # a full disk: the file as found goes back, cut after its last whole line (a
+            # truncate needs no space), rather than the session's events left aside
+            print(f"journal: cannot write {path} ({exc}): the file is kept as found", flush=True)
+            if moved is not None:
+                os.replace(moved, path)
+                if torn:
+                    os.truncate(path, len(raw) - len(tail))
+                moved = None
+            where = (f"the file kept where it is{', cut after its last whole line' if torn else ''}: "
+                     f"the disk refused a new one ({exc.strerror or exc})")
         what = (f"{bad} damaged line{'s' if bad != 1 else ''}"
                 + (" (the last one cut short)" if torn else "") if bad
                 else "its last line had no end of line")
         self.damage = (f"{path.name}: {what}; {len(good)} event{'s' if len(good) != 1 else ''} "
-                       f"kept{', the damaged lines left out' if bad else ''}; {_where(moved)}")
+                       f"kept{', the damaged lines left out' if bad else ''}; {where or _where(moved)}")
 
     def _note(self, ev: Event, now_s: float) -> None:
         """A written event, accounted for (and what a summary or a gap counts)."""
@@ -107,13 +138,14 @@ class Journal:
         self.sessions.note(ev)
         self._last_t_s = max(self._last_t_s, ev.t_s)
         params = ev.params or {}
-        if ev.kind == "rejected" and "summarised" in params:
+        if ev.kind in ("rejected", "command") and "summarised" in params:
             self.summarised += int(params["summarised"])
             for source_id, (lo, hi) in (params.get("seq") or {}).items():
                 self.ledger.account(source_id, ev.source, int(lo), int(hi), now_s)
         elif ev.kind == "journal_gap":
             self.lost += int(params.get("lost", 0))
-            self.ledger.account(str(params.get("source_id", "")), str(params.get("source", "")),
+            if params.get("source_id"):  # (one of the disk's counts many sources, accounted)
+                self.ledger.account(str(params.get("source_id", "")), str(params.get("source", "")),
                                 int(params.get("from_seq", 0)), int(params.get("to_seq", 0)), now_s)
 
     def _account(self, ev: Event, now_s: float) -> None:
@@ -139,15 +171,46 @@ class Journal:
         if self._known(ev):
             return []  # replayed from a cache after a restart
         self._account(ev, now_s)  # written now, or counted into a summary to come
-        return self._write(self.gate.offer(ev, now_s), now_s)
+        gate = self.crew_gate if self.crew_gate.folds(ev) else self.gate
+        other = self.gate if gate is self.crew_gate else self.crew_gate
+        return self._write(other.flush(now_s) + gate.offer(ev, now_s), now_s)
 
     def tick(self, now_s: float, flood_over: bool = False) -> list[Event]:
-        """Write the summary of a flood that has ended (``flood_over``: any flood held) and
-        count the events that have not come back within the ledger's wait; the events
-        written."""
-        written = self.gate.flush(now_s, force=flood_over)
+        """Write what the disk refused, if it takes it now; the summary of a flood that has
+        ended (``flood_over``: any flood held) and count the events that have not come back
+        within the ledger's wait; the events written (the held ones not again)."""
+        written = self._write_held()
+        written += self.gate.flush(now_s, force=flood_over)
+        written += self.crew_gate.flush(now_s, force=flood_over)
         written += [self._gap_event(gap) for gap in self.ledger.gaps(now_s)]
         return self._write(written, now_s)
+
+    def _write_held(self) -> list[Event]:
+        """The held lines written, if the disk takes them now (the journal_gap of those that
+        could not be held, to write after them)."""
+        if not self.held or self.path is None:
+            return []
+        try:
+            self._append(self.held)
+        except OSError as exc:
+            self.disk_error = _said(exc)
+            return []
+        self.held, self.disk_error = [], None
+        if not self.dropped:
+            return []
+        n = sum(self.dropped.values())
+        first_t, last_t = self._dropped_t_s
+        by = ", ".join(f"{src or '?'} {k}" for src, k in self.dropped.most_common())
+        gap = Event(
+            t_s=self._last_t_s, severity="warning", source="faults", kind="journal_gap",
+            key=keys.faults_journal(self.rover or "?"),
+            message=f"{n} event{'s' if n > 1 else ''} (sim t {first_t:.1f} to {last_t:.1f} s; "
+                    f"{by}) never reached the journal: the disk was full and the faults service "
+                    f"held {self.hold_max} events in memory at most; counted here, not listed",
+            params={"lost": n, "source": "", "by_source": dict(self.dropped), "reason": "disk_full",
+                    "from_t_s": first_t, "to_t_s": last_t}, session=self.sessions.running)
+        self.dropped, self._dropped_t_s = Counter(), []
+        return [gap]
 
     def _gap_event(self, gap: Gap) -> Event:
         n = gap.last - gap.first + 1
@@ -162,18 +225,63 @@ class Journal:
                     "from_seq": gap.first, "to_seq": gap.last}, session=self.sessions.running)
 
     def _write(self, events: list[Event], now_s: float) -> list[Event]:
+        """Write ``events`` (or hold them: see the module); those written or held."""
         if not events:
             return events
-        lines = [msgspec.json.encode(ev) for ev in events]
-        for ev in events:
-            self._note(ev, now_s)
         if self.path is None:
-            self._memory.extend(lines)
+            for ev in events:
+                self._note(ev, now_s)
+            self._memory.extend(msgspec.json.encode(ev) for ev in events)
             return events
+        if self.disk_error is None:
+            lines = [msgspec.json.encode(ev) for ev in events]
+            try:
+                self._append(lines)
+            except OSError as exc:
+                self.disk_error = _said(exc)
+            else:
+                for ev in events:
+                    self._note(ev, now_s)
+                return events
+        kept = []
+        for ev in map(self._unrecorded, events):
+            if len(self.held) < self.hold_max or (ev.kind in _KEPT and len(self.held) < 2 * self.hold_max):
+                self._note(ev, now_s)
+                self.held.append(msgspec.json.encode(ev))
+                kept.append(ev)
+            else:  # accounted for (never journalled again from a cache), counted lost
+                self.dropped[ev.source] += 1
+                self._dropped_t_s = [self._dropped_t_s[0] if self._dropped_t_s else ev.t_s, ev.t_s]
+        return kept
+
+    def _unrecorded(self, ev: Event) -> Event:
+        """An answer of this service to a write (a mark, a session control), held: it says,
+        to whoever wrote, that it is not recorded (SPEC 13e), and keeps saying so in the
+        journal once written."""
+        if ev.source != "faults" or ev.actor in ("", "twin") or ev.kind not in _ANSWERS:
+            return ev
+        return msgspec.structs.replace(
+            ev, message=f"not recorded: the disk is full ({self.disk_error}); {ev.message}; held "
+                        "in memory, written to the journal when space returns",
+            params={**(ev.params or {}), "recorded": False})
+
+    def _append(self, lines: list[bytes]) -> None:
+        """Append whole lines to the file; on an OSError (a full disk) the file is cut back to
+        what it was, so that no torn line is left, and the error raised."""
+        assert self.path is not None
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("ab") as f:
-            f.write(b"".join(line + b"\n" for line in lines))
-        return events
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            size = os.fstat(fd).st_size
+            view = memoryview(b"".join(line + b"\n" for line in lines))
+            try:
+                while view:
+                    view = view[os.write(fd, view):]
+            except OSError:
+                os.ftruncate(fd, size)
+                raise
+        finally:
+            os.close(fd)
 
     def lines(self, session: str | None = None) -> list[bytes]:
         """Every journalled event as its JSON text, oldest first; of one session only when
@@ -181,9 +289,9 @@ class Journal:
         if self.path is None:
             lines = list(self._memory)
         elif not self.path.is_file():
-            return []
+            lines = list(self.held)
         else:
-            lines = self.path.read_bytes().splitlines()
+            lines = self.path.read_bytes().splitlines() + self.held
         if session is None:
             return lines
         placed = self.sessions.of_line
@@ -205,6 +313,11 @@ def _session_of(line: bytes) -> str:
         return msgspec.json.decode(line, type=_SessionOnly).session
     except (msgspec.DecodeError, msgspec.ValidationError):
         return ""
+
+
+def _said(exc: OSError) -> str:
+    """Why the disk refused, in words: "No space left on device" (ENOSPC)."""
+    return exc.strerror or str(exc)
 
 
 def _where(moved: Path | None) -> str:

@@ -4,7 +4,8 @@
   of rejections is summarised, and the summary says so), in one segment per trainee session
   (SPEC §12c: each event says its ``session``), answered to
   ``get lunaris/<rover>/faults/journal``: the running session's events, ``?session=<id>``
-  another's (``?session=all``: every session's), ``?last=N`` the latest N of them.
+  another's (``?session=all``: every session's), ``?last=N`` the latest N of them (N a whole
+  number up to ``LAST_MAX``: anything else refused in words).
   ``get lunaris/<rover>/sessions`` lists the sessions (``id, trainee, start_t_s, end_t_s,
   started_wall``, oldest first). Each service
   publishes its events on its own key, ``lunaris/<rover>/event/<service>`` (which the access
@@ -34,6 +35,11 @@
   A trainee's session (``control/session``) is the clock's to answer, as a restore is.
 - **Marks**: ``control/mark`` ``{"text"}`` is answered with a ``mark`` event (by whoever wrote
   it: its ``actor``), an instructor's note on the timeline.
+- **A full disk** (SPEC 13e) never stops the service: the journal holds its events in memory
+  and writes them when space returns (:mod:`services.faults.journal`); the instructor is told
+  at once, and again when it is written again, in ``disk_full`` events, and warned before,
+  while the state folder has less than ``LOW_SPACE_BYTES`` free (:mod:`services.faults.disk`);
+  a mark answered meanwhile says "not recorded: the disk is full".
 
 A node (:class:`FaultsNode`) whose ports are heard, not read: every service's events and the
 gatekeeper's keys are no key family (:class:`common.node.Hears`); it publishes the journal's
@@ -71,11 +77,13 @@ from common.node import Every, Hears, Node, PerRover, Publishes
 from common.reasons import shown
 from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
+from services.faults.disk import LowSpace, journal_said
 from services.faults.journal import Journal
 
 __all__ = ["NODE", "Desk", "FaultsNode", "fault_owners"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
+LAST_MAX = 1_000_000  # ?last= of the journal query: at most this many events
 # The heads of the keys that instructors, scenarios and dashboards write.
 WRITABLE = ("fault/**", "input/**", "cmd/**", "clock/control/**", "control/**")
 CONTROLS = ("control/session, control/mark, control/reset, control/snapshot/<name>, "
@@ -130,6 +138,7 @@ class FaultsNode(Node[Desk]):
 
     def __init__(self, rovers: list[Rover], seed: int | None = None):
         self.live_rovers: set[str] = set()  # rovers some service serves (their tokens)
+        self.space: LowSpace | None = None  # the state folder's free space, watched
         super().__init__(rovers, seed)
 
     def rover_state(self, rover: Rover) -> Desk:
@@ -139,6 +148,7 @@ class FaultsNode(Node[Desk]):
         # The journals are the state folder's, the runtime's; the services' liveliness tokens
         # are no port of the table (heard on Zenoh's thread, with the tokens up already).
         folder = rt.store.dir
+        self.space = LowSpace(folder) if folder is not None else None
         for desk in self.rovers.values():
             desk.journal = Journal(folder / f"faults-journal-{desk.id}.jsonl" if folder else None,
                                    rover=desk.id)
@@ -165,7 +175,9 @@ class FaultsNode(Node[Desk]):
                      f"{s.parts[-1]} service, it claims to come from {shown(ev.source)} "
                      f"({ev.kind}: {shown(ev.message)}); not journalled")
             return
+        was = self.rovers[s.rover].journal.disk_error
         self.relay(s.rover, self.rovers[s.rover].journal.record(ev, time.monotonic()))
+        self.said_disk(s.rover, was)
         if ev.source == "clock" and ev.kind == "session" and ev.session > rt.session_id[s.rover] \
                 and "started_wall" in (ev.params or {}):
             # the clock's word that a session begins: a write answered here after it is in
@@ -173,10 +185,17 @@ class FaultsNode(Node[Desk]):
             # event replayed from a cache never takes this service back)
             rt.enter_session(s.rover, ev.session)
 
-    def journal_own(self, rover: str, ev: Event) -> None:
+    def journal_own(self, rover: str, ev: Event) -> Event:
         """This service's own event (a mark, a session control, a rejection), journalled and
-        relayed before it is published on ``event/faults``: heard back, it is known already."""
-        self.relay(rover, self.rovers[rover].journal.record(ev, time.monotonic()))
+        relayed before it is published on ``event/faults``: heard back, it is known already.
+        What to publish: ``ev``, or, held while the disk is full, ``ev`` saying it is not
+        recorded (an answer to a write: "not recorded: the disk is full ...")."""
+        journal = self.rovers[rover].journal
+        was = journal.disk_error
+        written = journal.record(ev, time.monotonic())
+        self.relay(rover, written)
+        self.said_disk(rover, was)
+        return next((w for w in written if w.source_id == ev.source_id and w.seq == ev.seq), ev)
 
     def relay(self, rover: str, written: list[Event]) -> None:
         """What the journal wrote, unchanged, on ``lunaris/<rover>/event``: the journal's
@@ -184,11 +203,27 @@ class FaultsNode(Node[Desk]):
         for ev in written:
             self.publish(keys.event(rover), ev)
 
+    def said_disk(self, rover: str, was: str | None) -> None:
+        """Tell the instructor, at once, that the journal's disk refuses it, and that it takes
+        it again (:func:`services.faults.disk.journal_said`)."""
+        said = journal_said(rover, self.rovers[rover].journal, was)
+        if said is not None:
+            self.rt.event(rover, said.severity, "disk_full", keys.faults_journal(rover),
+                          said.message, said.params)
+
     def end_floods(self, force: bool = False) -> None:
-        """Summaries of the floods that have ended (all of them, ``force``), and the events
-        that never came back counted."""
+        """What the disk refused written if it takes it now, summaries of the floods that have
+        ended (all of them, ``force``), the events that never came back counted; the free
+        space of the state folder looked at."""
         for rover, desk in self.rovers.items():
+            was = desk.journal.disk_error
             self.relay(rover, desk.journal.tick(time.monotonic(), flood_over=force))
+            self.said_disk(rover, was)
+        said = self.space.look() if self.space is not None else None
+        if said is not None:
+            for rover in sorted(self.rovers):
+                self.rt.event(rover, said.severity, "disk_full", keys.faults_journal(rover),
+                              said.message, said.params)
 
     def on_tick(self, desk: Desk, tick: Clock) -> None:
         if desk.unopened:
@@ -302,8 +337,9 @@ class FaultsNode(Node[Desk]):
     def on_journal_query(self, q: zenoh.Query) -> None:
         with q:
             last = q.parameters.get("last")
-            if last is not None and not last.isdigit():
-                q.reply_err(f"last={last!r}: give a whole number of events")
+            if last is not None and not (last.isascii() and last.isdigit() and len(last) <= 7
+                                         and int(last) <= LAST_MAX):
+                q.reply_err(f"last={shown(last)}: give a whole number of events, 0 to {LAST_MAX:,}")
                 return
             asked = q.parameters.get("session")
             if asked is not None and asked != "all" and not SESSION_ID.match(asked):

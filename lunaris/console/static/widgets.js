@@ -133,7 +133,7 @@ export function faultsCard(rover, clear) {
 const KIND = /** @type {Record<string, string>} */ ({
   rejected: "refused", fault_injected: "fault injected", fault_cleared: "fault cleared", fault_raised: "alarm",
   fault_resolved: "alarm ended", command: "command", input: "input", clock: "clock", session: "session",
-  scenario: "drill", internal_error: "twin error", mark: "mark"});
+  scenario: "drill", internal_error: "twin error", mark: "mark", disk_full: "disk"});
 
 /** @param {import("./state.js").TwinEvent} e its message, in plain words, without repeating its kind */
 const said = (e) => {
