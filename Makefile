@@ -79,7 +79,7 @@ reference: $(TEST_STAMP)
 test: $(TEST_STAMP) system-deps lint typecheck
 	rm -f .coverage .coverage.*
 	$(BIN)/python tools/run_tests.py --since $(START) --coverage -- \
-	  -n $(WORKERS) --dist loadgroup --cov --cov-report=term --cov-fail-under=0
+	  -n $(WORKERS) --dist loadgroup --cov --cov-report=term --cov-fail-under=0 --durations=25
 
 # lint, types and every test that starts no process (the unit tests), on WORKERS workers
 check: $(TEST_STAMP) $(NODE_STAMP) lint typecheck
