@@ -80,7 +80,9 @@ __all__ = [
 
 T = TypeVar("T", bound=msgspec.Struct)
 SNAPSHOT_NAME = re.compile(r"^[A-Za-z0-9_.-]{1,64}$")  # a snapshot's name: one key chunk
-SESSION_ID = re.compile(r"^\d{8}-\d{6}$")  # a session's id: the UTC time it began, YYYYMMDD-HHMMSS
+# a session's id: the UTC time it began, YYYYMMDD-HHMMSS, and .NNN for the second, third ...
+# begun within one second (services.clock.model.session_id): ids sort in the order they began
+SESSION_ID = re.compile(r"^\d{8}-\d{6}(\.\d{3})?$")
 
 Severity = Literal["info", "warning", "critical"]
 RailStateName = Literal["on", "off", "tripped", "shed", "failed"]

@@ -199,3 +199,22 @@ def test_where_the_umbilical_was_plugged_in_reads_as_connected_does():
     m.plug(True)
     assert m.umbilical_plugged_at == (20.0, 0.0, 0.0)
     assert cabled(None).umbilical_cfg.cable_m is None  # no slack: null, not 0
+
+
+def test_sessions_begun_in_a_burst_keep_the_wall_clocks_second_and_never_collide():
+    """Found by an adversary: 100 session switches in a burst gave ids 89 s ahead of the wall
+    clock (one second later each). Within one second they are counted (.001, .002 ...), sort in
+    the order they began, and the next second's id sorts after them all."""
+    from services.clock.model import session_id
+    wall = 1736884392.7  # 2025-01-14 19:53:12.7 UTC
+    ids = [session_id(wall)]
+    for _ in range(99):
+        ids.append(session_id(wall + 0.001, after=ids[-1]))
+    assert ids[:2] == ["20250114-195312", "20250114-195312.001"] and ids[-1] == "20250114-195312.099"
+    assert ids == sorted(ids) and len(set(ids)) == 100
+    assert session_id(wall + 1.0, after=ids[-1]) == "20250114-195313" > ids[-1]
+    assert session_id(wall - 5.0, after="20250114-195312") == "20250114-195312.001"  # a clock put back
+    many = "20250114-195312.999"
+    assert session_id(wall, after=many) == "20250114-195313"  # the count full: the next second
+    from common.messages import SESSION_ID
+    assert all(SESSION_ID.match(i) for i in [*ids, many])

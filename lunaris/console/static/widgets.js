@@ -137,7 +137,7 @@ const KIND = /** @type {Record<string, string>} */ ({
 
 /** @param {import("./state.js").TwinEvent} e its message, in plain words, without repeating its kind */
 const said = (e) => {
-  if (e.kind === "session") return plainMessage(e.message.replace(/^session (?=\d{8}-\d{6} )/, ""), e.key);
+  if (e.kind === "session") return plainMessage(e.message.replace(/^session (?=\d{8}-\d{6}(\.\d{3})? )/, ""), e.key);
   const text = plainMessage(e.message, e.key);
   if (e.kind === "mark") return text.replace(/^mark: /, "");
   if (e.kind === "rejected") return text.replace(/^rejected: /, "");  // "refused rejected: ..." read twice
