@@ -380,7 +380,7 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
         Route("/", _index),
         Route("/favicon.ico", _favicon),
         Route("/login", _login, methods=["GET", "POST"]),
-        Route("/logout", _logout, methods=["GET", "POST"]),
+        Route("/logout", _logout, methods=["POST"]),  # a link or an image cannot sign anyone out
         Route(ABOUT_PATH, _about),
         *drive.routes(),
         *rovers.routes(),

@@ -561,7 +561,10 @@ def test_an_instructor_signs_in_and_acts(live, guarded):
         live.probe.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "off")
         click(driver, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH2"]')
         live.probe.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "on")
-        driver.get(console.url + "/logout")
+        assert fetch(driver, "GET", "/logout") == 405  # a link or an image cannot sign anyone out
+        assert fetch(driver, "GET", "/api/me") == 200
+        click(driver, "#sign-out")  # a form's POST
+        WebDriverWait(driver, 20).until(lambda d: "Sign in" in d.page_source)
         assert fetch(driver, "GET", "/api/me") == 401
 
 

@@ -65,7 +65,9 @@ export function linkState() {
 export function who() {
   const me = store.me;
   if (!me) return nothing;
-  return html`${me.name} · ${me.role}${me.accounts ? html` <a href="/logout">sign out</a>` : nothing}`;
+  // signing out is a POST (a GET could be made by any link or image of another page)
+  return html`${me.name} · ${me.role}${me.accounts ? html` <form class="sign-out" method="post" action="/logout"><button
+    type="submit" id="sign-out">sign out</button></form>` : nothing}`;
 }
 
 export function viewTabs() {
