@@ -29,9 +29,11 @@ fault is in effect, of
 - the affected value leaving the band it kept before the injection, per fault kind
   (:data:`common.symptoms.SYMPTOMS`): the band is the range of the value over the minute
   before, widened by a tolerance and, for smooth values, by the trend it had (a temperature
-  already rising must rise faster than it did). A kind whose value does not leave its band (a
-  load stuck at the power it drew anyway, a radio degraded while the rover stays in range) has
-  no symptom: ``null``.
+  already rising must rise faster than it did). A load's power counts only on a live rail (its
+  payload's ``on``): an open load shows as 0 W there, also when its rail comes on after the
+  injection. A kind whose value does not leave its band (a load stuck at the power it drew
+  anyway, a radio degraded while the rover stays in range) has no symptom: ``null``; the
+  module :mod:`common.symptoms` says when each kind shows nothing, and why.
 
 **The crew's actions** are the events with ``actor: crew`` (rail commands, the drive stopped,
 inputs; accepted, or refused with the twin's reason) from the injection until the fault is
@@ -388,7 +390,8 @@ class Response:
                 rail = get("rail")
                 if rail:
                     self._load_rail[name] = rail
-                self._number(("load/" + name + "/power", "power_w"), t, get("power_w"))
+                if get("on") is not False:  # on a dead rail every load draws 0 W, whatever ails it
+                    self._number(("load/" + name + "/power", "power_w"), t, get("power_w"))
             elif head == "rail":
                 self._rail(name, t, get("state"))
             elif head == "solar":
@@ -512,8 +515,12 @@ class Response:
             if f.before is True and v is False:
                 words = f"{tail.rsplit('/', 1)[0]} out of range"
             f.before = v  # out of range before: the next loss of the link counts
+        elif f.direction == "nothing" and f.band is None:
+            if not isinstance(v, bool) and v <= TOLERANCE.get(fld, (0.0, 0.0, False))[0]:
+                name, unit = quantity(fld)
+                words = f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit} on a live rail"
         elif f.band is not None and not isinstance(v, bool):
-            way = f.band.outside(t, v, f.direction)
+            way = f.band.outside(t, v, "down" if f.direction == "nothing" else f.direction)
             if way:
                 name, unit = quantity(fld)
                 words = (f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit}, {way} "
@@ -615,11 +622,12 @@ class Response:
                 return  # no value before it: nothing to compare with
         else:
             points = series.before(f.injected_t)
-            if not points:
+            if not points and spec.direction != "nothing":
                 return  # no value before it: its band is not known
             trend = TOLERANCE.get(spec.field, (0, 0, False))[2] or (
                 spec.field == "power_w" and f.component in SMOOTH_POWER)
-            f.band = Band.of(points, spec.field, trend)
+            if points:  # (nothing: none before is a value never live, 0 when live a symptom)
+                f.band = Band.of(points, spec.field, trend)
         self._watchers.setdefault(key, []).append(f)
         for ts, v in list(series.recent):  # what came before the injection was heard
             if ts >= f.injected_t:

@@ -6,6 +6,30 @@ alarms as symptoms) and by the reference (``docs/reference/scenarios.md``). A va
 its range over the ``WINDOW_S`` before the fault, kept as ``BUCKET_S`` slices (bounded whatever
 the rate), widened by its :data:`TOLERANCE` and, for smooth values, by the trend it had: a
 temperature already rising must rise faster than it did to be a symptom.
+
+A load's power is what it draws on a live rail: its samples while its rail is off (0 W, for
+every load whatever ails it) are neither part of its band nor a symptom. An open load shows as
+nothing drawn on a live rail: its power falling below its band, or, its rail off all the minute
+before the fault (no band), 0 W once its rail is on - the camera the crew switches on after the
+fault, and sees at 0 W (found by an instructor: that open circuit had no symptom).
+
+Every kind of the catalogue has a symptom here; when a fault moves nothing the crew's topics
+show, its symptom stays ``null``, and only then:
+
+- a parameter that changes nothing (SPEC §12e: heating 0 W, dust 0, capacity loss 0,
+  resistance x1): every value stays where it was;
+- a load's fault on a rail that stays off (short, open, stuck): an off rail feeds nothing, so a
+  load on it draws 0 W whatever ails it; the symptom comes when the rail comes on (a short's
+  trip, an open's 0 W); a load stuck at what it drew anyway;
+- a stuck load whose rail was off the whole minute before the fault: no band of what it draws
+  on a live rail to hold the stuck power against (the rover file's ``nominal_w`` is not in a
+  recording), so no symptom is claimed;
+- a pack's resistance with no current through it: nothing to sag;
+- a panel's dust or disconnection with the panel dark (sun below its plane): it gave nothing
+  and gives nothing; the panel's power falls only with the sun on it;
+- the umbilical's supply cut while it supplied nothing (unplugged);
+- a radio's failure or reduced range while the rover is out of its range anyway, or (reduced
+  range) stays in it: the link says what it said.
 """
 
 from __future__ import annotations
@@ -21,7 +45,7 @@ WINDOW_S = 60.0  # the band a value kept before a fault: over this much sim time
 BUCKET_S = 1.0  # ... kept as the range of each such slice (bounded, whatever the rate)
 RECENT = 64  # the latest raw samples of a value, for an injection heard after its effect
 TREND_MIN_S = 5.0  # a trend is read from at least this much history
-Direction = Literal["up", "down", "any", "change", "lost"]
+Direction = Literal["up", "down", "any", "change", "lost", "nothing"]
 
 
 class SymptomSpec(NamedTuple):
@@ -30,7 +54,9 @@ class SymptomSpec(NamedTuple):
 
     family: str  # key chunks after lunaris/<rover>/, {name} for the component's name
     field: str
-    direction: Direction  # up, down, any: leaves its band so; change: differs; lost: true -> false
+    # up, down, any: leaves its band so; change: differs; lost: true -> false; nothing: falls
+    # below its band, or, with no band (never live before the fault), is nothing (0) when live
+    direction: Direction
     words: str
 
 
@@ -49,7 +75,10 @@ SYMPTOMS: dict[tuple[str, str], SymptomSpec] = {
     ("load", "short"): SymptomSpec(
         "load/{name}/power", "power_w", "any",
         "its rail trips on over-current (or the load's power leaves its band)"),
-    ("load", "open"): SymptomSpec("load/{name}/power", "power_w", "down", "the load's power falls"),
+    ("load", "open"): SymptomSpec(
+        "load/{name}/power", "power_w", "nothing",
+        "the load draws nothing (0 W) on a live rail: its power falls, or, its rail off at the "
+        "fault, it draws 0 W once the rail is on (none while the rail stays off)"),
     ("load", "stuck"): SymptomSpec(
         "load/{name}/power", "power_w", "any", "the load's power changes (none if it is stuck at "
         "what it drew anyway)"),

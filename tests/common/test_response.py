@@ -195,9 +195,11 @@ def test_a_disconnected_pack_raises_no_output_and_is_resolved_when_the_alarm_cle
     assert f.resolved_t_s == 9.0  # cleared before its alarm resolved
 
 
-def _load(r: Response, name: str, t: float, power_w: float, rail: str = "12V") -> None:
+def _load(r: Response, name: str, t: float, power_w: float, rail: str = "12V", on: bool = True) -> None:
+    """A load's sample; ``on``: its rail is live (off: it draws 0 W, as the loads service says)."""
     clock(r, t)
-    r.value(["load", name, "power"], {"t_s": t, "power_w": power_w, "rail": rail, "on": True, "faults": []})
+    r.value(["load", name, "power"], {"t_s": t, "power_w": power_w if on else 0.0, "rail": rail, "on": on,
+                                      "faults": []})
 
 
 def test_a_stuck_load_shows_when_its_power_changes_and_not_when_stuck_where_it_was():
@@ -223,6 +225,61 @@ def test_an_open_load_shows_when_its_power_falls():
     for t in ticks(10.1, 11):
         _load(r, "imu", t, 0.0, "3V3_CH1")
     assert fault_of(r, "load/imu/open").first_symptom_t_s == 10.1
+
+
+def test_an_open_load_on_a_rail_off_at_the_fault_shows_when_the_rail_comes_on_and_it_draws_nothing():
+    """The instructor's training day: the camera's rail off, the camera opened, the crew switches
+    the rail on at 20 s and sees the camera at 0 W. Nothing before (the rail off: 0 W is what
+    any load draws there); the symptom is the first sample on the live rail, at 20.0 s."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _load(r, "nav_camera", t, 3.5, "5V_CH2", on=False)
+    inject(r, 10.0, "load/nav_camera/open")
+    for t in ticks(10, 20):
+        _load(r, "nav_camera", t, 0.0, "5V_CH2", on=False)
+    assert fault_of(r, "load/nav_camera/open").first_symptom_t_s is None  # nothing to see yet
+    for t in ticks(20, 21):
+        _load(r, "nav_camera", t, 0.0, "5V_CH2", on=True)
+    f = fault_of(r, "load/nav_camera/open")
+    assert f.first_symptom_t_s == 20.0
+    assert f.symptom == "load/nav_camera power 0 W on a live rail"
+
+
+def test_an_open_load_whose_rail_never_comes_on_has_no_symptom():
+    r = Response(R)
+    for t in ticks(0, 10):
+        _load(r, "nav_camera", t, 3.5, "5V_CH2", on=False)
+    inject(r, 10.0, "load/nav_camera/open")
+    for t in ticks(10, 100):
+        _load(r, "nav_camera", t, 0.0, "5V_CH2", on=False)
+    f = fault_of(r, "load/nav_camera/open")
+    assert f.first_symptom_t_s is None and f.symptom == ""
+
+
+def test_a_loads_power_on_a_dead_rail_is_no_part_of_its_band():
+    """0 W while the rail was off says nothing of what the load draws: the imu at 1.0 W on its
+    live rail, its rail off 5 s to 8 s, then opened at 10 s: 0 W at 10.1 s is below the 1.0 W
+    band (less 0.05 W), a symptom at 10.1 s (with the off spell in the band, its band went down
+    to 0 W and nothing was ever below it)."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _load(r, "imu", t, 1.0, "3V3_CH1", on=not 5.0 <= t < 8.0)
+    inject(r, 10.0, "load/imu/open")
+    _load(r, "imu", 10.1, 0.0, "3V3_CH1")
+    f = fault_of(r, "load/imu/open")
+    assert f.first_symptom_t_s == 10.1 and f.symptom == "load/imu power 0 W, below 1 W before"
+
+
+def test_a_loads_power_on_a_dead_rail_is_no_symptom():
+    """A stuck load at the power it drew, its rail switched off after the fault: 0 W on a dead
+    rail is what any load draws there, no symptom of it (it was one, at the switch-off)."""
+    r2 = Response(R)
+    for t in ticks(0, 10):
+        _load(r2, "imu", t, 1.0, "3V3_CH1")
+    inject(r2, 10.0, "load/imu/stuck", {"power_w": 1.0})
+    for t in ticks(10, 30):
+        _load(r2, "imu", t, 1.0, "3V3_CH1", on=t < 15.0)  # the crew switched the rail off at 15 s
+    assert fault_of(r2, "load/imu/stuck").first_symptom_t_s is None
 
 
 def test_a_failed_rail_shows_as_its_state_and_is_resolved_when_cleared():
