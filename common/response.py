@@ -25,7 +25,8 @@ fault is in effect, of
 
 - a derived alarm raised (``fault_raised``, SPEC §6: over-current, tripped, over-temperature,
   no output ...) on the fault's component or on what it sits on (a load's rail; the loads of a
-  failed rail);
+  failed rail), but for those on no crew topic (:data:`common.symptoms.UNSEEN_ALARMS`: a
+  load's own over-current, which still holds its fault unresolved until it clears);
 - the affected value leaving the band it kept before the injection, per fault kind
   (:data:`common.symptoms.SYMPTOMS`): the band is the range of the value over the minute
   before, widened by a tolerance and, for smooth values, by the trend it had (a temperature
@@ -86,6 +87,7 @@ from common.symptoms import (
     SMOOTH_POWER,
     SYMPTOMS,
     TOLERANCE,
+    UNSEEN_ALARMS,
     Band,
     Direction,
     Series,
@@ -669,7 +671,9 @@ class Response:
             f.touches.add("rail/" + self._load_rail[unit[5:]])
         f.caused.add(key)
         f.caused_any = True
-        f.found(t, f"alarm {message}")
+        parts = message.split("/")
+        if (parts[0], parts[-1]) not in UNSEEN_ALARMS:  # (one the crew never sees is none)
+            f.found(t, f"alarm {message}")
         if f.resolved_t is not None and f.active:
             f.resolved_t, f.resolved_by = None, ""  # not resolved after all
         self.version += 1

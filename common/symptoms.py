@@ -38,8 +38,8 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
-__all__ = ["BUCKET_S", "RECENT", "SMOOTH_POWER", "SYMPTOMS", "TOLERANCE", "TREND_MIN_S", "WINDOW_S",
-           "Band", "Direction", "Series", "SymptomSpec", "quantity"]
+__all__ = ["BUCKET_S", "RECENT", "SMOOTH_POWER", "SYMPTOMS", "TOLERANCE", "TREND_MIN_S", "UNSEEN_ALARMS",
+           "WINDOW_S", "Band", "Direction", "Series", "SymptomSpec", "quantity"]
 
 WINDOW_S = 60.0  # the band a value kept before a fault: over this much sim time
 BUCKET_S = 1.0  # ... kept as the range of each such slice (bounded, whatever the rate)
@@ -99,6 +99,13 @@ SYMPTOMS: dict[tuple[str, str], SymptomSpec] = {
         "radio/{name}/link", "in_range", "lost", "the link goes out of range; none while it "
         "stays in range"),
 }
+
+# The twin's alarms (common.faults.DERIVED) that no instrument of the rover measures, so on no
+# crew topic and no symptom: (component type, alarm). A load's over-current: the PDM measures
+# and trips its channels, the rails (a channel's trip is its rail's alarm, ERROR on the crew's
+# /diagnostics); the loads sharing a channel are not told apart. (Found by an instructor: the
+# crew's /diagnostics named the shorted camera for the 13 ms before its rail tripped.)
+UNSEEN_ALARMS: frozenset[tuple[str, str]] = frozenset({("load", "over_current")})
 
 # field -> (absolute, relative to the value, trend followed): how far outside its band a value
 # must go to be a symptom. Loads' power is noisy sample to sample: its band is its range, no

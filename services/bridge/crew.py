@@ -7,7 +7,8 @@ made only of what the rover's own sensors and protection would report:
 - the twin's alarms, the *derived* faults of the owners' ``faults/active/<service>`` (an
   injected fault in the same record is never looked at), in the crew's words: a rail's
   ``tripped`` is an over-current trip, the pack's ``over_temperature`` an over-temperature;
-  but not those the rover's own instruments cannot measure (:data:`UNSEEN`): a load's
+  but not those the rover's own instruments cannot measure
+  (:data:`common.symptoms.UNSEEN_ALARMS`): a load's
   ``over_current``. A PDM measures and protects its channels, the rails: a channel's trip is
   its rail's ERROR; the loads on a channel share its current, and none is singled out as the
   one that drew too much. (Found by an instructor: a short showed ``load/nav_camera ERROR
@@ -38,6 +39,7 @@ from typing import Any
 from common import keys
 from common.config import Rover
 from common.messages import ActiveFault, ActiveFaults, RadioLink, RailState
+from common.symptoms import UNSEEN_ALARMS
 from services.bridge.bindings import RoverNames, expand, rover_names
 from services.bridge.convert import (
     DIAG_ERROR,
@@ -53,7 +55,7 @@ from services.bridge.convert import (
 )
 from services.bridge.mapping import MappingFile, load_mapping, resolve_mapping
 
-__all__ = ["READS", "SYMPTOMS", "UNSEEN", "crew_statuses", "crew_view", "seen", "symptom_of"]
+__all__ = ["READS", "SYMPTOMS", "crew_statuses", "crew_view", "seen", "symptom_of"]
 
 # The twin's alarms (common.faults.DERIVED) as the crew's dashboard names them.
 SYMPTOMS: dict[str, dict[str, str]] = {
@@ -71,9 +73,6 @@ SYMPTOMS: dict[str, dict[str, str]] = {
     "rail": {"tripped": "over-current trip: off until reset", "shed": "load shed: low charge"},
     "radio": {"unpowered": "no power"},
 }
-# The twin's alarms no instrument of the rover measures, so never on the crew's dashboard
-# (module text): (component type, alarm).
-UNSEEN: frozenset[tuple[str, str]] = frozenset({("load", "over_current")})
 _LEVEL = {"info": DIAG_OK, "warning": DIAG_WARN, "critical": DIAG_ERROR}
 READS = (RailState, RadioLink)  # the telemetry the crew's view reads beside the alarms
 
@@ -114,7 +113,7 @@ def crew_statuses(rover: str, component_names: list[str], active: list[ActiveFau
     for f in active:
         if f.origin == "derived":
             comp, alarm = component_of_fault(f.key)
-            if (comp.split("/", 1)[0], alarm) not in UNSEEN:
+            if (comp.split("/", 1)[0], alarm) not in UNSEEN_ALARMS:
                 alarms.setdefault(comp, []).append(f)
     statuses = []
     for comp in component_names:

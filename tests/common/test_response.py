@@ -132,6 +132,30 @@ def test_a_fault_resolved_by_the_crew_is_resolved_when_its_alarms_cleared_and_it
     assert [a.action for a in f.crew_actions] == ["rail reset and on"]
 
 
+def test_a_loads_own_over_current_is_no_symptom_the_crew_sees_its_rails_trip_is():
+    """The camera's over-current alarm, raised at its surge just before its rail trips, is on
+    no crew topic (the dashboard's PDM measures rails, not loads: services.bridge.crew): heard
+    first, at the trip's tick, it is not the symptom; the rail's trip is, in the same tick. It
+    still holds the fault unresolved until it clears."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _pdm(r, t, 3.5, "on")
+    inject(r, 10.0, "load/nav_camera/short")
+    ev(r, 10.1, "fault_raised", "load/nav_camera/over_current", actor="twin", severity="critical")
+    f = fault_of(r, "load/nav_camera/short")
+    assert f.first_symptom_t_s is None and f.symptom == ""  # nothing the crew could see yet
+    ev(r, 10.1, "fault_raised", "rail/5V_CH2/tripped", actor="twin", severity="critical")
+    _pdm(r, 10.1, 0.0, "tripped")
+    f = fault_of(r, "load/nav_camera/short")
+    assert f.first_symptom_t_s == 10.1 and f.symptom == "alarm rail/5V_CH2/tripped"
+    crew(r, 20.0, "cmd/rail/5V_CH2", params={"reset": True, "on": True})
+    _pdm(r, 20.1, 3.5, "on")
+    ev(r, 20.1, "fault_resolved", "rail/5V_CH2/tripped", actor="twin")
+    assert fault_of(r, "load/nav_camera/short").resolved_t_s is None  # the camera's alarm is up
+    ev(r, 20.2, "fault_resolved", "load/nav_camera/over_current", actor="twin")
+    assert fault_of(r, "load/nav_camera/short").resolved_t_s == 20.2
+
+
 # -- each kind's symptom ------------------------------------------------------------------------------
 
 
