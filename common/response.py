@@ -223,6 +223,7 @@ class _Fault:
     rails: dict[str, str | None]  # rail -> its state before the fault
     watch: tuple[str, str] | None = None  # (series, field) whose band it watches
     direction: Direction = "any"
+    live: str = ""  # nothing: when its value counts, in words (SymptomSpec.live)
     band: Band | None = None
     before: Any = None  # a state's value before the fault (change, lost)
     cleared_t: float | None = None
@@ -325,6 +326,8 @@ class Response:
         self._series: dict[tuple[str, str], Series] = {}
         self._states: dict[str, Any] = {}  # rail name -> state; "radio/<n>" -> in_range ...
         self._load_rail: dict[str, str] = {}
+        self._plugged: bool | None = None  # the umbilical plugged in (None: not known)
+        self._unplugged_last: tuple[float, Any] | None = None  # its last state while not
         self._watchers: dict[tuple[str, str], list[_Fault]] = {}
         self._rail_faults: dict[str, list[_Fault]] = {}
 
@@ -408,7 +411,7 @@ class Response:
             self._number(_BATTERY_TEMPERATURE, t, get("temperature_c"))
             self._state(_BATTERY_OPERATIONAL, t, get("operational"))
         elif head == "umbilical" and n == 2:
-            self._number(_UMBILICAL, t, get("power_w"))
+            self._umbilical(t, get("connected"), get("power_w"))
         elif head == "scenario" and n == 2 and parts[1] == "progress":
             self._progress(payload)
         cur = self._current
@@ -460,6 +463,30 @@ class Response:
         for series in self._series.values():
             series.clear()
         self._states.clear()
+        self._plugged, self._unplugged_last = None, None
+
+    def _umbilical(self, t: float, connected: Any, power_w: Any) -> None:
+        """The umbilical's supply counts only while it is plugged in: its state says connected,
+        or the last plug heard (:meth:`_plug`) plugged it in - a cut umbilical says it is not
+        connected, plugged or not. Unplugged, it supplies nothing, whatever ails it."""
+        if connected:
+            self._plugged = True
+        if connected is None or connected or self._plugged:
+            self._number(_UMBILICAL, t, power_w)
+        else:
+            self._unplugged_last = (t, power_w)
+
+    def _plug(self, t: float, params: Any) -> None:
+        """The umbilical plugged in or out (``input/umbilical``, accepted, whoever did it). Its
+        state of the tick it was plugged in at came first (its service says so after): it
+        counts now."""
+        plugged = params.get("connected") if isinstance(params, Mapping) else None
+        if not isinstance(plugged, bool):
+            return
+        self._plugged = plugged
+        last, self._unplugged_last = self._unplugged_last, None
+        if plugged and last is not None and last[0] >= t:
+            self._number(_UMBILICAL, *last)
 
     def _series_of(self, key: tuple[str, str]) -> Series:
         series = self._series.get(key)
@@ -520,7 +547,7 @@ class Response:
         elif f.direction == "nothing" and f.band is None:
             if not isinstance(v, bool) and v <= TOLERANCE.get(fld, (0.0, 0.0, False))[0]:
                 name, unit = quantity(fld)
-                words = f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit} on a live rail"
+                words = f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit} {f.live}".rstrip()
         elif f.band is not None and not isinstance(v, bool):
             way = f.band.outside(t, v, "down" if f.direction == "nothing" else f.direction)
             if way:
@@ -561,6 +588,8 @@ class Response:
             self._alarm(s, key, t, True)
         elif kind == "fault_resolved":
             self._alarm(s, key, t, False)
+        elif kind == "input" and key == self.prefix + "input/umbilical" and s is self._current:
+            self._plug(t, params)
         elif kind == "scenario" and isinstance(params, Mapping) and params.get("what") == "expect":
             self._scored(s, params)
         if _get(ev, "actor", "") == "crew" and kind in ("command", "input", "rejected", "clock"):
@@ -616,7 +645,7 @@ class Response:
 
     def _watch(self, f: _Fault, tail: str, spec: SymptomSpec) -> None:
         key = (tail, spec.field)
-        f.watch, f.direction = key, spec.direction
+        f.watch, f.direction, f.live = key, spec.direction, spec.live
         series = self._series_of(key)
         if spec.direction in ("change", "lost"):
             f.before = series.last_before(f.injected_t)

@@ -359,6 +359,49 @@ def test_an_umbilical_that_supplied_nothing_shows_no_symptom_when_disconnected()
     assert fault_of(r2, "umbilical/disconnect").first_symptom_t_s == 5.1
 
 
+def _umbilical(r: Response, t: float, connected: bool, power_w: float) -> None:
+    clock(r, t)
+    r.value(["umbilical", "state"], {"t_s": t, "connected": connected, "power_w": power_w})
+
+
+def test_an_umbilical_cut_while_unplugged_shows_when_it_is_plugged_in_and_supplies_nothing():
+    """Cut while unplugged (0 W, as any unplugged umbilical): nothing to see. Plugged in at
+    20 s (the solar service says so after its state of that tick, connected false, 0 W): the
+    crew plugged it in and it supplies nothing, a symptom at 20.0 s. Unplugged again, then cut
+    and never plugged: none."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _umbilical(r, t, False, 0.0)
+    inject(r, 10.0, "umbilical/disconnect")
+    for t in ticks(10, 20.1):
+        _umbilical(r, t, False, 0.0)
+    assert fault_of(r, "umbilical/disconnect").first_symptom_t_s is None
+    ev(r, 20.0, "input", "input/umbilical", actor="crew", params={"connected": True},
+       message="umbilical plugged in")
+    f = fault_of(r, "umbilical/disconnect")
+    assert f.first_symptom_t_s == 20.0 and f.symptom == "umbilical power 0 W plugged in"
+    r2 = Response(R)
+    for t in ticks(0, 10):
+        _umbilical(r2, t, False, 0.0)
+    inject(r2, 10.0, "umbilical/disconnect")
+    for t in ticks(10, 100):
+        _umbilical(r2, t, False, 0.0)
+    assert fault_of(r2, "umbilical/disconnect").first_symptom_t_s is None
+
+
+def test_an_umbilical_plugged_in_at_the_start_and_cut_shows_when_its_supply_falls():
+    """Plugged in (connected, 120 W) with no event saying so (the rover file's): cut at 5 s,
+    its state says not connected, 0 W at 5.1 s: still plugged in, below 120 W, a symptom at
+    5.1 s (its state alone says it is not connected, as an unplugged one)."""
+    r = Response(R)
+    for t in ticks(0, 5):
+        _umbilical(r, t, True, 120.0)
+    inject(r, 5.0, "umbilical/disconnect")
+    _umbilical(r, 5.1, False, 0.0)
+    f = fault_of(r, "umbilical/disconnect")
+    assert f.first_symptom_t_s == 5.1 and f.symptom == "umbilical power 0 W, below 120 W before"
+
+
 def _link(r: Response, name: str, t: float, in_range: bool) -> None:
     clock(r, t)
     r.value(["radio", name, "link"], {"t_s": t, "in_range": in_range, "x_m": 0.0, "y_m": 0.0})
