@@ -25,13 +25,16 @@ fault is in effect, of
 
 - a derived alarm raised (``fault_raised``, SPEC §6: over-current, tripped, over-temperature,
   no output ...) on the fault's component or on what it sits on (a load's rail; the loads of a
-  failed rail);
+  failed rail), but for those on no crew topic (:data:`common.symptoms.UNSEEN_ALARMS`: a
+  load's own over-current, which still holds its fault unresolved until it clears);
 - the affected value leaving the band it kept before the injection, per fault kind
   (:data:`common.symptoms.SYMPTOMS`): the band is the range of the value over the minute
   before, widened by a tolerance and, for smooth values, by the trend it had (a temperature
-  already rising must rise faster than it did). A kind whose value does not leave its band (a
-  load stuck at the power it drew anyway, a radio degraded while the rover stays in range) has
-  no symptom: ``null``.
+  already rising must rise faster than it did). A load's power counts only on a live rail (its
+  payload's ``on``): an open load shows as 0 W there, also when its rail comes on after the
+  injection. A kind whose value does not leave its band (a load stuck at the power it drew
+  anyway, a radio degraded while the rover stays in range) has no symptom: ``null``; the
+  module :mod:`common.symptoms` says when each kind shows nothing, and why.
 
 **The crew's actions** are the events with ``actor: crew`` (rail commands, the drive stopped,
 inputs; accepted, or refused with the twin's reason) from the injection until the fault is
@@ -84,6 +87,7 @@ from common.symptoms import (
     SMOOTH_POWER,
     SYMPTOMS,
     TOLERANCE,
+    UNSEEN_ALARMS,
     Band,
     Direction,
     Series,
@@ -219,6 +223,7 @@ class _Fault:
     rails: dict[str, str | None]  # rail -> its state before the fault
     watch: tuple[str, str] | None = None  # (series, field) whose band it watches
     direction: Direction = "any"
+    live: str = ""  # nothing: when its value counts, in words (SymptomSpec.live)
     band: Band | None = None
     before: Any = None  # a state's value before the fault (change, lost)
     cleared_t: float | None = None
@@ -321,6 +326,8 @@ class Response:
         self._series: dict[tuple[str, str], Series] = {}
         self._states: dict[str, Any] = {}  # rail name -> state; "radio/<n>" -> in_range ...
         self._load_rail: dict[str, str] = {}
+        self._plugged: bool | None = None  # the umbilical plugged in (None: not known)
+        self._unplugged_last: tuple[float, Any] | None = None  # its last state while not
         self._watchers: dict[tuple[str, str], list[_Fault]] = {}
         self._rail_faults: dict[str, list[_Fault]] = {}
 
@@ -388,7 +395,8 @@ class Response:
                 rail = get("rail")
                 if rail:
                     self._load_rail[name] = rail
-                self._number(("load/" + name + "/power", "power_w"), t, get("power_w"))
+                if get("on") is not False:  # on a dead rail every load draws 0 W, whatever ails it
+                    self._number(("load/" + name + "/power", "power_w"), t, get("power_w"))
             elif head == "rail":
                 self._rail(name, t, get("state"))
             elif head == "solar":
@@ -403,7 +411,7 @@ class Response:
             self._number(_BATTERY_TEMPERATURE, t, get("temperature_c"))
             self._state(_BATTERY_OPERATIONAL, t, get("operational"))
         elif head == "umbilical" and n == 2:
-            self._number(_UMBILICAL, t, get("power_w"))
+            self._umbilical(t, get("connected"), get("power_w"))
         elif head == "scenario" and n == 2 and parts[1] == "progress":
             self._progress(payload)
         cur = self._current
@@ -455,6 +463,30 @@ class Response:
         for series in self._series.values():
             series.clear()
         self._states.clear()
+        self._plugged, self._unplugged_last = None, None
+
+    def _umbilical(self, t: float, connected: Any, power_w: Any) -> None:
+        """The umbilical's supply counts only while it is plugged in: its state says connected,
+        or the last plug heard (:meth:`_plug`) plugged it in - a cut umbilical says it is not
+        connected, plugged or not. Unplugged, it supplies nothing, whatever ails it."""
+        if connected:
+            self._plugged = True
+        if connected is None or connected or self._plugged:
+            self._number(_UMBILICAL, t, power_w)
+        else:
+            self._unplugged_last = (t, power_w)
+
+    def _plug(self, t: float, params: Any) -> None:
+        """The umbilical plugged in or out (``input/umbilical``, accepted, whoever did it). Its
+        state of the tick it was plugged in at came first (its service says so after): it
+        counts now."""
+        plugged = params.get("connected") if isinstance(params, Mapping) else None
+        if not isinstance(plugged, bool):
+            return
+        self._plugged = plugged
+        last, self._unplugged_last = self._unplugged_last, None
+        if plugged and last is not None and last[0] >= t:
+            self._number(_UMBILICAL, *last)
 
     def _series_of(self, key: tuple[str, str]) -> Series:
         series = self._series.get(key)
@@ -512,8 +544,12 @@ class Response:
             if f.before is True and v is False:
                 words = f"{tail.rsplit('/', 1)[0]} out of range"
             f.before = v  # out of range before: the next loss of the link counts
+        elif f.direction == "nothing" and f.band is None:
+            if not isinstance(v, bool) and v <= TOLERANCE.get(fld, (0.0, 0.0, False))[0]:
+                name, unit = quantity(fld)
+                words = f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit} {f.live}".rstrip()
         elif f.band is not None and not isinstance(v, bool):
-            way = f.band.outside(t, v, f.direction)
+            way = f.band.outside(t, v, "down" if f.direction == "nothing" else f.direction)
             if way:
                 name, unit = quantity(fld)
                 words = (f"{tail.rsplit('/', 1)[0]} {name} {v:.3g} {unit}, {way} "
@@ -552,6 +588,8 @@ class Response:
             self._alarm(s, key, t, True)
         elif kind == "fault_resolved":
             self._alarm(s, key, t, False)
+        elif kind == "input" and key == self.prefix + "input/umbilical" and s is self._current:
+            self._plug(t, params)
         elif kind == "scenario" and isinstance(params, Mapping) and params.get("what") == "expect":
             self._scored(s, params)
         if _get(ev, "actor", "") == "crew" and kind in ("command", "input", "rejected", "clock"):
@@ -607,7 +645,7 @@ class Response:
 
     def _watch(self, f: _Fault, tail: str, spec: SymptomSpec) -> None:
         key = (tail, spec.field)
-        f.watch, f.direction = key, spec.direction
+        f.watch, f.direction, f.live = key, spec.direction, spec.live
         series = self._series_of(key)
         if spec.direction in ("change", "lost"):
             f.before = series.last_before(f.injected_t)
@@ -615,11 +653,12 @@ class Response:
                 return  # no value before it: nothing to compare with
         else:
             points = series.before(f.injected_t)
-            if not points:
+            if not points and spec.direction != "nothing":
                 return  # no value before it: its band is not known
             trend = TOLERANCE.get(spec.field, (0, 0, False))[2] or (
                 spec.field == "power_w" and f.component in SMOOTH_POWER)
-            f.band = Band.of(points, spec.field, trend)
+            if points:  # (nothing: none before is a value never live, 0 when live a symptom)
+                f.band = Band.of(points, spec.field, trend)
         self._watchers.setdefault(key, []).append(f)
         for ts, v in list(series.recent):  # what came before the injection was heard
             if ts >= f.injected_t:
@@ -661,7 +700,9 @@ class Response:
             f.touches.add("rail/" + self._load_rail[unit[5:]])
         f.caused.add(key)
         f.caused_any = True
-        f.found(t, f"alarm {message}")
+        parts = message.split("/")
+        if (parts[0], parts[-1]) not in UNSEEN_ALARMS:  # (one the crew never sees is none)
+            f.found(t, f"alarm {message}")
         if f.resolved_t is not None and f.active:
             f.resolved_t, f.resolved_by = None, ""  # not resolved after all
         self.version += 1

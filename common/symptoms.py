@@ -6,6 +6,41 @@ alarms as symptoms) and by the reference (``docs/reference/scenarios.md``). A va
 its range over the ``WINDOW_S`` before the fault, kept as ``BUCKET_S`` slices (bounded whatever
 the rate), widened by its :data:`TOLERANCE` and, for smooth values, by the trend it had: a
 temperature already rising must rise faster than it did to be a symptom.
+
+A load's power is what it draws on a live rail: its samples while its rail is off (0 W, for
+every load whatever ails it) are neither part of its band nor a symptom. An open load shows as
+nothing drawn on a live rail: its power falling below its band, or, its rail off all the minute
+before the fault (no band), 0 W once its rail is on - the camera the crew switches on after the
+fault, and sees at 0 W (found by an instructor: that open circuit had no symptom). The
+umbilical's supply counts the same way only while it is plugged in (its state says connected,
+or the last ``input/umbilical`` heard plugged it in: a cut umbilical says it is not connected,
+plugged or not), and a cut one shows as nothing supplied once plugged in.
+
+Every kind of the catalogue has a symptom here. A fault's symptom stays ``null`` when it moves
+nothing the crew's topics show:
+
+- a parameter that changes nothing (SPEC §12e: heating 0 W, dust 0, capacity loss 0,
+  resistance x1): every value stays where it was;
+- a load's fault on a rail that stays off (short, open, stuck): an off rail feeds nothing, so a
+  load on it draws 0 W whatever ails it; the symptom comes when the rail comes on (a short's
+  trip, an open's 0 W); a load stuck at what it drew anyway;
+- a pack's resistance with no current through it: nothing to sag;
+- a panel's dust or disconnection while the panel is dark and stays so: it gave nothing and
+  gives nothing;
+- the umbilical's supply cut while it is unplugged and stays so (an unplugged umbilical
+  supplies nothing anyway);
+- a radio's failure or reduced range while the rover stays out of its range, or (reduced
+  range) stays in it: the link says what it said.
+
+It also stays ``null`` where the crew could tell, but only against what it knows of the rover
+and no band before the fault holds it (limits, not claims that nothing shows):
+
+- a stuck load whose rail was off the whole minute before the fault, once the rail is on: its
+  stuck power against the rover file's ``nominal_w``, which no recording holds;
+- dust on a panel dark at the fault, once the sun is on it: less power than the sun's angle
+  gives;
+- a radio failed or degraded while the rover was out of range, once it is back where it should
+  be in range: the link stays lost.
 """
 
 from __future__ import annotations
@@ -14,14 +49,14 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Literal, NamedTuple
 
-__all__ = ["BUCKET_S", "RECENT", "SMOOTH_POWER", "SYMPTOMS", "TOLERANCE", "TREND_MIN_S", "WINDOW_S",
-           "Band", "Direction", "Series", "SymptomSpec", "quantity"]
+__all__ = ["BUCKET_S", "RECENT", "SMOOTH_POWER", "SYMPTOMS", "TOLERANCE", "TREND_MIN_S", "UNSEEN_ALARMS",
+           "WINDOW_S", "Band", "Direction", "Series", "SymptomSpec", "quantity"]
 
 WINDOW_S = 60.0  # the band a value kept before a fault: over this much sim time
 BUCKET_S = 1.0  # ... kept as the range of each such slice (bounded, whatever the rate)
 RECENT = 64  # the latest raw samples of a value, for an injection heard after its effect
 TREND_MIN_S = 5.0  # a trend is read from at least this much history
-Direction = Literal["up", "down", "any", "change", "lost"]
+Direction = Literal["up", "down", "any", "change", "lost", "nothing"]
 
 
 class SymptomSpec(NamedTuple):
@@ -30,8 +65,11 @@ class SymptomSpec(NamedTuple):
 
     family: str  # key chunks after lunaris/<rover>/, {name} for the component's name
     field: str
-    direction: Direction  # up, down, any: leaves its band so; change: differs; lost: true -> false
+    # up, down, any: leaves its band so; change: differs; lost: true -> false; nothing: falls
+    # below its band, or, with no band (never live before the fault), is nothing (0) when live
+    direction: Direction
     words: str
+    live: str = ""  # nothing: when the value counts, in words ("on a live rail")
 
 
 # fault (component, kind) -> its symptom on a value. Every kind also has the alarm symptom.
@@ -49,7 +87,11 @@ SYMPTOMS: dict[tuple[str, str], SymptomSpec] = {
     ("load", "short"): SymptomSpec(
         "load/{name}/power", "power_w", "any",
         "its rail trips on over-current (or the load's power leaves its band)"),
-    ("load", "open"): SymptomSpec("load/{name}/power", "power_w", "down", "the load's power falls"),
+    ("load", "open"): SymptomSpec(
+        "load/{name}/power", "power_w", "nothing",
+        "the load draws nothing (0 W) on a live rail: its power falls, or, its rail off at the "
+        "fault, it draws 0 W once the rail is on (none while the rail stays off)",
+        "on a live rail"),
     ("load", "stuck"): SymptomSpec(
         "load/{name}/power", "power_w", "any", "the load's power changes (none if it is stuck at "
         "what it drew anyway)"),
@@ -61,8 +103,9 @@ SYMPTOMS: dict[tuple[str, str], SymptomSpec] = {
     ("solar", "disconnect"): SymptomSpec(
         "solar/{name}/power", "power_w", "down", "the panel's power falls to nothing"),
     ("umbilical", "disconnect"): SymptomSpec(
-        "umbilical/state", "power_w", "down", "the umbilical's supply falls (none if it supplied "
-        "nothing)"),
+        "umbilical/state", "power_w", "nothing",
+        "the umbilical's supply falls, or, unplugged at the fault, it supplies nothing once "
+        "plugged in (none while it stays unplugged)", "plugged in"),
     ("radio", "failure"): SymptomSpec(
         "radio/{name}/link", "in_range", "lost", "the link goes out of range (none while the "
         "rover was out of range anyway)"),
@@ -70,6 +113,13 @@ SYMPTOMS: dict[tuple[str, str], SymptomSpec] = {
         "radio/{name}/link", "in_range", "lost", "the link goes out of range; none while it "
         "stays in range"),
 }
+
+# The twin's alarms (common.faults.DERIVED) that no instrument of the rover measures, so on no
+# crew topic and no symptom: (component type, alarm). A load's over-current: the PDM measures
+# and trips its channels, the rails (a channel's trip is its rail's alarm, ERROR on the crew's
+# /diagnostics); the loads sharing a channel are not told apart. (Found by an instructor: the
+# crew's /diagnostics named the shorted camera for the 13 ms before its rail tripped.)
+UNSEEN_ALARMS: frozenset[tuple[str, str]] = frozenset({("load", "over_current")})
 
 # field -> (absolute, relative to the value, trend followed): how far outside its band a value
 # must go to be a symptom. Loads' power is noisy sample to sample: its band is its range, no

@@ -7,6 +7,13 @@ made only of what the rover's own sensors and protection would report:
 - the twin's alarms, the *derived* faults of the owners' ``faults/active/<service>`` (an
   injected fault in the same record is never looked at), in the crew's words: a rail's
   ``tripped`` is an over-current trip, the pack's ``over_temperature`` an over-temperature;
+  but not those the rover's own instruments cannot measure
+  (:data:`common.symptoms.UNSEEN_ALARMS`): a load's
+  ``over_current``. A PDM measures and protects its channels, the rails: a channel's trip is
+  its rail's ERROR; the loads on a channel share its current, and none is singled out as the
+  one that drew too much. (Found by an instructor: a short showed ``load/nav_camera ERROR
+  over-current`` for the 13 ms between the camera's surge and its rail's trip, the answer to
+  the drill's "find the load".)
 - what the component's own telemetry shows: a rail with no output while switched on (its
   converter dead), a radio without a link;
 - silence: a component whose telemetry stopped is STALE.
@@ -32,6 +39,7 @@ from typing import Any
 from common import keys
 from common.config import Rover
 from common.messages import ActiveFault, ActiveFaults, RadioLink, RailState
+from common.symptoms import UNSEEN_ALARMS
 from services.bridge.bindings import RoverNames, expand, rover_names
 from services.bridge.convert import (
     DIAG_ERROR,
@@ -63,7 +71,6 @@ SYMPTOMS: dict[str, dict[str, str]] = {
         "under_temperature": "under-temperature",
     },
     "rail": {"tripped": "over-current trip: off until reset", "shed": "load shed: low charge"},
-    "load": {"over_current": "over-current"},
     "radio": {"unpowered": "no power"},
 }
 _LEVEL = {"info": DIAG_OK, "warning": DIAG_WARN, "critical": DIAG_ERROR}
@@ -105,7 +112,9 @@ def crew_statuses(rover: str, component_names: list[str], active: list[ActiveFau
     alarms: dict[str, list[ActiveFault]] = {}
     for f in active:
         if f.origin == "derived":
-            alarms.setdefault(component_of_fault(f.key)[0], []).append(f)
+            comp, alarm = component_of_fault(f.key)
+            if (comp.split("/", 1)[0], alarm) not in UNSEEN_ALARMS:
+                alarms.setdefault(comp, []).append(f)
     statuses = []
     for comp in component_names:
         own = alarms.get(comp, [])

@@ -132,6 +132,30 @@ def test_a_fault_resolved_by_the_crew_is_resolved_when_its_alarms_cleared_and_it
     assert [a.action for a in f.crew_actions] == ["rail reset and on"]
 
 
+def test_a_loads_own_over_current_is_no_symptom_the_crew_sees_its_rails_trip_is():
+    """The camera's over-current alarm, raised at its surge just before its rail trips, is on
+    no crew topic (the dashboard's PDM measures rails, not loads: services.bridge.crew): heard
+    first, at the trip's tick, it is not the symptom; the rail's trip is, in the same tick. It
+    still holds the fault unresolved until it clears."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _pdm(r, t, 3.5, "on")
+    inject(r, 10.0, "load/nav_camera/short")
+    ev(r, 10.1, "fault_raised", "load/nav_camera/over_current", actor="twin", severity="critical")
+    f = fault_of(r, "load/nav_camera/short")
+    assert f.first_symptom_t_s is None and f.symptom == ""  # nothing the crew could see yet
+    ev(r, 10.1, "fault_raised", "rail/5V_CH2/tripped", actor="twin", severity="critical")
+    _pdm(r, 10.1, 0.0, "tripped")
+    f = fault_of(r, "load/nav_camera/short")
+    assert f.first_symptom_t_s == 10.1 and f.symptom == "alarm rail/5V_CH2/tripped"
+    crew(r, 20.0, "cmd/rail/5V_CH2", params={"reset": True, "on": True})
+    _pdm(r, 20.1, 3.5, "on")
+    ev(r, 20.1, "fault_resolved", "rail/5V_CH2/tripped", actor="twin")
+    assert fault_of(r, "load/nav_camera/short").resolved_t_s is None  # the camera's alarm is up
+    ev(r, 20.2, "fault_resolved", "load/nav_camera/over_current", actor="twin")
+    assert fault_of(r, "load/nav_camera/short").resolved_t_s == 20.2
+
+
 # -- each kind's symptom ------------------------------------------------------------------------------
 
 
@@ -195,9 +219,11 @@ def test_a_disconnected_pack_raises_no_output_and_is_resolved_when_the_alarm_cle
     assert f.resolved_t_s == 9.0  # cleared before its alarm resolved
 
 
-def _load(r: Response, name: str, t: float, power_w: float, rail: str = "12V") -> None:
+def _load(r: Response, name: str, t: float, power_w: float, rail: str = "12V", on: bool = True) -> None:
+    """A load's sample; ``on``: its rail is live (off: it draws 0 W, as the loads service says)."""
     clock(r, t)
-    r.value(["load", name, "power"], {"t_s": t, "power_w": power_w, "rail": rail, "on": True, "faults": []})
+    r.value(["load", name, "power"], {"t_s": t, "power_w": power_w if on else 0.0, "rail": rail, "on": on,
+                                      "faults": []})
 
 
 def test_a_stuck_load_shows_when_its_power_changes_and_not_when_stuck_where_it_was():
@@ -223,6 +249,61 @@ def test_an_open_load_shows_when_its_power_falls():
     for t in ticks(10.1, 11):
         _load(r, "imu", t, 0.0, "3V3_CH1")
     assert fault_of(r, "load/imu/open").first_symptom_t_s == 10.1
+
+
+def test_an_open_load_on_a_rail_off_at_the_fault_shows_when_the_rail_comes_on_and_it_draws_nothing():
+    """The instructor's training day: the camera's rail off, the camera opened, the crew switches
+    the rail on at 20 s and sees the camera at 0 W. Nothing before (the rail off: 0 W is what
+    any load draws there); the symptom is the first sample on the live rail, at 20.0 s."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _load(r, "nav_camera", t, 3.5, "5V_CH2", on=False)
+    inject(r, 10.0, "load/nav_camera/open")
+    for t in ticks(10, 20):
+        _load(r, "nav_camera", t, 0.0, "5V_CH2", on=False)
+    assert fault_of(r, "load/nav_camera/open").first_symptom_t_s is None  # nothing to see yet
+    for t in ticks(20, 21):
+        _load(r, "nav_camera", t, 0.0, "5V_CH2", on=True)
+    f = fault_of(r, "load/nav_camera/open")
+    assert f.first_symptom_t_s == 20.0
+    assert f.symptom == "load/nav_camera power 0 W on a live rail"
+
+
+def test_an_open_load_whose_rail_never_comes_on_has_no_symptom():
+    r = Response(R)
+    for t in ticks(0, 10):
+        _load(r, "nav_camera", t, 3.5, "5V_CH2", on=False)
+    inject(r, 10.0, "load/nav_camera/open")
+    for t in ticks(10, 100):
+        _load(r, "nav_camera", t, 0.0, "5V_CH2", on=False)
+    f = fault_of(r, "load/nav_camera/open")
+    assert f.first_symptom_t_s is None and f.symptom == ""
+
+
+def test_a_loads_power_on_a_dead_rail_is_no_part_of_its_band():
+    """0 W while the rail was off says nothing of what the load draws: the imu at 1.0 W on its
+    live rail, its rail off 5 s to 8 s, then opened at 10 s: 0 W at 10.1 s is below the 1.0 W
+    band (less 0.05 W), a symptom at 10.1 s (with the off spell in the band, its band went down
+    to 0 W and nothing was ever below it)."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _load(r, "imu", t, 1.0, "3V3_CH1", on=not 5.0 <= t < 8.0)
+    inject(r, 10.0, "load/imu/open")
+    _load(r, "imu", 10.1, 0.0, "3V3_CH1")
+    f = fault_of(r, "load/imu/open")
+    assert f.first_symptom_t_s == 10.1 and f.symptom == "load/imu power 0 W, below 1 W before"
+
+
+def test_a_loads_power_on_a_dead_rail_is_no_symptom():
+    """A stuck load at the power it drew, its rail switched off after the fault: 0 W on a dead
+    rail is what any load draws there, no symptom of it (it was one, at the switch-off)."""
+    r2 = Response(R)
+    for t in ticks(0, 10):
+        _load(r2, "imu", t, 1.0, "3V3_CH1")
+    inject(r2, 10.0, "load/imu/stuck", {"power_w": 1.0})
+    for t in ticks(10, 30):
+        _load(r2, "imu", t, 1.0, "3V3_CH1", on=t < 15.0)  # the crew switched the rail off at 15 s
+    assert fault_of(r2, "load/imu/stuck").first_symptom_t_s is None
 
 
 def test_a_failed_rail_shows_as_its_state_and_is_resolved_when_cleared():
@@ -276,6 +357,49 @@ def test_an_umbilical_that_supplied_nothing_shows_no_symptom_when_disconnected()
     inject(r2, 5.0, "umbilical/disconnect")
     r2.value(["umbilical", "state"], {"t_s": 5.1, "connected": True, "power_w": 0.0})
     assert fault_of(r2, "umbilical/disconnect").first_symptom_t_s == 5.1
+
+
+def _umbilical(r: Response, t: float, connected: bool, power_w: float) -> None:
+    clock(r, t)
+    r.value(["umbilical", "state"], {"t_s": t, "connected": connected, "power_w": power_w})
+
+
+def test_an_umbilical_cut_while_unplugged_shows_when_it_is_plugged_in_and_supplies_nothing():
+    """Cut while unplugged (0 W, as any unplugged umbilical): nothing to see. Plugged in at
+    20 s (the solar service says so after its state of that tick, connected false, 0 W): the
+    crew plugged it in and it supplies nothing, a symptom at 20.0 s. Unplugged again, then cut
+    and never plugged: none."""
+    r = Response(R)
+    for t in ticks(0, 10):
+        _umbilical(r, t, False, 0.0)
+    inject(r, 10.0, "umbilical/disconnect")
+    for t in ticks(10, 20.1):
+        _umbilical(r, t, False, 0.0)
+    assert fault_of(r, "umbilical/disconnect").first_symptom_t_s is None
+    ev(r, 20.0, "input", "input/umbilical", actor="crew", params={"connected": True},
+       message="umbilical plugged in")
+    f = fault_of(r, "umbilical/disconnect")
+    assert f.first_symptom_t_s == 20.0 and f.symptom == "umbilical power 0 W plugged in"
+    r2 = Response(R)
+    for t in ticks(0, 10):
+        _umbilical(r2, t, False, 0.0)
+    inject(r2, 10.0, "umbilical/disconnect")
+    for t in ticks(10, 100):
+        _umbilical(r2, t, False, 0.0)
+    assert fault_of(r2, "umbilical/disconnect").first_symptom_t_s is None
+
+
+def test_an_umbilical_plugged_in_at_the_start_and_cut_shows_when_its_supply_falls():
+    """Plugged in (connected, 120 W) with no event saying so (the rover file's): cut at 5 s,
+    its state says not connected, 0 W at 5.1 s: still plugged in, below 120 W, a symptom at
+    5.1 s (its state alone says it is not connected, as an unplugged one)."""
+    r = Response(R)
+    for t in ticks(0, 5):
+        _umbilical(r, t, True, 120.0)
+    inject(r, 5.0, "umbilical/disconnect")
+    _umbilical(r, 5.1, False, 0.0)
+    f = fault_of(r, "umbilical/disconnect")
+    assert f.first_symptom_t_s == 5.1 and f.symptom == "umbilical power 0 W, below 120 W before"
 
 
 def _link(r: Response, name: str, t: float, in_range: bool) -> None:

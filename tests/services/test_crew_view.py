@@ -13,7 +13,7 @@ import pytest
 
 from common import keys
 from common.config import load_rover
-from common.messages import ActiveFault, ActiveFaults, RadioLink, RailState
+from common.messages import ActiveFault, ActiveFaults, LoadPower, RadioLink, RailState
 from services.bridge import crew_view
 from services.bridge.convert import DIAG_ERROR, DIAG_OK, DIAG_STALE, DIAG_WARN
 from services.bridge.crew import crew_statuses
@@ -49,6 +49,37 @@ def test_a_short_is_an_over_current_trip_and_never_named():
     text = _words(list(st.values()))
     for word in ("short", "dust", "injected", "0.05", "0.4", "resistance", "fraction"):
         assert word not in text, word
+
+
+CAMERA_OVER = ActiveFault(keys.under(R, "load/nav_camera/over_current"), {}, 12.0, "derived", "critical")
+
+
+@pytest.mark.parametrize("rail_state", ["on", "tripped"])
+def test_a_loads_over_current_at_the_trip_is_never_the_crews(rail_state):
+    """The instant of a short: the camera's own over-current alarm is up (the loads service
+    raised it at its 500 W, before the power service tripped the rail, and resolves it once the
+    rail is off), the rail still on or already tripped. A PDM measures its channels, not each
+    load on one: the camera is OK, no status says over-current but the tripped rail's, and no
+    status but the camera's own names it (issue 31: it read ERROR over-current for 13 ms)."""
+    comps = ["rail/5V_CH2", "load/nav_camera", "load/hazard_cameras"]
+    rail = (RailState(12.0, 5.0, 0.7, 3.5, 3.0, "on") if rail_state == "on"
+            else RailState(12.0, 0.0, 0.0, 0.0, 3.0, "tripped", "over-current 100.00 A > 3.0 A"))
+    active = [SHORT, CAMERA_OVER] + ([TRIPPED] if rail_state == "tripped" else [])
+    st = {s["name"]: s for s in crew_statuses(R, comps, active, {"rail/5V_CH2": rail}, {}, 3.0)}
+    assert st[f"{R}/load/nav_camera"] == {"level": DIAG_OK, "name": f"{R}/load/nav_camera",
+                                          "message": "OK", "hardware_id": R, "values": []}
+    others = json.dumps([s for name, s in st.items() if name != f"{R}/load/nav_camera"])
+    assert "nav_camera" not in others
+    want = (DIAG_OK, "OK") if rail_state == "on" else (DIAG_ERROR, "over-current trip: off until reset")
+    assert (st[f"{R}/rail/5V_CH2"]["level"], st[f"{R}/rail/5V_CH2"]["message"]) == want
+    # the console's "what the crew sees" says the same
+    mapp = load_rover(ROVERS / "mapp.yaml")
+    values = {keys.rail_state(R, "5V_CH2"): rail,
+              keys.load_power(R, "nav_camera"): LoadPower(12.0, 500.0, "5V_CH2", True, ["over_current"]),
+              keys.under(R, "faults/active/loads"): ActiveFaults(12.0, "loads", [SHORT, CAMERA_OVER])}
+    view = crew_view(R, values, config=mapp)
+    camera = next(d for d in view["diagnostics"] if d["component"] == "load/nav_camera")
+    assert (camera["level_name"], camera["message"]) == ("OK", "OK")
 
 
 def test_what_the_telemetry_shows_and_silence():

@@ -49,6 +49,19 @@ def test_a_load_draws_nothing_while_its_rail_is_off(mapp):
     assert m.power("flight_computer")[1] is True
 
 
+def test_an_open_load_on_a_rail_off_at_the_fault_draws_nothing_once_the_rail_is_on(mapp):
+    """What the crew's symptom of an open load rests on (common.response): on a dead rail it
+    says 0 W and off, as every load there; once the rail is on, 0 W and on."""
+    m = LoadsModel(mapp, seed=3)
+    m.set_rail("5V_CH2", False)
+    m.set_faults("nav_camera", [Open()])
+    m.sample()
+    assert m.power("nav_camera") == (0.0, False)
+    assert m.set_rail("5V_CH2", True)
+    assert m.power("nav_camera") == (0.0, True) and m.power("hazard_cameras")[0] > 0.0
+    assert ("nav_camera", 0.0, "5V_CH2", True) in m.powers()
+
+
 def test_faults_short_open_stuck(mapp):
     m = LoadsModel(mapp, seed=3)
     m.set_faults("nav_camera", [Short(resistance_ohm=0.05)])
