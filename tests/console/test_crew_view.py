@@ -178,7 +178,7 @@ def test_the_instructor_standing_in_for_the_crew_is_counted_as_the_crew(site, pa
     PDM's buttons are the crew's actions (the Crew view's response said "not yet" beside a drill
     whose expectations were met from those buttons)."""
     p = site.probe
-    fault = keys.fault(R, "load/imu", "open")
+    fault = keys.fault(R, "load/imu", "open")  # the imu is on 3V3_CH1: the crew acts on its rail
     row = '#crew-response tr[data-fault="load/imu/open"]'
     p.put(fault, b"")
     try:
@@ -189,15 +189,15 @@ def test_the_instructor_standing_in_for_the_crew_is_counted_as_the_crew(site, pa
         box = WebDriverWait(page, 10).until(lambda d: d.find_element(By.ID, "as-crew"))
         box.click()
         WebDriverWait(page, 10).until(lambda d: d.find_element(By.ID, "as-crew").is_selected(), "ticked")
-        click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH2"]')
-        p.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("cmd/rail/3V3_CH2")
+        click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH1"]')
+        p.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("cmd/rail/3V3_CH1")
                      and e["actor"] == "crew")
-        click(page, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH2"]')
-        p.wait_value(keys.rail_state(R, "3V3_CH2"), lambda r: r["state"] == "on")
+        click(page, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH1"]')
+        p.wait_value(keys.rail_state(R, "3V3_CH1"), lambda r: r["state"] == "on")
         view(page, "crew")
         WebDriverWait(page, 10).until(lambda d: d.find_element(
             By.CSS_SELECTOR, row).get_attribute("data-acted") == "true", "the crew's action counted")
     finally:
         page.execute_script("const b = document.getElementById('as-crew'); if (b && b.checked) b.click();")
         p.delete(fault)
-        p.put(keys.cmd_rail(R, "3V3_CH2"), {"on": True})
+        p.put(keys.cmd_rail(R, "3V3_CH1"), {"on": True})
