@@ -19,6 +19,7 @@ from collections.abc import Iterator
 
 import pytest
 from selenium.webdriver.common.by import By
+from selenium.webdriver.support import expected_conditions as ec
 
 from common import keys
 from tests.console.conftest import MAPP, Live, console_page, console_site, shoot
@@ -190,6 +191,7 @@ def test_the_instructor_standing_in_for_the_crew_is_counted_as_the_crew(site, pa
         box.click()
         WebDriverWait(page, 10).until(lambda d: d.find_element(By.ID, "as-crew").is_selected(), "ticked")
         click(page, f'[data-action="rail-off"][data-rover="{R}"][data-rail="3V3_CH1"]')
+        WebDriverWait(page, 10).until(ec.alert_is_present()).accept()  # an essential rail: asked first
         p.wait_event(R, lambda e: e["kind"] == "command" and e["key"].endswith("cmd/rail/3V3_CH1")
                      and e["actor"] == "crew")
         click(page, f'[data-action="rail-on"][data-rover="{R}"][data-rail="3V3_CH1"]')
