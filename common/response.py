@@ -145,6 +145,7 @@ class FaultResponse(msgspec.Struct, omit_defaults=False):
     cleared_t_s: float | None = None
     active: bool = True  # still in effect (at the session's end, or now)
     response_s: float | None = None  # first crew action - first symptom
+    note: str = ""  # what the times cannot say: injected before the recording (or the watching) began
 
 
 class Expectation(msgspec.Struct, omit_defaults=False):
@@ -819,7 +820,7 @@ class Response:
 
     def _result(self, s: _Session) -> SessionResponse:
         return SessionResponse(
-            session=s.id, trainee=s.trainee, faults=[f.result() for f in s.faults],
+            session=s.id, trainee=s.trainee, faults=[f.result(note=_before_seen(f, s)) for f in s.faults],
             expectations=self._expectations(s), rover=self.rover, start_t_s=s.start_t,
             end_t_s=s.last_t, started_wall=s.started_wall)
 
@@ -842,6 +843,16 @@ class Response:
             crew_acted=bool(f.acted())) for f in s.faults]
         return LiveResponse(self.rover, s.id, s.trainee, now, faults,
                             self._expectations(s), self.version)
+
+
+def _before_seen(f: _Fault, s: _Session) -> str:
+    """Words for a fault injected before the first tick of its session this response saw (a
+    recording begun after it): its symptom and the crew's first moments may not be in it.
+    Found: a recording started 16 s after a short gave its times as if it had seen them all."""
+    if f.era != 0 or s.start_t is None or s.ticks == 0 or f.injected_t >= s.start_t:
+        return ""
+    return (f"injected at {f.injected_t:.1f} s, before the recording began ({s.start_t:.1f} s): "
+            "what came between is not in it")
 
 
 def _rounded(t: Any) -> float | None:

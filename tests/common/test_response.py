@@ -715,3 +715,18 @@ def test_a_sessions_times_are_its_own_from_its_first_tick_with_its_wall_clock_st
     assert (a.session, a.start_t_s, a.end_t_s) == (A, 0.0, pytest.approx(203.0))
     assert (b.session, b.trainee, b.start_t_s, b.started_wall) == (B, "Ben", 0.0, 1795928400.5)
     assert b.end_t_s == pytest.approx(43.9) and b.start_t_s <= b.faults[0].injected_t_s <= b.end_t_s
+
+
+def test_a_fault_injected_before_the_recording_began_says_so():
+    """SPEC 13a: a recording begun after a fault says so. Found by an instructor: a recording
+    started 16 s after a short gave its times as if it had seen them all."""
+    A = "20261129T050000Z"
+    r = Response(R)
+    inject(r, 14.0, "load/imu/open", session=A)  # the journal's history, heard first
+    for t in ticks(30.0, 40.0):
+        clock(r, t, session=A)
+    inject(r, 35.0, "battery/heating", {"heat_w": 30}, session=A)
+    early, late = only(r).faults
+    assert early.note == ("injected at 14.0 s, before the recording began (30.0 s): what came between "
+                          "is not in it")
+    assert late.note == ""
