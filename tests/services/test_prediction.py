@@ -211,20 +211,32 @@ def test_the_vectorised_bus_solution_is_the_scalar_one_to_the_bit(cases):
             want.voltage_v, want.current_a, want.brownout), (v, r, p)
 
 
+TRAVERSE = """
+traverse: {name: a short climb}
+speed_m_per_s: 0.1
+return_to_start: true
+waypoints:
+  - {x_m: 8, y_m: 6, z_m: 0.5}
+  - {x_m: 12, y_m: 9, z_m: 2.5}
+"""
+
+
 def test_a_traverse_profile_without_noise_is_the_composed_twin_driving_it():
     """The drive load following a traverse, tick by tick, in every future: with no noise and
     no uncertainty, the state of charge where the composed twin arrives (it drives the same
     traverse, its drive coupled to the pack) is the prediction's, to a part in 10^4."""
-    from common.traverse import load_traverse
+    from common.traverse import parse_traverse
     from services.composed.budget import power_profile, run_traverse
-    from tests.harness import ROOT, ROVERS
+    from tests.harness import ROVERS
 
     raw = msgspec.to_builtins(load_rover(ROVERS / "mapp.yaml"))
     for ld in raw["loads"]:
         ld["std_w"] = 0.0
     raw["battery"]["uncertainty"] = {}
     rover = msgspec.convert(raw, Rover)
-    cmd = load_traverse(ROOT / "config" / "traverses" / "mapp-crater-rim.yaml", rover).command()
+    # a short traverse with a climb and a descent (4,000 ticks; the shipped crater rim's
+    # 120,000 took 78 s of the unit tests to the same end)
+    cmd = parse_traverse(TRAVERSE, "short.yaml", rover).command()
     ticks = power_profile(rover, cmd)
     budget = run_traverse(rover, cmd, 0.2, 4.0, 0)
     assert budget.outcome == "arrived"
@@ -232,7 +244,7 @@ def test_a_traverse_profile_without_noise_is_the_composed_twin_driving_it():
     out = predict(start, len(ticks) / rover.tick_hz, 3, step_ticks=1)
     assert_allclose(out.soc_at_horizon, budget.final_soc, rtol=1e-4)
     parked = predict(start_of(ComposedTwin(rover)), len(ticks) / rover.tick_hz, 1, step_ticks=1)
-    assert out.soc_at_horizon[0] < parked.soc_at_horizon[0] - 0.005  # the drive cost shows
+    assert out.soc_at_horizon[0] < parked.soc_at_horizon[0] - 0.001  # the drive cost shows (0.0028)
 
 
 def test_the_notes_say_what_every_prediction_assumes_and_a_spread_of_none():
