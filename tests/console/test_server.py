@@ -495,6 +495,28 @@ def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
         assert none.status_code == 404 and f"sessions: {S1}, {S2}" in none.json()["message"]
 
 
+def test_a_recording_lists_its_trainees_sessions(session, tmp_path, router):
+    """The Recordings view names each recording's trainees: the sessions of a recording, read
+    once and kept beside it (the list carries them from then on), read again once it is newer."""
+    from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
+
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    tape = Tape()
+    two_trainees(tape)
+    tape.write(folder / "day.mcap")
+    app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
+    with client(app) as c:
+        (entry,) = c.get("/api/recordings").json()["recordings"]
+        assert entry["sessions"] is None  # not read yet
+        r = c.get(entry["sessions_url"])
+        assert r.status_code == 200, r.text
+        listed = r.json()["sessions"]
+        assert [(s["id"], s["trainee"], s["faults"]) for s in listed] == [(S1, "Ada", 1), (S2, "Bob", 1)]
+        assert c.get("/api/recordings").json()["recordings"][0]["sessions"] == listed  # kept
+        assert c.get("/api/recordings/nothing.mcap/sessions").status_code == 404
+
+
 def test_a_recording_being_made_is_refused_until_it_is_stopped(session, rover, tmp_path, router):
     folder = tmp_path / "recordings"
     app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
