@@ -3,7 +3,8 @@ two trainees, Ada then Bob, in the console's folder; in a real browser at 1280x8
 instructor opens the Recordings view: the recording is listed with its trainees' names; the
 instructor picks the recording and Bob's session, asks for the debrief, sees that it is being
 prepared (it takes seconds the first time) and then reads it in the view: Bob's session, never
-Ada's, the instructor's mark on it, in words a person without a technical background reads.
+Ada's, the instructor's mark on it and drawn on its timeline, in words a person without a
+technical background reads (fault names, their strength, conditions; no key, no JSON).
 """
 
 from __future__ import annotations
@@ -17,22 +18,10 @@ from selenium.webdriver.support.select import Select
 
 from tests.console.conftest import Live, console_page, console_site, save_shot
 from tests.console.pages import WebDriverWait, click, view
-from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
+from tests.lunaris.test_report_response import S1, S2, Tape
+from tests.lunaris.test_report_words import MARK, day
 
 pytestmark = pytest.mark.timeout(240)
-
-MARK = "crew slow to see the heat"
-
-
-def day(tape: Tape) -> None:
-    """Ada's and Bob's sessions (tests.lunaris.test_report_response), and the instructor's mark
-    in Bob's, as the faults service journals it."""
-    two_trainees(tape)
-    tape.event(26.0, "mark", "control/mark", message=f"mark: {MARK}", params={"text": MARK}, session=S2,
-               source="faults")
-    for i in range(1, 100):  # Bob's session goes on past the mark
-        tape.tick(round(40 + i * 0.1, 3), 1)
-
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[Live]:
@@ -81,6 +70,20 @@ def test_the_debrief_of_the_second_trainee_opens_from_the_recordings_view(site, 
         assert "nav_camera" not in text.split("Events (")[-1]  # nothing of Ada's session
         img = page.find_element(By.CSS_SELECTOR, "img[alt='session plots']")
         assert img.get_property("naturalWidth") > 1000
+        # in words a person without a technical background reads, the mark drawn
+        for words in ("Debrief of Bob's session", "Battery: Overheating", "extra heat 45 W", "your mark",
+                      "rail 12V is off", "On the timeline: 1 mark(s) of yours, 1 action(s) of the crew"):
+            assert words in text, words
+        for code in ("fault_injected", "heat_w", "battery/heating", "rail.12V.state", '{"', "on=false"):
+            assert code not in text, code
+        page.execute_script("arguments[0].scrollIntoView()", img)
     finally:
         page.switch_to.default_content()
+    save_shot(page, artefacts, "debrief-timeline", doc=False)
+    page.switch_to.frame(page.find_element(By.ID, "debrief-frame"))
+    try:
+        page.execute_script("document.querySelector('h2').scrollIntoView()")
+    finally:
+        page.switch_to.default_content()
+    save_shot(page, artefacts, "debrief-score", doc=False)
     assert re.search(r"\bBob\b", page.find_element(By.ID, "debrief-card").text)
