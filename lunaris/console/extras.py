@@ -348,7 +348,11 @@ async def _scenarios(request: Request) -> Response:
 async def _recordings(request: Request) -> Response:
     ex: Extras = request.app.state.extras
     if request.method == "GET":
-        return JSONResponse({"recordings": await asyncio.to_thread(ex.recordings),
+        listed = await asyncio.to_thread(ex.recordings)
+        for x in listed:
+            if x["sessions"] is not None:
+                x["sessions"] = _noted(request, x["sessions"])
+        return JSONResponse({"recordings": listed,
                              "recording": ex.recording_status(),
                              "folder": str(ex.recordings_dir) if ex.recordings_dir else None})
     user: User = request.scope["state"]["user"]
@@ -382,7 +386,13 @@ async def _recording_sessions(request: Request) -> Response:
     listed, status, why = await request.app.state.extras.sessions(request.path_params["name"])
     if listed is None:
         return JSONResponse({"message": why}, status_code=status)
-    return JSONResponse({"sessions": listed})
+    return JSONResponse({"sessions": _noted(request, listed)})
+
+
+def _noted(request: Request, listed: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A recording's sessions with the console's notes laid over (void, renamed), rover by rover."""
+    notes = request.app.state.session_notes
+    return [notes.apply(s.get("rover", ""), [s])[0] for s in listed]
 
 
 async def _download(request: Request) -> Response:

@@ -10,8 +10,9 @@ import {changed, mayAct} from "../state.js";
 
 /**
  * `GET /api/recordings`.
+ * A session of a recording, with the console's notes laid over (void, renamed: session_notes.py).
  * @typedef {{id: string, trainee: string | null, rover: string, start_t_s: number | null,
- *   end_t_s: number | null, faults: number}} RecordedSession
+ *   end_t_s: number | null, faults: number, void?: boolean, journal_trainee?: string | null}} RecordedSession
  * @typedef {{name: string, bytes: number, modified: number, report: boolean, download?: string,
  *   report_url?: string, sessions?: RecordedSession[] | null, sessions_url?: string}} RecordingInfo
  * @typedef {{file: string | null, running?: boolean, started?: number, lines?: string[]}} Recording
@@ -62,9 +63,11 @@ function trainees(name) {
   if (got === undefined) return html`<small class="muted">–</small>`;
   if (got === "reading") return html`<small class="muted">reading the sessions…</small>`;
   if (!Array.isArray(got)) return html`<small class="error">${plainMessage(got.message)}</small>`;
-  if (!got.length) return html`<small class="muted">no trainee session</small>`;
-  return html`${got.map((s, i) => html`${i ? ", " : ""}<span data-trainee=${s.trainee ?? ""} title=${
-    `session ${s.id}`}>${s.trainee || "no trainee named"}</span>`)}`;
+  const kept = got.filter((s) => !s.void), voided = got.length - kept.length;
+  if (!kept.length) return html`<small class="muted">no trainee session${voided ? ` (${voided} voided)` : ""}</small>`;
+  return html`${kept.map((s, i) => html`${i ? ", " : ""}<span data-trainee=${s.trainee ?? ""} title=${
+    `session ${s.id}`}>${s.trainee || "no trainee named"}</span>`)}${voided
+    ? html` <small class="muted">(${voided} voided)</small>` : nothing}`;
 }
 
 /**
@@ -100,7 +103,7 @@ async function openDebrief(name, session) {
 function debriefCard(saved) {
   const ready = saved.filter((x) => !(listed?.ok && listed.data.recording.running && listed.data.recording.file === x.name));
   const name = ready.some((x) => x.name === picked.name) ? picked.name : (ready[0]?.name ?? "");
-  const got = sessions[name], list = Array.isArray(got) ? got : [];
+  const got = sessions[name], list = Array.isArray(got) ? got.filter((x) => !x.void) : [];
   const session = list.some((x) => x.id === picked.session) ? picked.session : (list.at(-1)?.id ?? "");
   const d = debrief;
   /** @param {Event} e */
