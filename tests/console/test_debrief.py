@@ -21,6 +21,7 @@ from selenium.webdriver.support.select import Select
 
 from common import keys
 from tests.console.conftest import Live, console_page, console_site, save_shot
+from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
 from tests.lunaris.test_report_response import S1, S2, Tape
 from tests.lunaris.test_report_words import MARK, day
@@ -82,6 +83,7 @@ def test_the_debrief_of_the_second_trainee_opens_from_the_recordings_view(site, 
             assert words in text, words
         for code in ("fault_injected", "heat_w", "battery/heating", "rail.12V.state", '{"', "on=false"):
             assert code not in text, code
+        assert vocabulary(text, field_names()) == []
         page.execute_script("arguments[0].scrollIntoView()", img)
     finally:
         page.switch_to.default_content()
@@ -93,6 +95,9 @@ def test_the_debrief_of_the_second_trainee_opens_from_the_recordings_view(site, 
         page.switch_to.default_content()
     save_shot(page, artefacts, "debrief-score", doc=False)
     assert re.search(r"\bBob\b", page.find_element(By.ID, "debrief-card").text)
+    problems = [f"recordings view: {x}" for x in page.execute_script(LAYOUT)]
+    problems += [f"recordings view: {x}" for x in vocabulary(page.execute_script(TEXT), field_names())]
+    assert not problems, problems
 
 
 def started(site: Live, trainee: str, seen: set[str]) -> str:
