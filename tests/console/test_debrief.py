@@ -20,7 +20,7 @@ from selenium.webdriver.support import expected_conditions as ec
 from selenium.webdriver.support.select import Select
 
 from common import keys
-from tests.console.conftest import Live, console_page, console_site, save_shot
+from tests.console.conftest import Live, console_page, console_site, save_shot, shoot
 from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
 from tests.console.pages import WebDriverWait, answer, clear_answers, click, view
 from tests.lunaris.test_report_response import S1, S2, Tape
@@ -67,7 +67,7 @@ def test_the_debrief_of_the_second_trainee_opens_from_the_recordings_view(site, 
     WebDriverWait(page, 120).until(lambda d: d.find_elements(By.ID, "debrief-frame"), "the debrief shown")
     assert "Bob's session" in page.find_element(By.ID, "debrief-shown").text
     page.execute_script("document.getElementById('debrief-frame').scrollIntoView()")
-    save_shot(page, artefacts, "debrief", doc=False)
+    shoot(page, artefacts, "debrief", doc=False)
     page.switch_to.frame(page.find_element(By.ID, "debrief-frame"))
     try:
         text = WebDriverWait(page, 30).until(lambda d: d.find_element(By.TAG_NAME, "body").text,
