@@ -350,8 +350,10 @@ def _draw(args: argparse.Namespace) -> int:
     s = sessions[-1]
     note = add_thresholds(s, args.rover_file)
     t0, t1 = s.span_s
-    trainee = f", trainee {s.score.trainee}" if s.score is not None and s.score.trainee else ""
-    title = f"{rover} - session {s.id}{trainee} - {path.name} - {t1 - t0:.0f} s of simulated time"
+    trainee = s.score.trainee if s.score is not None else None
+    whose = f"{trainee}'s session" if trainee else "a session with no trainee named"
+    title = (f"Debrief of {whose} on {rover}: {t1 - t0:.0f} s of simulated time (recording {path.name}, "
+             f"session {s.id or 'before sessions'})")
     fig = draw(s, title)
     png = io.BytesIO()
     fig.savefig(png, format="png", dpi=100)

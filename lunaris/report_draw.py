@@ -10,9 +10,13 @@ its resolution; each expectation of the scenario from when it was armed to its d
 missed: :mod:`common.response`), state of charge, battery voltage and current, battery
 temperature, the power of each load, generation against the load, and each radio link in and
 out of range. Alarm thresholds are drawn where the rover file defines them. Every event is a
-mark across the plots; labels are placed so that they never overlap, and those that find no
-room are counted (the HTML table has them all). Events replayed from before the recording
-started are listed as such, not drawn. A rover that drove also gets its path in the site
+mark across the plots (the instructor's marks dashed); labels are placed so that they never
+overlap, and those that find no room are counted (the HTML table has them all); once the figure
+is laid out, a label that would run past its axes' right edge is moved to end inside it. Every
+label and table speaks in words (:mod:`lunaris.report_words`): fault names and strengths from
+the catalogue, event kinds, scenario conditions; the timeline's lanes are the drill, the
+instructor (marks, actions), the crew's actions, the faults and alarms. Events replayed from
+before the recording started are listed as such, not drawn. A rover that drove also gets its path in the site
 frame, coloured by the drive's power.
 """
 
@@ -22,23 +26,30 @@ import base64
 import html
 import urllib.parse
 
-from common import keys
 from common.response import SessionResponse
 from lunaris.report_session import Session
+from lunaris.report_words import (
+    KIND_WORDS,
+    condition_words,
+    event_words,
+    fault_words,
+    key_words,
+    params_words,
+)
 
-__all__ = ["draw", "html_page", "moved", "place_labels", "score_rows"]
+__all__ = ["draw", "drawn_counts", "fault_line", "html_page", "keep_inside", "moved", "place_labels",
+           "score_rows"]
 
-MARK_KINDS = {"fault_injected": "+", "fault_cleared": "-", "fault_raised": "!",
-              "fault_resolved": "ok ", "rejected": "x ", "command": "", "input": "", "clock": "",
-              "session": "", "scenario": ""}
-# The timeline's lanes, top to bottom: which event kinds each shows.
-LANES = (("scenario", ("scenario",)), ("session", ("session",)),
-         ("actions", ("command", "input", "clock")),
-         ("faults", ("fault_injected", "fault_cleared", "fault_raised", "fault_resolved", "rejected")))
-LANE_COLOUR = {"scenario": "tab:purple", "session": "black", "actions": "tab:green"}
+MARK_KINDS = {"fault_injected", "fault_cleared", "fault_raised", "fault_resolved", "rejected", "command",
+              "input", "clock", "session", "scenario", "mark"}
+# The timeline's lanes, top to bottom: who or what each shows (:func:`_lane`).
+LANES = ("drill", "instructor", "crew", "faults and alarms")
+LANE_COLOUR = {"drill": "tab:purple", "instructor": "tab:brown", "crew": "tab:green"}
 SEVERITY_COLOUR = {"info": "tab:blue", "warning": "tab:orange", "critical": "tab:red"}
+MARK_COLOUR = "tab:brown"
 MOVED_M = 0.05  # a path narrower than this in x and y is a parked rover: no path drawn
-
+LABEL_CHARS = 60  # the most of an event's words a timeline label shows
+WHO = {"scenario": "the drill", "twin": "the rover", "instructor": "instructor", "crew": "crew"}
 
 
 def _marks(s: Session) -> list[dict]:
@@ -46,14 +57,37 @@ def _marks(s: Session) -> list[dict]:
     return [e for e in s.events if e.get("kind") in MARK_KINDS and e.get("at_s") is not None]
 
 
+def _lane(e: dict) -> str:
+    """Where an event goes on the timeline: the drill's steps; the instructor's marks, actions
+    and the session's start; the crew's actions (refused ones too); the faults and alarms."""
+    kind, actor = e.get("kind", ""), e.get("actor") or ""
+    if kind == "scenario":
+        return "drill"
+    if actor == "crew" and kind in ("command", "input", "rejected", "clock"):
+        return "crew"
+    if kind in ("mark", "session", "command", "input", "clock"):
+        return "instructor"
+    return "faults and alarms"
+
+
 def _short(s: Session, e: dict) -> str:
+    """An event's label on the timeline, in words."""
     kind = e.get("kind", "")
     if kind == "scenario":
-        return str(e.get("message", "")).split(": ", 1)[-1][:48]
-    if kind in ("command", "input", "clock", "session"):
-        return str(e.get("message", ""))[:40]
-    name = e.get("key", "").removeprefix(keys.rover_prefix(s.rover) + "/").removeprefix("fault/")
-    return f"{MARK_KINDS.get(kind, '')}{name}"
+        text = str(e.get("message", "")).split(": ", 1)[-1]
+    else:
+        text = event_words(e)
+        if kind == "mark":
+            text = f"mark: {text}"
+        elif kind == "fault_injected":
+            text = f"+ {text}"
+        elif kind == "fault_cleared":
+            text = f"cleared: {text}"
+        elif kind == "fault_resolved":
+            text = f"ended: {text}"
+        elif kind == "rejected":
+            text = f"refused: {text}"
+    return text if len(text) <= LABEL_CHARS else text[:LABEL_CHARS - 1] + "…"
 
 
 def place_labels(marks: list[tuple[float, str]], span_s: float, width_chars: float,
@@ -145,14 +179,35 @@ def draw(s: Session, title: str):
     for ax in axes[2:]:
         ax.grid(True, alpha=0.3)
         for e in marks:
-            ax.axvline(e["at_s"], color=_colour(e), alpha=0.5, linewidth=1.0,
-                       linestyle=":" if e.get("kind") in ("rejected", "scenario") else "-")
+            mark = e.get("kind") == "mark"
+            ax.axvline(e["at_s"], color=_colour(e), alpha=0.9 if mark else 0.5,
+                       linewidth=1.6 if mark else 1.0,
+                       linestyle="--" if mark else ":" if e.get("kind") in ("rejected", "scenario") else "-")
     _draw_timeline(ax_tl, s, marks, t0, t1 - t0)
     if drove:
         _draw_path(fig, all_axes[-1], s)
     before = sum(1 for e in s.events if e.get("at_s") is None)
     fig.suptitle(title + (f" ({before} event(s) from before the recording: in the table)" if before else ""))
+    keep_inside(fig, (ax_tl, ax_score))
     return fig
+
+
+def keep_inside(fig, axes) -> None:
+    """Every label of ``axes`` moved, once the figure is laid out, to end inside its axes: a
+    label near the right edge was cut (its length in characters is only a guess of its width)."""
+    fig.canvas.draw()  # the layout, and each text's size
+    for ax in axes:
+        box = ax.get_window_extent()
+        x0, x1 = ax.get_xlim()
+        per_px = (x1 - x0) / max(1.0, box.width)
+        for text in ax.texts:
+            if text.get_transform() != ax.transData:
+                continue
+            ext = text.get_window_extent()
+            shift_px = min(0.0, box.x1 - 2 - ext.x1) or max(0.0, box.x0 + 2 - ext.x0)
+            if shift_px:
+                x, y = text.get_position()
+                text.set_position((x + shift_px * per_px, y))
 
 
 def score_rows(score: SessionResponse | None) -> list[tuple[str, object]]:
@@ -160,6 +215,27 @@ def score_rows(score: SessionResponse | None) -> list[tuple[str, object]]:
     if score is None:
         return []
     return [("fault", f) for f in score.faults] + [("expect", e) for e in score.expectations]
+
+
+def _after(a: float | None, b: float | None) -> str:
+    """How long after ``b`` ``a`` came, in words ("12 s later", "2 s before")."""
+    if a is None or b is None:
+        return ""
+    d = a - b
+    return "at once" if abs(d) < 0.05 else f"{abs(d):.1f} s {'later' if d > 0 else 'before'}"
+
+
+def fault_line(f) -> str:
+    """One fault of the score sheet in a sentence: when the crew could see it, when it acted,
+    whether it was resolved."""
+    seen = (f"seen {_after(f.first_symptom_t_s, f.injected_t_s)}" if f.first_symptom_t_s is not None
+            else "no symptom seen")
+    base = f.first_symptom_t_s if f.first_symptom_t_s is not None else f.injected_t_s
+    acted = (f"crew acted {_after(f.first_crew_action_t_s, base)} ({len(f.crew_actions)} action(s))"
+             if f.crew_actions else "no response from the crew")
+    done = (f"resolved {f.resolved_t_s - f.injected_t_s:.1f} s after injection" if f.resolved_t_s is not None
+            else "not resolved")
+    return f"{seen}; {acted}; {done}"
 
 
 def _since(a: float | None, b: float | None) -> str:
@@ -190,7 +266,7 @@ def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
         if what == "fault":
             assert isinstance(item, FaultResponse)
             f = item
-            labels.append(f.fault[:34] or f.key[-34:])
+            labels.append(key_words(f.key)[:44])
             x0 = s.x(f.injected_t_s)
             x1 = s.x(f.resolved_t_s) if f.resolved_t_s is not None else t_end
             ax.broken_barh([(x0, max(1e-3, x1 - x0))], (y - 0.18, 0.36),
@@ -203,12 +279,7 @@ def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
                         color="tab:green" if a.accepted else "tab:red")
             if f.resolved_t_s is not None:
                 ax.plot([x1], [y], marker="s", color="tab:green", markersize=6)
-            since = _since(f.first_crew_action_t_s, f.first_symptom_t_s or f.injected_t_s)
-            acted = f"first crew action {since}" if f.crew_actions else "no response from the crew"
-            text = (f"symptom {_since(f.first_symptom_t_s, f.injected_t_s)}, {acted}, "
-                    f"resolved {_since(f.resolved_t_s, f.injected_t_s)}; "
-                    f"{len(f.crew_actions)} crew action(s)")
-            ax.text(x0, y - 0.26, text, fontsize="x-small", va="bottom", clip_on=True)
+            ax.text(x0, y - 0.26, fault_line(f), fontsize="x-small", va="bottom", clip_on=True)
         else:
             assert isinstance(item, Expectation)
             e = item
@@ -220,26 +291,26 @@ def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
                 at = s.x(e.at_t_s)
                 ax.plot([at], [y], marker="o", color="tab:green", markersize=8)
                 took = "" if e.armed_t_s is None else f" in {e.at_t_s - e.armed_t_s:.1f} s"
-                ax.text(at, y - 0.26, f"met{took} (within {e.within_s:g} s)", fontsize="x-small",
+                ax.text(at, y - 0.26, f"met{took} (allowed {e.within_s:g} s)", fontsize="x-small",
                         va="bottom", color="tab:green", clip_on=True)
             else:
                 at = s.x(e.deadline_t_s) if e.deadline_t_s is not None else t_end
                 word = "missed" if e.met is False else "pending"
                 ax.plot([at], [y], marker="X", color="tab:red", markersize=8)
-                ax.text(at, y - 0.26, f"{word} (within {e.within_s:g} s)", fontsize="x-small",
+                ax.text(at, y - 0.26, f"{word} (allowed {e.within_s:g} s)", fontsize="x-small",
                         va="bottom", ha="right", color="tab:red", clip_on=True)
     ax.set_yticks(range(len(rows)), labels, fontsize="small")
     faults = sum(1 for w, _ in rows if w == "fault")
     expects = [item for w, item in rows if w == "expect"]
     met = sum(1 for e in expects if getattr(e, "met", False))
-    ax.set_title(f"score sheet: {faults} fault(s); {met} of {len(expects)} expectation(s) met"
-                 if rows else "score sheet: no fault injected, no expectation in this session",
+    ax.set_title(f"the crew's response: {faults} fault(s); {met} of {len(expects)} expectation(s) met"
+                 if rows else "the crew's response: no fault injected, no expectation in this session",
                  fontsize="medium", loc="left")
     if rows:
         ax.legend(handles=[
-            Line2D([], [], marker="D", color="tab:orange", linestyle="", label="first symptom"),
+            Line2D([], [], marker="D", color="tab:orange", linestyle="", label="crew could first see it"),
             Line2D([], [], marker="^", color="tab:green", linestyle="", label="crew action"),
-            Line2D([], [], marker="x", color="tab:red", linestyle="", label="refused"),
+            Line2D([], [], marker="x", color="tab:red", linestyle="", label="crew action refused"),
             Line2D([], [], marker="s", color="tab:green", linestyle="", label="resolved"),
             Line2D([], [], marker="o", color="tab:green", linestyle="", label="met"),
             Line2D([], [], marker="X", color="tab:red", linestyle="", label="missed")],
@@ -247,32 +318,37 @@ def _draw_score(ax, s: Session, rows: list[tuple[str, object]]) -> None:
 
 
 def _colour(e: dict) -> str:
-    kind = e.get("kind", "")
-    lane = next((name for name, kinds in LANES if kind in kinds), "faults")
-    return LANE_COLOUR.get(lane) or SEVERITY_COLOUR.get(e.get("severity", ""), "gray")
+    if e.get("kind") == "mark":
+        return MARK_COLOUR
+    return LANE_COLOUR.get(_lane(e)) or SEVERITY_COLOUR.get(e.get("severity", ""), "gray")
 
 
 def _draw_timeline(ax, s: Session, marks: list[dict], t0: float, span_s: float) -> None:
-    """The session's events in lanes, each label on a row where it overlaps no other."""
+    """The session's events in lanes (the drill, the instructor's marks and actions, the crew's
+    actions, the faults and alarms), each label on a row where it overlaps no other; a mark of
+    the instructor's drawn as a flag."""
     rows = 3
     ax.set_ylim(0, len(LANES) * rows)
     ax.set_yticks([(len(LANES) - 1 - i) * rows + rows / 2 for i in range(len(LANES))],
-                  [name for name, _ in LANES])
+                  [name.replace(" and ", "\nand ") for name in LANES])
     ax.tick_params(axis="y", length=0)
     ax.grid(True, axis="x", alpha=0.3)
     dropped = 0
-    for i, (_name, kinds) in enumerate(LANES):
+    for i, name in enumerate(LANES):
         base = (len(LANES) - 1 - i) * rows
         ax.axhline(base, color="#dddddd", linewidth=0.8)
-        lane = [e for e in marks if e.get("kind") in kinds]
+        lane = [e for e in marks if _lane(e) == name]
         for e in lane:
-            ax.plot([e["at_s"]], [base + 0.35], marker="|", color=_colour(e), markersize=8)
+            mark = e.get("kind") == "mark"
+            ax.plot([e["at_s"]], [base + 0.35], marker="v" if mark else "|", color=_colour(e),
+                    markersize=9 if mark else 8)
         placed, lost = place_labels([(e["at_s"], _short(s, e)) for e in lane], span_s, 150, rows, t0)
         dropped += lost
         colours = {_short(s, e): _colour(e) for e in lane}
         for t, text, row in placed:
             ax.text(t, base + rows - 0.6 - row * 0.95, text, fontsize="x-small", va="center",
-                    color=colours[text], clip_on=True)
+                    color=colours[text], clip_on=True,
+                    fontweight="bold" if text.startswith("mark: ") else "normal")
     ax.set_title("what happened" + (f" ({dropped} more label(s) without room: see the event table)"
                                     if dropped else ""), fontsize="medium", loc="left")
 
@@ -314,44 +390,71 @@ def _t(t: float | None) -> str:
     return "-" if t is None else f"{t:.1f}"
 
 
+def _action_words(a) -> str:
+    """A crew action in words: "40.0 s: rail off 5V_CH2" -> "at 40.0 s the crew switched rail
+    5V_CH2 off"."""
+    action = str(a.action)
+    verb = {"rail off": f"switched rail {a.target} off", "rail on": f"switched rail {a.target} on",
+            "rail reset": f"reset rail {a.target}"}.get(action)
+    verb = verb or f"{action.replace('_', ' ')} {a.target}".strip()
+    return f"at {a.t_s:.1f} s: {verb}" + ("" if a.accepted else f" - refused: {a.message}")
+
+
 def _score_html(score: SessionResponse | None) -> str:
-    """The score sheet as tables: the faults with their times and actions, the expectations."""
+    """The score sheet as tables, in words: the faults with their times and the crew's actions,
+    the expectations."""
     if score is None:
         return ""
     e = html.escape
-    faults = "\n".join(
-        f"<tr class='{'resolved' if f.resolved_t_s is not None else 'open'}'>"
-        f"<td>{e(f.fault)}</td><td>{e(json_params(f.params))}</td><td>{e(f.injected_by)}</td>"
-        f"<td>{_t(f.injected_t_s)}</td>"
-        f"<td>{_t_since(f.first_symptom_t_s, f.injected_t_s)}<br>"
-        f"<small>{e(f.symptom)}</small></td>"
-        f"<td>{_t(f.first_crew_action_t_s)}</td>"
-        f"<td>{_t_since(f.resolved_t_s, f.injected_t_s)}<br>"
-        f"<small>{e(f.resolved_by)}</small></td>"
-        f"<td>{'<br>'.join(f'{a.t_s:.1f} {e(a.action)} {e(a.target)}' + ('' if a.accepted else ' <b>refused</b>: ' + e(a.message)) for a in f.crew_actions) or 'no response'}</td></tr>"  # noqa: E501
-        for f in score.faults)
+
+    def fault_row(f) -> str:
+        component, _, kind = f.fault.rpartition("/")
+        effect = fault_words(component, kind)[1]
+        acts = "<br>".join(e(_action_words(a)) for a in f.crew_actions) or "no response"
+        state = "resolved" if f.resolved_t_s is not None else "open"
+        return (f"<tr class='{state}' data-fault='{e(f.fault)}'>"
+                f"<td><b>{e(key_words(f.key))}</b><br><small>{e(effect)}</small></td>"
+                f"<td>{e(params_words(component, kind, f.params)) or '-'}</td>"
+                f"<td>{e(WHO.get(f.injected_by, f.injected_by))}</td>"
+                f"<td>{_t(f.injected_t_s)}</td>"
+                f"<td>{_t_since(f.first_symptom_t_s, f.injected_t_s)}<br>"
+                f"<small>{e(f.symptom)}</small></td>"
+                f"<td>{_t(f.first_crew_action_t_s)}</td>"
+                f"<td>{_t_since(f.resolved_t_s, f.injected_t_s)}<br>"
+                f"<small>{e(f.resolved_by)}</small></td>"
+                f"<td>{acts}</td></tr>")
+    faults = "\n".join(fault_row(f) for f in score.faults)
     expects = "\n".join(
-        f"<tr class='{'met' if x.met else 'missed'}'><td>{e(x.label)}</td><td>{e(x.condition)}</td>"
+        f"<tr class='{'met' if x.met else 'missed'}'><td>{e(x.label)}</td>"
+        f"<td>{e(condition_words(x.condition))}</td>"
         f"<td>{x.within_s:g}</td><td>{_t(x.armed_t_s)}</td>"
         f"<td>{'met at ' + _t(x.at_t_s) if x.met else ('missed' if x.met is False else 'pending')}"
         f"</td><td>{e(x.detail)}</td></tr>" for x in score.expectations)
-    trainee = f" - trainee {e(score.trainee)}" if score.trainee else ""
-    return f"""<h2>Score sheet: session {e(score.session)}{trainee}</h2>
+    whose = f"{e(score.trainee)}'s session" if score.trainee else "the session (no trainee named)"
+    return f"""<h2>The crew's response: {whose} <small>({e(score.session)})</small></h2>
 <h3>Faults ({len(score.faults)})</h3>
-<table><tr><th>fault</th><th>parameters</th><th>injected by</th><th>injected [sim s]</th>
-<th>first symptom</th><th>first crew action</th><th>resolved</th><th>crew actions</th></tr>
+<p class="help">Times are seconds since the session's start; in brackets, how long after the fault
+was put in.</p>
+<table><tr><th>fault</th><th>how strong</th><th>put in by</th><th>put in at [s]</th>
+<th>the crew could first see it</th><th>the crew first acted</th><th>resolved</th>
+<th>the crew's actions</th></tr>
 {faults}
 </table>
 <h3>Expectations ({sum(1 for x in score.expectations if x.met)} of {len(score.expectations)} met)</h3>
-<table><tr><th>expectation</th><th>condition</th><th>within [s]</th><th>armed [sim s]</th><th>outcome</th>
+<table><tr><th>expected of the crew</th><th>when</th><th>time allowed [s]</th><th>from [s]</th>
+<th>outcome</th>
 <th>detail</th></tr>
 {expects}
 </table>
 """
 
 
-def json_params(params: dict) -> str:
-    return ", ".join(f"{k}={v}" for k, v in params.items())
+def drawn_counts(s: Session) -> dict[str, int]:
+    """What the timeline draws, by lane (and the instructor's marks apart)."""
+    marks = _marks(s)
+    out = {name: sum(1 for e in marks if _lane(e) == name) for name in LANES}
+    out["marks"] = sum(1 for e in marks if e.get("kind") == "mark")
+    return out
 
 
 def _sessions_nav(s: Session, sessions: list[tuple[str, str | None]]) -> str:
@@ -376,29 +479,37 @@ def html_page(s: Session, title: str, png: bytes,
     def when(e: dict) -> str:
         return "before the recording" if e.get("at_s") is None else f"{e['at_s']:.1f}"
     rows = "\n".join(
-        f"<tr class='{html.escape(e.get('severity', ''))}{' before' if e.get('at_s') is None else ''}'>"
-        f"<td>{when(e)}</td><td>{e.get('t_s', 0.0):.1f}</td>"
-        f"<td>{html.escape(e.get('severity', ''))}</td><td>{html.escape(e.get('source', ''))}</td>"
-        f"<td>{html.escape(e.get('actor') or '')}</td>"
-        f"<td>{html.escape(e.get('kind', ''))}</td><td>{html.escape(e.get('message', ''))}</td></tr>"
+        f"<tr class='{html.escape(e.get('severity', ''))}{' before' if e.get('at_s') is None else ''}'"
+        f" data-kind='{html.escape(e.get('kind', ''))}'>"
+        f"<td>{when(e)}</td>"
+        f"<td>{html.escape(WHO.get(e.get('actor') or '', e.get('actor') or ''))}</td>"
+        f"<td>{html.escape(KIND_WORDS.get(e.get('kind', ''), e.get('kind', '').replace('_', ' ')))}</td>"
+        f"<td>{html.escape(event_words(e))}</td></tr>"
         for e in s.events)
+    n = drawn_counts(s)
+    drawn = (f"On the timeline: {n['marks']} mark(s) of yours, {n['crew']} action(s) of the crew, "
+             f"{n['faults and alarms']} fault(s) and alarm(s), {n['drill']} step(s) of the drill; each is "
+             "also a line across the plots (a mark of yours dashed, in brown).")
     return f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>
 body {{ font-family: sans-serif; margin: 2em; }}
+img {{ max-width: 100%; height: auto; }}
 table {{ border-collapse: collapse; }} td, th {{ padding: 2px 8px; border-bottom: 1px solid #ddd; }}
 tr.warning td {{ color: #b36b00; }} tr.critical td {{ color: #c00; font-weight: bold; }}
 tr.before td {{ color: #888; font-style: italic; }}
 tr.met td, tr.resolved td {{ color: #1b5e20; }} tr.missed td, tr.open td {{ color: #b71c1c; }}
+tr[data-kind="mark"] td {{ color: #6d4c41; font-weight: bold; }}
+p.help {{ color: #555; }}
 </style></head>
 <body>
 <h1>{html.escape(title)}</h1>
 {_sessions_nav(s, sessions or [])}
 <img alt="session plots" src="data:image/png;base64,{base64.b64encode(png).decode()}">
+<p id="drawn">{html.escape(drawn)}</p>
 {_score_html(s.score)}
 <h2>Events ({len(s.events)})</h2>
-<table><tr><th>t [s since the start]</th><th>sim t [s]</th><th>severity</th><th>source</th><th>who</th>
-<th>kind</th><th>message</th></tr>
+<table><tr><th>time [s since the start]</th><th>who</th><th>what</th><th>in words</th></tr>
 {rows}
 </table>
 </body></html>

@@ -193,8 +193,9 @@ class Extras:
             st = path.stat()
             quoted = urllib.parse.quote(path.name)
             out.append({"name": path.name, "bytes": st.st_size, "modified": st.st_mtime,
-                        "report": path.with_suffix(".html").is_file(),
-                        "download": f"/recordings/{quoted}", "report_url": f"/recordings/{quoted}/report"})
+                        "report": path.with_suffix(".html").is_file(), "sessions": _kept_sessions(path),
+                        "download": f"/recordings/{quoted}", "report_url": f"/recordings/{quoted}/report",
+                        "sessions_url": f"/api/recordings/{quoted}/sessions"})
         return out
 
     def _being_recorded(self, path: Path) -> bool:
@@ -249,6 +250,35 @@ class Extras:
         return {"file": self.recording_file.name if self.recording_file else None,
                 "running": job.running, "started": job.started, "lines": list(job.lines)[-3:]}
 
+    async def sessions(self, name: str) -> tuple[list[dict[str, Any]] | None, int, str]:
+        """The trainee sessions of recording ``name``, each ``{id, trainee, rover, start_t_s,
+        end_t_s, faults}`` in the order they began (what ``lunaris report --json`` reads), kept
+        beside the recording as NAME.sessions.json and read again when the recording is newer:
+        (them, 200, "") or (None, the status, why)."""
+        path, status, why = self.mcap(name)
+        if path is None:
+            return None, status, why
+        kept = path.with_suffix(".sessions.json")
+        if not kept.is_file() or kept.stat().st_mtime < path.stat().st_mtime:
+            done = await asyncio.to_thread(subprocess.run, [sys.executable, "-m", "lunaris.cli", "report",
+                                                            str(path), "--json"],
+                                           capture_output=True, text=True, timeout=300)
+            if done.returncode not in (0, 1):  # 1: no session in it (an empty list)
+                return None, 500, (done.stderr or done.stdout).strip()
+            try:
+                scores = json.loads(done.stdout or "[]")
+            except ValueError:
+                return None, 500, f"lunaris report said what is not JSON: {done.stdout[:200]!r}"
+            listed = [{"id": s.get("session", ""), "trainee": s.get("trainee"), "rover": s.get("rover", ""),
+                       "start_t_s": s.get("start_t_s"), "end_t_s": s.get("end_t_s"),
+                       "faults": len(s.get("faults") or [])} for s in scores if isinstance(s, dict)]
+            kept.write_text(json.dumps(listed))
+        try:
+            return json.loads(kept.read_text()), 200, ""
+        except ValueError:
+            kept.unlink(missing_ok=True)
+            return None, 500, f"{kept.name} was damaged: it is read again on the next ask"
+
     async def report(self, name: str, session: str | None = None) -> tuple[Path | None, int, str]:
         """The debrief report of recording ``name``, of its last session or of ``session``
         (each trainee's: the report links the recording's others), drawn once, again when the
@@ -267,6 +297,19 @@ class Extras:
             if done.returncode != 0:  # 2: what was asked is not in the recording (a session)
                 return None, 404 if done.returncode == 2 else 500, (done.stderr or done.stdout).strip()
         return out, 200, ""
+
+
+def _kept_sessions(path: Path) -> list[dict[str, Any]] | None:
+    """The sessions of a recording as read the last time (NAME.sessions.json), or None while
+    they are not read (or the recording is newer)."""
+    kept = path.with_suffix(".sessions.json")
+    try:
+        if kept.stat().st_mtime < path.stat().st_mtime:
+            return None
+        listed = json.loads(kept.read_text())
+    except (OSError, ValueError):
+        return None
+    return listed if isinstance(listed, list) else None
 
 
 def _forbidden(user: User) -> JSONResponse:
@@ -305,7 +348,11 @@ async def _scenarios(request: Request) -> Response:
 async def _recordings(request: Request) -> Response:
     ex: Extras = request.app.state.extras
     if request.method == "GET":
-        return JSONResponse({"recordings": await asyncio.to_thread(ex.recordings),
+        listed = await asyncio.to_thread(ex.recordings)
+        for x in listed:
+            if x["sessions"] is not None:
+                x["sessions"] = _noted(request, x["sessions"])
+        return JSONResponse({"recordings": listed,
                              "recording": ex.recording_status(),
                              "folder": str(ex.recordings_dir) if ex.recordings_dir else None})
     user: User = request.scope["state"]["user"]
@@ -334,6 +381,20 @@ async def _report(request: Request) -> Response:
     return FileResponse(out, media_type="text/html")
 
 
+async def _recording_sessions(request: Request) -> Response:
+    """The trainee sessions a recording holds (observers too: it is reading)."""
+    listed, status, why = await request.app.state.extras.sessions(request.path_params["name"])
+    if listed is None:
+        return JSONResponse({"message": why}, status_code=status)
+    return JSONResponse({"sessions": _noted(request, listed)})
+
+
+def _noted(request: Request, listed: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A recording's sessions with the console's notes laid over (void, renamed), rover by rover."""
+    notes = request.app.state.session_notes
+    return [notes.apply(s.get("rover", ""), [s])[0] for s in listed]
+
+
 async def _download(request: Request) -> Response:
     """A recording as a file to save (observers too: it is reading)."""
     name = request.path_params["name"]
@@ -348,6 +409,7 @@ def routes() -> list[Route]:
     return [
         Route("/api/scenarios", _scenarios, methods=["GET", "POST"]),
         Route("/api/recordings", _recordings, methods=["GET", "POST"]),
+        Route("/api/recordings/{name}/sessions", _recording_sessions),
         Route("/recordings/{name}/report", _report),
         Route("/recordings/{name}", _download),
     ]

@@ -56,7 +56,7 @@ from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from lunaris.address import ABOUT_APP, ABOUT_PATH
 from lunaris.client import ToolError, close_session
-from lunaris.console import api, drive, extras, response, rovers
+from lunaris.console import api, drive, extras, response, rovers, session_notes
 from lunaris.console.auth import COOKIE, LOCAL, SESSION_S, Accounts, AccountsError, Attempts, SignIns
 from lunaris.console.live import Hub
 
@@ -385,6 +385,7 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
         *drive.routes(),
         *rovers.routes(),
         *response.routes(),  # before api's /api/rovers/{rover}/{what}
+        *session_notes.routes(),
         *api.routes(),
         *extras.routes(),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
@@ -397,6 +398,7 @@ def make_app(twin: zenoh.Session | Opener, accounts: Accounts | None, *, tls: bo
     app.state.catalogue = api.catalogue()
     app.state.traverses = drive.Traverses([drive.SHIPPED, *traverse_dirs])
     app.state.rover_files = rover_files or rovers.RoverFiles()
+    app.state.session_notes = session_notes.SessionNotes(recordings_dir)
     app.state.extras = extras.Extras(
         None, scenarios_dir, recordings_dir, connection or [],
         live_rovers=lambda: [r for r in app.state.hub.mirror.rovers() if app.state.hub.mirror.services(r)])

@@ -24,7 +24,7 @@ from selenium.webdriver.support import expected_conditions as ec
 from common import keys
 from tests.console.conftest import MAPP, Live, console_page, console_site, shoot
 from tests.console.page_checks import LAYOUT, TEXT, field_names, vocabulary
-from tests.console.pages import WebDriverWait, click, view
+from tests.console.pages import WebDriverWait, answer, clear_answers, click, fill, view
 from tests.harness import (
     ROOT,
     env_without_zenoh_config,
@@ -203,3 +203,19 @@ def test_the_instructor_standing_in_for_the_crew_is_counted_as_the_crew(site, pa
         page.execute_script("const b = document.getElementById('as-crew'); if (b && b.checked) b.click();")
         p.delete(fault)
         p.put(keys.cmd_rail(R, "3V3_CH1"), {"on": True})
+
+
+def test_the_instructor_marks_the_timeline_from_the_crew_view(site, page, artefacts):
+    """Found by an instructor: watching the crew, there was no Mark field (only on the Session
+    view): a note from the Crew view is a mark on the session's timeline, for its debrief."""
+    view(page, "crew")
+    clear_answers(page)
+    note = "crew found the tripped rail from its alarms"
+    fill(page, "#crew-mark #mark-text", note)
+    click(page, f'#crew-mark [data-action="mark"][data-rover="{R}"]')
+    assert note in answer(page, "accepted")
+    got = site.probe.wait_event(R, lambda e: e.get("kind") == "mark" and note in e.get("message", ""))
+    assert got["actor"] == "instructor", got
+    WebDriverWait(page, 10).until(lambda d: d.find_element(By.CSS_SELECTOR, "#crew-mark #mark-text")
+                                  .get_attribute("value") == "", "the field emptied once the mark is made")
+    shoot(page, artefacts, "crew-mark", doc=False)

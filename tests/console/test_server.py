@@ -495,6 +495,66 @@ def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
         assert none.status_code == 404 and f"sessions: {S1}, {S2}" in none.json()["message"]
 
 
+def test_a_recording_lists_its_trainees_sessions(session, tmp_path, router):
+    """The Recordings view names each recording's trainees: the sessions of a recording, read
+    once and kept beside it (the list carries them from then on), read again once it is newer."""
+    from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
+
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    tape = Tape()
+    two_trainees(tape)
+    tape.write(folder / "day.mcap")
+    app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
+    with client(app) as c:
+        (entry,) = c.get("/api/recordings").json()["recordings"]
+        assert entry["sessions"] is None  # not read yet
+        r = c.get(entry["sessions_url"])
+        assert r.status_code == 200, r.text
+        listed = r.json()["sessions"]
+        assert [(s["id"], s["trainee"], s["faults"]) for s in listed] == [(S1, "Ada", 1), (S2, "Bob", 1)]
+        assert c.get("/api/recordings").json()["recordings"][0]["sessions"] == listed  # kept
+        assert c.get("/api/recordings/nothing.mcap/sessions").status_code == 404
+
+
+def test_a_session_is_voided_and_renamed_by_the_consoles_notes(session, accounts, tmp_path, router):
+    """Found by an instructor: three 'Ana' sessions from retries stayed in the day's list, and a
+    mistyped name could not be put right. The console notes a session voided or renamed (the
+    journal keeps it as it began) and lays its notes over what it lists; observers cannot."""
+    from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
+
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    tape = Tape()
+    two_trainees(tape)
+    tape.write(folder / "day.mcap")
+    app = make_app(session, Accounts(accounts), recordings_dir=folder, connection=["--connect", router])
+    url = "/api/rovers/mapp-1/sessions/"
+    with client(app) as c:
+        assert _sign_in(c, "ana", "crater-rim-instructor").status_code == 303
+        r = c.post(url + S1, json={"action": "void"})
+        assert r.status_code == 200 and "voided" in r.json()["message"], r.text
+        r = c.post(url + S2, json={"action": "rename", "trainee": "Bob Marsh"})
+        assert r.status_code == 200 and r.json()["note"]["by"] == "ana", r.text
+        listed = c.get("/api/recordings/day.mcap/sessions").json()["sessions"]
+        assert [(s["id"], s["trainee"], s["journal_trainee"], s["void"]) for s in listed] == [
+            (S1, "Ada", "Ada", True), (S2, "Bob Marsh", "Bob", False)]
+        assert c.get("/api/recordings").json()["recordings"][0]["sessions"] == listed
+        notes = json.loads((folder / "session-notes.json").read_text())
+        assert notes["mapp-1"][S1]["void"] is True and notes["mapp-1"][S2]["trainee"] == "Bob Marsh"
+        assert c.post(url + S1, json={"action": "restore"}).status_code == 200
+        assert not c.get("/api/recordings/day.mcap/sessions").json()["sessions"][0]["void"]
+        for bad, why in (({"action": "rename", "trainee": "<b>"}, "'<'"), ({"action": "drop"}, "action"),
+                         ({"action": "rename"}, "name")):
+            r = c.post(url + S2, json=bad)
+            assert r.status_code == 422 and why in r.json()["message"], (bad, r.text)
+        assert c.post(url + "20261125", json={"action": "void"}).status_code == 422
+        c.post("/logout")
+        assert _sign_in(c, "obi", "lander-side-observer").status_code == 303
+        assert c.post(url + S2, json={"action": "void"}).status_code == 403
+        assert not c.get("/api/recordings/day.mcap/sessions").json()["sessions"][1]["void"]
+
+
 def test_a_recording_being_made_is_refused_until_it_is_stopped(session, rover, tmp_path, router):
     folder = tmp_path / "recordings"
     app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])

@@ -155,7 +155,7 @@ def test_the_report_draws_a_recording(tmp_path: Path):
     fig = draw(s, "test")
     # the timeline, the score sheet, five plots, the radio links and the current's twin axis
     assert len(fig.axes) == 9
-    assert fig.axes[1].get_title(loc="left") == "score sheet: 1 fault(s); 0 of 0 expectation(s) met"
+    assert fig.axes[1].get_title(loc="left") == "the crew's response: 1 fault(s); 0 of 0 expectation(s) met"
     fig.savefig(tmp_path / "out.png")
     assert (tmp_path / "out.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -237,10 +237,10 @@ def test_the_debrief_marks_actions_steps_resets_and_what_came_before(tmp_path: P
     assert "1 event(s) from before the recording" in fig._suptitle.get_text()
     timeline = fig.axes[0]
     texts = [t.get_text() for t in timeline.texts]
-    assert "rail 12V: on=false; the rail is now off" in texts and "step 1/2 dust" in texts
+    assert "rail 12V: switch off; the rail is now off" in texts and "step 1/2 dust" in texts
     assert "replayed" not in " ".join(texts)
     texts = [t.get_text() for t in draw(two, "test").axes[0].texts]
-    assert texts == ["session of 'Bob' begins"]
+    assert texts == ["Bob's session began"]
 
 
 def test_labels_never_overlap_and_the_rest_are_counted():

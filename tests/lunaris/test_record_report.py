@@ -111,7 +111,8 @@ def test_a_session_recorded_to_mcap_reads_back_and_renders(live, tmp_path):
     page = tmp_path / "debrief.html"
     assert run_tool("report", str(path), "-o", str(page)).returncode == 0
     text = page.read_text()
-    assert "data:image/png;base64," in text and "fault_injected" in text and "injected load/imu/stuck" in text
+    assert "data:image/png;base64," in text and "<td>fault injected</td>" in text
+    assert "Load imu: Stuck power draw (power drawn 1.4 W)" in text
 
 
 def test_recording_stops_after_its_duration_and_on_sigterm(live, tmp_path):

@@ -177,7 +177,9 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     assert f"session {S2} (1 other session(s) in the recording)" in done.stdout
     assert "1 fault(s), 1 of 1 expectation(s) met" in done.stdout
     html = page.read_text()
-    assert f"Score sheet: session {S2}" in html and "battery/heating" in html and "isolate the heater" in html
+    assert f"The crew's response: Bob's session <small>({S2})</small>" in html
+    assert "Battery: Overheating" in html
+    assert "isolate the heater" in html
     assert "met at 30.1" in html and "nav_camera" not in html
     assert "<td>no response</td>" in html  # the heating: no crew action on what it touches
     # every trainee's report a link away, and who acted in the events (found by an instructor:
@@ -185,7 +187,7 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     # read like the instructor's)
     assert f'<a href="?session={S1}">Ada - session {S1}</a>' in html
     assert f"<b>Bob - session {S2} (this report)</b>" in html
-    assert "<td>crew</td><td>command</td>" in html and "<td>scenario</td><td>fault_injected</td>" in html
+    assert "<td>crew</td><td>command</td>" in html and "<td>the drill</td><td>fault injected</td>" in html
     png = tmp_path / "first.png"
     done = run_tool("report", str(path), "--session", S1, "-o", str(png))
     assert done.returncode == 0 and png.read_bytes()[:4] == b"\x89PNG"
@@ -194,9 +196,9 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     from lunaris.report_draw import draw
     fig = draw(one, "first")
     sheet = fig.axes[1]
-    assert sheet.get_title(loc="left") == "score sheet: 1 fault(s); 0 of 0 expectation(s) met"
-    assert [t.get_text() for t in sheet.get_yticklabels()] == ["load/nav_camera/short"]
-    assert any("2 crew action(s)" in t.get_text() for t in sheet.texts)  # (not 5V_CH9: another rail)
+    assert sheet.get_title(loc="left") == "the crew's response: 1 fault(s); 0 of 0 expectation(s) met"
+    assert [t.get_text() for t in sheet.get_yticklabels()] == ["Load nav camera: Short circuit"]
+    assert any("(2 action(s))" in t.get_text() for t in sheet.texts)  # (not 5V_CH9: another rail)
 
 
 def test_a_recording_is_read_fast_and_whole_and_a_cut_one_as_far_as_it_goes(tmp_path):

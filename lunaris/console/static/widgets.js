@@ -163,7 +163,7 @@ async function mark(rover) {
 }
 
 /** @param {string} rover the field and button that mark the timeline (not for observers) */
-function markRow(rover) {
+export function markRow(rover) {
   if (!mayAct()) return nothing;
   return html`<form class="row mark-row" @submit=${(/** @type {Event} */ e) => {
     e.preventDefault();

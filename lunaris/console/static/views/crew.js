@@ -5,13 +5,14 @@
 // crew's actions and its resolution, the drill's expectations met or missed; beside them the
 // faults the instructor put in effect. Asked again as soon as an event of the rover comes (a
 // fault injected, an alarm raised, the crew's call answered), and every CREW_S seconds while
-// the view shows (what telemetry alone changes).
+// the view shows (what telemetry alone changes). The instructor marks the session's timeline from
+// here too (a Mark for the debrief, as above the Session view's event log).
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {query} from "../api.js";
 import {clockText, dur, faultName, fieldLabel, num, partName, plainMessage, words} from "../format.js";
 import {changed, store} from "../state.js";
-import {checkFaults, faultsCard} from "../widgets.js";
+import {checkFaults, faultsCard, markRow} from "../widgets.js";
 import {clearFault} from "./live.js";
 
 /**
@@ -209,6 +210,16 @@ function alarmsCard(res) {
     ${alarms(v.diagnostics)}</section>`;
 }
 
+/**
+ * @param {string} rover a note on the session's timeline while watching the crew (`control/mark`:
+ * a `mark` event, drawn on the debrief's timeline); none for observers
+ */
+function markCard(rover) {
+  const row = markRow(rover);
+  return row === nothing ? nothing : html`<section class="card" id="crew-mark"><h2>Mark for the debrief</h2>${row}
+    <p class="help">What you note here is on the session's timeline, in the debrief of this trainee.</p></section>`;
+}
+
 export const crew = {
   name: "crew",
   label: "Crew",
@@ -217,7 +228,7 @@ export const crew = {
     if (asked[rover] !== undefined && newest(rover) !== heard[rover]) load(rover);  // an event came
     const res = seen[rover];
     return html`<div class="grid two">
-      <div class="col">${alarmsCard(res)}${responseCard(responses[rover])}${faultsCard(rover, clearFault)}</div>
+      <div class="col">${markCard(rover)}${alarmsCard(res)}${responseCard(responses[rover])}${faultsCard(rover, clearFault)}</div>
       <div class="col"><section class="card" id="crew-readings"><h2>The crew's readings</h2>
         <p class="help">Every topic the crew's dashboard receives, as it reads now.</p>
         ${res?.ok ? readings(res.data.topics) : nothing}</section>

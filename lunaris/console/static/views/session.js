@@ -4,13 +4,17 @@
 // restore snapshots; ask the battery prediction.
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
-import {WORDS, answer, query, send} from "../api.js";
+import {WORDS, answer, post, query, send} from "../api.js";
 import {clockText, dayTime, dur, emptyWords, fmt, nameProblem, plainMessage, sessionName, wallTime} from "../format.js";
-import {battery, changed, clock, runningSession} from "../state.js";
+import {battery, changed, clock, mayAct, runningSession} from "../state.js";
 import {actionButton, eventsCard, field, traineeWords} from "../widgets.js";
 
 /** @typedef {import("../api.js").Answer} Answer */
-/** @typedef {import("../types.js").SessionInfo} SessionInfo */
+/**
+ * A session as the console lists it: the twin's, with the console's notes laid over
+ * (lunaris/console/session_notes.py): voided, renamed (`journal_trainee`: the name it began with).
+ * @typedef {import("../types.js").SessionInfo & {void?: boolean, journal_trainee?: string}} SessionInfo
+ */
 /** @typedef {import("../types.js").SnapshotInfo} SnapshotInfo */
 /** @typedef {import("../types.js").Prediction} Prediction */
 /** @typedef {import("../types.js").Percentiles} Percentiles */
@@ -222,21 +226,62 @@ function traineeCard(r) {
     ${said(answers.started[r])}</section>`;
 }
 
+/** Whether the sessions voided are listed too (greyed, with Restore). */
+let showVoided = false;
+
+/**
+ * Void, restore or rename a session (the console's note: the journal keeps it as it began).
+ * @param {string} r @param {SessionInfo} x @param {"void" | "restore" | "rename"} action
+ */
+async function noteSession(r, x, action) {
+  const who = x.trainee || "no trainee named";
+  /** @type {Record<string, unknown>} */
+  const body = {action};
+  if (action === "rename") {
+    const name = prompt(`A new name for the session of ${who} begun ${sessionName(x.id)} (the journal and the recordings keep "${
+      x.journal_trainee ?? x.trainee}"):`, x.trainee);
+    if (name === null || name.trim() === x.trainee) return;
+    const why = traineeProblem(name.trim());
+    if (!name.trim() || why) {
+      answer("invalid", `not renamed: ${why || "type a name"}`);
+      return;
+    }
+    body.trainee = name.trim();
+  } else if (action === "void" && !confirm(`Void the session of ${who} begun ${sessionName(x.id)}? It is left out of the `
+    + "day's list and of the debrief's choice of trainee; the journal and the recordings keep it, and Restore brings it back.")) {
+    return;
+  }
+  await post(`/api/rovers/${encodeURIComponent(r)}/sessions/${encodeURIComponent(x.id)}`, body);
+  await loadSessions(r);
+}
+
 /** @param {Result<SessionInfo[]> | undefined} res @param {string} r */
 function sessionList(res, r) {
   if (res === undefined) return html`<p>Asking the journal…</p>`;
   if (!res.ok) return html`<p class="error">No list: ${plainMessage(res.message)}</p>`;
   if (!res.data.length) return html`<p>No session in the journal yet.</p>`;
-  const running = runningSession(r)?.id;
+  const running = runningSession(r)?.id, may = mayAct();
+  const voided = res.data.filter((x) => x.void).length;
+  const shown = [...res.data].reverse().filter((x) => showVoided || !x.void);
   return html`<table><tr><th>trainee</th><th>began on</th><th class="num">sim start</th><th class="num">sim end</th>
-    <th class="num">events</th></tr>${[...res.data].reverse().map((x) => html`<tr data-session=${x.id}
-      data-trainee=${x.trainee} class=${x.end_t_s === null ? "running" : ""}>
-    <td class="wrap">${x.trainee || "(no trainee named)"}<br><small title="what lunaris report --session takes">${x.id}${
-      x.from_snapshot ? ` · from snapshot ${x.from_snapshot}` : ""}</small></td>
+    <th class="num">events</th>${may ? html`<th></th>` : nothing}</tr>${shown.map((x) => html`<tr data-session=${x.id}
+      data-trainee=${x.trainee} data-void=${x.void ? "true" : nothing} class=${x.void ? "void" : x.end_t_s === null ? "running" : ""}>
+    <td class="wrap">${x.trainee || "(no trainee named)"}${x.void ? html` <b>(void)</b>` : nothing}${
+      x.journal_trainee !== undefined && x.journal_trainee !== x.trainee
+        ? html` <small class="renamed">(began as ${x.journal_trainee || "no trainee named"})</small>` : nothing}<br><small
+      title="what lunaris report --session takes">${x.id}${x.from_snapshot ? ` · from snapshot ${x.from_snapshot}` : ""}</small></td>
     <td>${x.started_wall === null ? sessionName(x.id) : dayTime(x.started_wall)}</td>
     <td class="num">${clockText(x.start_t_s)}</td>
     <td class="num">${x.end_t_s === null ? html`<b>${x.id === running ? "running" : "not ended"}</b>` : clockText(x.end_t_s)}</td>
-    <td class="num">${x.events ?? 0}</td></tr>`)}</table>`;
+    <td class="num">${x.events ?? 0}</td>${may ? html`<td class="end"><button type="button" class="act" data-action="session-rename"
+      @click=${() => noteSession(r, x, "rename")}>Rename</button> ${x.void
+      ? html`<button type="button" class="act" data-action="session-restore" @click=${() => noteSession(r, x, "restore")}>Restore</button>`
+      : html`<button type="button" class="act" data-action="session-void" @click=${() => noteSession(r, x, "void")}>Void</button>`}</td>`
+    : nothing}</tr>`)}</table>
+    ${voided ? html`<p class="help"><label><input type="checkbox" id="sessions-show-void" ?checked=${showVoided}
+      @change=${(/** @type {Event} */ e) => { showVoided = /** @type {HTMLInputElement} */ (e.target).checked; changed(); }}>
+      show the ${voided} session(s) voided</label> (a retry, a false start: left out of the list and of the debrief's choice,
+      kept in the journal)</p>` : nothing}`;
 }
 
 /** @param {string} r */
