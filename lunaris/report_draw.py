@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import base64
 import html
+import time
 import urllib.parse
 
 from common.response import SessionResponse
@@ -416,7 +417,7 @@ def _score_html(score: SessionResponse | None) -> str:
                 f"<td><b>{e(key_words(f.key))}</b><br><small>{e(effect)}</small></td>"
                 f"<td>{e(params_words(component, kind, f.params)) or '-'}</td>"
                 f"<td>{e(WHO.get(f.injected_by, f.injected_by))}</td>"
-                f"<td>{_t(f.injected_t_s)}</td>"
+                f"<td>{_t(f.injected_t_s)}{'<br><small>' + e(f.note) + '</small>' if f.note else ''}</td>"
                 f"<td>{_t_since(f.first_symptom_t_s, f.injected_t_s)}<br>"
                 f"<small>{e(f.symptom)}</small></td>"
                 f"<td>{_t(f.first_crew_action_t_s)}</td>"
@@ -431,10 +432,12 @@ def _score_html(score: SessionResponse | None) -> str:
         f"<td>{'met at ' + _t(x.at_t_s) if x.met else ('missed' if x.met is False else 'pending')}"
         f"</td><td>{e(x.detail)}</td></tr>" for x in score.expectations)
     whose = f"{e(score.trainee)}'s session" if score.trainee else "the session (no trainee named)"
+    began = ("" if score.started_wall is None else " It began at "
+             + time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime(score.started_wall)) + ".")
     return f"""<h2>The crew's response: {whose} <small>({e(score.session)})</small></h2>
 <h3>Faults ({len(score.faults)})</h3>
 <p class="help">Times are seconds since the session's start; in brackets, how long after the fault
-was put in.</p>
+was put in.{began}</p>
 <table><tr><th>fault</th><th>how strong</th><th>put in by</th><th>put in at [s]</th>
 <th>the crew could first see it</th><th>the crew first acted</th><th>resolved</th>
 <th>the crew's actions</th></tr>

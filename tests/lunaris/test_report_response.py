@@ -178,6 +178,7 @@ def test_the_score_sheet_is_drawn_under_the_timeline_and_tabled_in_the_page(tmp_
     assert "1 fault(s), 1 of 1 expectation(s) met" in done.stdout
     html = page.read_text()
     assert f"The crew's response: Bob's session <small>({S2})</small>" in html
+    assert "It began at 2023-11-14 22:13:20 UTC." in html  # its wall-clock start beside its times
     assert "Battery: Overheating" in html
     assert "isolate the heater" in html
     assert "met at 30.1" in html and "nav_camera" not in html
