@@ -41,7 +41,8 @@ CREW = ("#crew-alarms table", "#crew-ok", "#crew-readings table", "#crew-control
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Iterator[Live]:
-    with console_site(tmp_path_factory.mktemp("console-crew"), "--rover", str(MAPP)) as live:
+    with console_site(tmp_path_factory.mktemp("console-crew"), "--rover", str(MAPP),
+                      "--scenarios", str(DRILL.parent)) as live:
         yield live
 
 
@@ -219,3 +220,32 @@ def test_the_instructor_marks_the_timeline_from_the_crew_view(site, page, artefa
     WebDriverWait(page, 10).until(lambda d: d.find_element(By.CSS_SELECTOR, "#crew-mark #mark-text")
                                   .get_attribute("value") == "", "the field emptied once the mark is made")
     shoot(page, artefacts, "crew-mark", doc=False)
+
+
+def test_a_new_trainee_stops_the_drill_of_the_session_before(site, page):
+    """SPEC 13a: a drill belongs to its session. Found by an instructor: New trainee pressed
+    40 s into the shipped drill (the question did not mention it), and the drill played on and
+    scored the next trainee ("isolate the shorted camera ... waiting: 55 s left")."""
+    view(page, "scenarios")
+    click(page, '[data-play="shorted-camera.yaml"]')
+    WebDriverWait(page, 10).until(ec.alert_is_present()).accept()  # it starts from a reset
+    playing = lambda d: d.find_element(By.ID, "sc-play").text  # noqa: E731
+    WebDriverWait(page, 30).until(lambda d: playing(d).startswith("Playing"), "the drill playing")
+    view(page, "crew")
+    rows = "#crew-response tr[data-expectation]"
+    WebDriverWait(page, 30).until(lambda d: d.find_elements(By.CSS_SELECTOR, rows), "its expectations")
+    view(page, "session")
+    box = page.find_element(By.ID, "trainee-name")
+    box.clear()
+    box.send_keys("Cleo")
+    click(page, f'[data-action="session-start"][data-rover="{R}"]')
+    alert = WebDriverWait(page, 10).until(ec.alert_is_present())
+    drill = "Shorted camera - isolate and recover the 5V rail"
+    assert alert.text.startswith(f'The drill "{drill}" stops first'), alert.text
+    alert.accept()
+    view(page, "scenarios")
+    WebDriverWait(page, 30).until(lambda d: playing(d).startswith("Stopped") and "a new session began"
+                                  in playing(d), lambda: f"the drill stopped (the page: {playing(page)!r})")
+    view(page, "crew")
+    WebDriverWait(page, 10).until(lambda d: not d.find_elements(By.CSS_SELECTOR, rows),
+                                  "none of the drill's expectations in Cleo's session")

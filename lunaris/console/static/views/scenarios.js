@@ -146,7 +146,8 @@ function progress(playing) {
       : html`<p class="error">The drill ${playing.file} could not start: ${lastWords(lines) || "no reason given"}.</p>`;
   }
   const said = notes(lines);
-  const how = st.finished ? (st.end_reason === "interrupted" ? "Stopped" : "Finished")
+  const stopped = st.end_reason === "interrupted" || st.end_reason.startsWith("stopped");  // (a new session)
+  const how = st.finished ? (stopped ? "Stopped" : "Finished")
     : playing.running ? "Playing" : "Stopped";
   return html`<p><b>${how}</b>: “${st.scenario}” on ${st.rover}, ${dur(st.t_rel_s)} of sim time into the drill${
     st.finished && st.end_reason !== "interrupted" ? html`: ${st.end_reason}.` : "."}</p>

@@ -182,6 +182,20 @@ function traineeProblem(name) {
   return `a trainee's name is letters, digits, spaces and - _ . ' &; this one has ${[...new Set(said)].join(", ")}`;
 }
 
+/**
+ * The drill playing on rover ``r`` now, by its name ("" when none): a new session stops it.
+ * @param {string} r
+ * @returns {Promise<string>}
+ */
+async function drillPlaying(r) {
+  /** @type {Awaited<ReturnType<typeof query<{playing?: {running?: boolean, file?: string | null,
+   *   status?: {scenario?: string, rover?: string} | null}}>>>} */
+  const listed = await query("/api/scenarios");
+  const playing = listed.ok ? listed.data.playing : undefined;
+  if (!playing?.running || (playing.status?.rover && playing.status.rover !== r)) return "";
+  return playing.status?.scenario || playing.file || "a drill";
+}
+
 /** @param {string} r the running session, and a new trainee's */
 function traineeCard(r) {
   const s = runningSession(r), snaps = answers.snapshots[r];
@@ -200,8 +214,10 @@ function traineeCard(r) {
     }
     const ending = s?.trainee ? `${s.trainee}'s session ends` : "The running session ends";
     const how = from ? `the twin is restored to the snapshot "${from}"` : "the twin goes back to its rover file";
-    if (!confirm(`Start ${name}'s session on ${r}? ${ending}; ${how}, every injected fault cleared, and the plots `
-      + "and the event log start empty.")) return;
+    const drill = await drillPlaying(r);  // it belongs to the session that ends (SPEC 13a): said first
+    const stops = drill ? `The drill "${drill}" stops first, and nothing more of it is scored. ` : "";
+    if (!confirm(`${stops}Start ${name}'s session on ${r}? ${ending}; ${how}, every injected fault cleared, and the `
+      + "plots and the event log start empty.")) return;
     const res = await send("PUT", "control/session", JSON.stringify(from ? {trainee: name, from_snapshot: from}
       : {trainee: name}), r);
     answers.started[r] = res;
