@@ -41,7 +41,9 @@ from lunaris.console.auth import User
 
 __all__ = ["Extras", "routes"]
 
-NAME = re.compile(r"^[A-Za-z0-9_.-]{1,80}$")
+# a recording's name: a plain name, never '..' nor a hidden file ('.x'): it begins with a letter or a digit
+NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,79}$")
+NAME_WORDS = "letters, digits, '.', '_' and '-', beginning with a letter or a digit"
 LINES = 400
 MCAP_TYPE = "application/vnd.mcap"  # IANA's media type for MCAP
 
@@ -211,8 +213,7 @@ class Extras:
             return None, 404, "this console has no folder for recordings (lunaris console --recordings DIR)"
         stem = name.removesuffix(".mcap")
         if stem == name or not NAME.match(stem):
-            return None, 404, (f"no recording {name!r}: a recording is NAME.mcap, the name made of "
-                               "letters, digits, '.', '_' and '-'")
+            return None, 404, f"no recording {name!r}: a recording is NAME.mcap, its name {NAME_WORDS}"
         path = folder / name
         if self._being_recorded(path):  # written as NAME.mcap.part until then
             return None, 409, (f"{name} is still being recorded: stop the recording first (the file "
@@ -230,7 +231,7 @@ class Extras:
         (409, what stands in the way: a recording running, a file of that name)."""
         stem = name.removesuffix(".mcap")
         if not NAME.match(stem):
-            return 422, f"not recorded: bad name {name!r}: letters, digits, '.', '_' and '-'"
+            return 422, f"not recorded: bad name {name!r}: {NAME_WORDS}"
         if self.recording is not None and self.recording.running:
             return 409, f"already recording to {self.recording_file}: stop it first"
         if self.recordings_dir is None:

@@ -559,7 +559,9 @@ def test_a_recording_being_made_is_refused_until_it_is_stopped(session, rover, t
     folder = tmp_path / "recordings"
     app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
     with client(app) as c:
-        for bad in ("../up", "a b", "", "x" * 200):  # a name that cannot be one: invalid, as any bad input
+        # a name that cannot be one: invalid, as any bad input ('..' and '.hidden' were stored as
+        # '...mcap' and '.hidden.mcap', found by an adversary)
+        for bad in ("../up", "a b", "", "x" * 200, "..", ".hidden", "-x"):
             r = c.post("/api/recordings", json={"name": bad})
             assert (r.status_code, r.json()["verdict"]) == (422, "invalid"), (bad, r.text)
             assert "bad name" in r.json()["message"]
