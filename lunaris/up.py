@@ -128,7 +128,8 @@ class Supervisor:
         log = self.log_path(service)
         log.parent.mkdir(parents=True, exist_ok=True)
         # Each child follows this process: it dies with it, kill -9 or not (lunaris.supervised,
-        # set in the child: no preexec_fn in a process with the router's threads)
+        # set in the child: no preexec_fn in a process with the router's threads). Started from
+        # the main thread only: the kernel's parent-death signal follows the thread that forked.
         env = {**os.environ, SUPERVISOR_ENV: str(os.getpid())}
         with log.open("ab") as out:
             proc = subprocess.Popen(self.command(service), stdin=subprocess.DEVNULL, stdout=out,
