@@ -16,6 +16,7 @@ import zenoh
 
 from common.connection import ConnectionConfigError
 from lunaris.processes import quiet_stdout
+from lunaris.supervised import follow_supervisor
 
 __all__ = ["COMMANDS", "main"]
 
@@ -49,6 +50,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 def main(argv: list[str] | None = None) -> int:
+    follow_supervisor()  # first: started by `lunaris up`, die with it (lunaris.supervised)
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = argparse.ArgumentParser(
         prog="lunaris", description="Lunaris: digital twin of a lunar rover's power and radio.")

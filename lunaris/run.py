@@ -27,13 +27,13 @@ import sys
 from common.config import ConfigError, Rover, load_rover
 from common.connection import add_connection_args, config_from_args
 from common.runtime import AlreadyRunning, Runtime
+from lunaris.supervised import SUPERVISOR_ENV, supervisor
 
 __all__ = ["ALREADY_RUNNING", "CONFIG_ERROR", "SERVICES", "SUPERVISOR_ENV", "add_arguments",
            "load_rovers", "main", "parse_shard", "served"]
 
 CONFIG_ERROR = 2  # exit status: a rover file, mapping or option that cannot work (do not retry)
 ALREADY_RUNNING = 3  # exit status: another instance serves these rovers (do not retry)
-SUPERVISOR_ENV = "LUNARIS_SUPERVISOR_PID"  # set by `lunaris up`: a service dies with it
 STARTS_ENV = "LUNARIS_COUNT_STARTS"  # a file each service's start adds a line to (make test counts)
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
@@ -128,9 +128,9 @@ def main(args: argparse.Namespace) -> int:
         except AlreadyRunning as exc:
             print(f"lunaris {args.service}: not starting: {exc}", file=sys.stderr, flush=True)
             return ALREADY_RUNNING
-        supervisor = os.environ.get(SUPERVISOR_ENV)
-        if supervisor and supervisor.isdigit():
-            rt.watch_parent(int(supervisor))
+        parent = supervisor()  # started by `lunaris up`: the kernel's signal, and this watch
+        if parent is not None:
+            rt.watch_parent(parent)
         node = getattr(module, "NODE", None)
         if node is not None:
             node(rovers, seed=args.seed).attach(rt)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
 import errno
 import os
 import shutil
@@ -39,7 +38,6 @@ from lunaris.run import ALREADY_RUNNING, CONFIG_ERROR, SERVICES, SUPERVISOR_ENV,
 __all__ = ["ROVERS_PER_BRIDGE", "Supervisor", "add_arguments", "default_bridges", "main"]
 
 DEFAULT_ROVER = "config/rovers/mapp.yaml"
-PR_SET_PDEATHSIG = 1  # prctl(2)
 # A bridge process serves this many rovers by default: at 100 MAPP rovers each of two
 # shards took 25-45 % of a core (bench/fleet.py), one Python thread's worth to spare.
 ROVERS_PER_BRIDGE = 50
@@ -76,16 +74,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--recordings", metavar="DIR", default="recordings",
                    help="where the console makes and lists its recordings (default ./recordings, "
                         "from where up runs: kept when a temporary state folder goes)")
-
-
-def _die_with_parent() -> None:
-    """In the child, before exec: the kernel sends SIGTERM when the supervisor dies, even by
-    kill -9, so no service outlives it (Linux; elsewhere the service watches its parent)."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    except (OSError, AttributeError):
-        pass  # not Linux: the service's own watch of its parent pid stops it
 
 
 class Supervisor:
@@ -139,11 +127,13 @@ class Supervisor:
         # when it exits, the end of its log is shown.
         log = self.log_path(service)
         log.parent.mkdir(parents=True, exist_ok=True)
+        # Each child follows this process: it dies with it, kill -9 or not (lunaris.supervised,
+        # set in the child: no preexec_fn in a process with the router's threads). Started from
+        # the main thread only: the kernel's parent-death signal follows the thread that forked.
         env = {**os.environ, SUPERVISOR_ENV: str(os.getpid())}
         with log.open("ab") as out:
             proc = subprocess.Popen(self.command(service), stdin=subprocess.DEVNULL, stdout=out,
-                                    stderr=subprocess.STDOUT, env=env, start_new_session=True,
-                                    preexec_fn=_die_with_parent)
+                                    stderr=subprocess.STDOUT, env=env, start_new_session=True)
         self.procs[service] = proc
         self._started[service] = time.monotonic()
         print(f"[up] {service} started (pid {proc.pid})", flush=True)
