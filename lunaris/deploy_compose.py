@@ -42,8 +42,10 @@ _HEAD = """\
 # and, where another router opens a link to them, the routers' port on LUNARIS_BIND
 # (default: every address of the machine: the other machines must reach them). Inside a
 # machine, its services reach its router by the machine's name (a network alias), the name
-# on the router's certificate. deploy/README.md §9 has the whole guide; docker-compose.yml
-# is the one-machine case.
+# on the router's certificate. The console publishes its page on LUNARIS_CONSOLE_BIND (default
+# 127.0.0.1) and answers to its machine's names in the site, or to those of LUNARIS_ALLOW_HOST
+# (comma-separated). deploy/README.md §9 has the whole guide; docker-compose.yml is the
+# one-machine case.
 
 x-lunaris: &lunaris
   image: lunaris:${{LUNARIS_TAG:-latest}}
@@ -153,13 +155,16 @@ def render_site_compose(site: Site, site_path: str, secrets: str = "deploy/secre
                 command = ["run", what, *rover_args, "--state-dir", STATE]
                 if what == "bridge":
                     command += ["--bridge-config", bridge_config]
-                extra = ""
+                extra = env = ""
             else:  # the console
                 identity = "console"
                 command = ["console", "--http", "0.0.0.0:8080", "--accounts",
                            "/etc/lunaris/console-accounts.json", "--scenarios", "config/scenarios",
                            "--recordings", f"{STATE}/recordings", *rover_args]
                 extra = ("    ports:\n      - \"${LUNARIS_CONSOLE_BIND:-127.0.0.1}:8080:8080\"\n")
+                # the names a browser reaches it by: its machine's (the site's), or the variable's
+                env = (f"      LUNARIS_ALLOW_HOST: "
+                       f"\"${{LUNARIS_ALLOW_HOST:-{','.join(_names(spec.hosts))}}}\"\n")
             out.append(f"""
   {name}-{what}:
     <<: *lunaris
@@ -172,7 +177,7 @@ def render_site_compose(site: Site, site_path: str, secrets: str = "deploy/secre
         condition: service_started
     environment:
       LUNARIS_ZENOH_CONFIG: /etc/lunaris/zenoh.json5
-    command: {_list(command, len("    command: "))}
+{env}    command: {_list(command, len("    command: "))}
 {extra}    volumes:
       - ./config:{APP}/config:ro
       - {folder}/client-{identity}.json5:/etc/lunaris/zenoh.json5:ro

@@ -247,6 +247,34 @@ def test_the_console_runs_with_its_own_identity_and_requires_a_sign_in(compose: 
     assert command[command.index("--recordings") + 1].startswith(STATE_DIR)
 
 
+def _resolved(file: str, home: Path, **env: str) -> dict[str, Any]:
+    """``file`` as docker-compose resolves it with only ``env`` set."""
+    result = subprocess.run([DOCKER_COMPOSE or "docker-compose", "-f", file, "config"], cwd=REPO,
+                            capture_output=True, text=True, timeout=60,
+                            env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "HOME": str(home),
+                                 **env})
+    assert result.returncode == 0, result.stderr
+    return yaml.safe_load(result.stdout)
+
+
+@pytest.mark.parametrize(("file", "console", "default"), [
+    ("docker-compose.yml", "console", ""),
+    ("docker-compose.site.yml", "ground-console", "ground.lunaris.example")])
+def test_the_console_is_given_the_names_it_is_reached_by(tmp_path: Path, file: str, console: str,
+                                                         default: str) -> None:
+    """A console in a container refuses a Host it does not know (421): LUNARIS_ALLOW_HOST reaches
+    it from both compose files (the site's: its machine's names by default), as the console
+    reads it (tests/console/test_startup.py)."""
+    if DOCKER_COMPOSE is None:
+        pytest.skip("docker-compose is not installed (apt-get install docker-compose)")
+    env = _resolved(file, tmp_path)["services"][console]["environment"]
+    assert env["LUNARIS_ALLOW_HOST"] == default
+    assert env["LUNARIS_ZENOH_CONFIG"] == "/etc/lunaris/zenoh.json5"
+    given = _resolved(file, tmp_path, LUNARIS_ALLOW_HOST="rover-base.example,10.0.0.5")
+    assert given["services"][console]["environment"]["LUNARIS_ALLOW_HOST"] == \
+        "rover-base.example,10.0.0.5"
+
+
 # -- the three-machine case: docker-compose.site.yml, the site of deploy/site.yaml ------------
 
 
