@@ -12,7 +12,9 @@ certificate the CA did not sign makes a router.
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
 import textwrap
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,7 +25,7 @@ import zenoh
 from common import keys
 from lunaris.deploy_secrets import make_ca, make_certificate
 from lunaris.deploy_site import SiteError, load_site
-from lunaris.processes import wait_for
+from lunaris.processes import lunaris_cmd, wait_for
 from testbed.deployment import (
     REPO,
     Processes,
@@ -148,6 +150,35 @@ def test_nothing_is_left_behind_unnoticed(tmp_path: Path) -> None:
         assert words in out.stderr, out.stderr
     acl = run_lunaris("deploy", "acl", "--site", str(SITE), "--output", str(folder), "--check")
     assert acl.returncode == 1 and "crew/zenohd.json5 is stale" in acl.stderr
+
+
+def _lunaris_in(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "LUNARIS_ZENOH_CONFIG"}
+    return subprocess.run(lunaris_cmd(*args), cwd=cwd, capture_output=True, text=True, timeout=120,
+                          env=env)
+
+
+def test_any_spelling_of_the_site_files_path_checks_the_same(tmp_path: Path) -> None:
+    """The routers' configurations named the site file as it was typed: a site made as
+    deploy/site.yaml and checked as ./deploy/site.yaml or by its absolute path refused every
+    router (issue 33.4). A site of one's own (outside the repository) and the shipped one."""
+    own = tmp_path / "own"
+    (own / "deploy").mkdir(parents=True)
+    (own / "deploy" / "site.yaml").write_text(SITE.read_text().replace("config/rovers/mapp.yaml", str(MAPP)))
+    made = _lunaris_in(own, "deploy", "secrets", "s", "--site", "deploy/site.yaml")
+    assert made.returncode == 0, made.stderr
+    for spelling in ("./deploy/site.yaml", str(own / "deploy" / "site.yaml"), "deploy/../deploy/site.yaml"):
+        out = _lunaris_in(own, "deploy", "check", "s", "--site", spelling)
+        assert out.returncode == 0, (spelling, out.stderr)
+        out = _lunaris_in(own, "deploy", "check", "s/crew", "--site", spelling, "--router", "crew")
+        assert out.returncode == 0, (spelling, out.stderr)
+    # the shipped site, in the repository: made by its absolute path, checked as typed in it
+    folder = tmp_path / "shipped"
+    assert _lunaris_in(tmp_path, "deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
+    for spelling in ("deploy/site.yaml", "./deploy/site.yaml"):
+        out = _lunaris_in(REPO, "deploy", "check", str(folder), "--site", spelling)
+        assert out.returncode == 0, (spelling, out.stderr)
+    assert "of the Lunaris site deploy/site.yaml." in (folder / "ground" / "zenohd.json5").read_text()
 
 
 # -- three routers on loopback, linked -------------------------------------------------------
