@@ -49,8 +49,8 @@ from lunaris.deploy_secrets import (
 from lunaris.deploy_site import SERVICES, RouterSpec, Site
 from services.bridge import DEFAULT_MAPPING, MappingFile, RoverNames, load_mapping
 
-__all__ = ["check_router_folder", "check_site_secrets", "make_site_secrets", "site_fleet",
-           "site_problems", "write_router_configs"]
+__all__ = ["check_router_folder", "check_site_secrets", "make_site_secrets", "router_folder_files",
+           "site_fleet", "site_problems", "write_router_configs"]
 
 _LOCAL_HOSTS = ["localhost", "127.0.0.1"]  # on every router's certificate: its own machine
 
@@ -213,6 +213,55 @@ def _certificate_problems(tls: Path, identity: str) -> list[str]:
     return []
 
 
+def router_folder_files(site: Site, spec: RouterSpec) -> set[str]:
+    """What the folder of router ``spec``'s machine holds (paths in it), and nothing more."""
+    files = {"credentials.txt", "zenohd.json5", "tls/ca.crt", "tls/router.crt", "tls/router.key"}
+    files |= {f"client-{identity}.json5" for identity in spec.clients}
+    if "console" in spec.runs:
+        files.add("console-accounts.json")
+    if "dashboard" in spec.clients:
+        _, fleet = site_fleet(site)
+        files |= {f"zenoh-bridge-ros2dds-{r.id}.json5" for r in fleet} | {"rmw-zenoh-dashboard.json5"}
+    return files
+
+
+def _unneeded(rfolder: Path, site: Site, spec: RouterSpec) -> list[str]:
+    """Each file or folder of a machine's folder that its machine does not need, and why it must
+    go: the CA's key above all (with it anyone makes a router of the site), another machine's
+    or identity's secrets (whoever reads this machine would have them)."""
+    needed = router_folder_files(site, spec)
+    folders = {str(Path(f).parent) for f in needed} - {"."}
+    identities = {i for r in site.routers for i in r.clients}
+    out = []
+    for path in sorted(rfolder.rglob("*")):
+        rel = path.relative_to(rfolder).as_posix()
+        if rel in needed or (path.is_dir() and rel in folders):
+            continue
+        if path.is_dir():
+            if not any(p.is_file() for p in path.rglob("*")):
+                out.append(f"{rel}/: not something this machine needs: remove it")
+            continue
+        text = path.read_bytes()[:100_000] if path.is_file() else b""
+        client = rel.removeprefix("client-").removesuffix(".json5") if rel.startswith("client-") else None
+        if path.name == "ca.key":
+            out.append(f"{rel}: the site's CA's private key: with it anyone makes a router the "
+                       "site trusts; no machine needs it, it stays with whoever makes the secrets "
+                       "(DIR/ca/): remove it from this machine")
+        elif b"PRIVATE KEY" in text:
+            out.append(f"{rel}: a private key this machine does not need (its own is "
+                       "tls/router.key): remove it")
+        elif client is not None and "/" not in rel:
+            where = [r.name for r in site.routers if client in r.clients]
+            out.append(f"{rel}: the identity {client} does not connect to the router {spec.name}"
+                       + (f" (it connects to {', '.join(where)})" if where else
+                          "" if client in identities else " (no machine of the site has it)")
+                       + ": whoever reads this machine would have its password: remove it")
+        else:
+            out.append(f"{rel}: not something the machine of {spec.name} needs (its folder "
+                       f"holds what it needs and nothing more): remove it")
+    return out
+
+
 def check_router_folder(rfolder: Path, site: Site, name: str) -> list[str]:
     """What one machine's folder holds that cannot be trusted (what its ``preflight``
     checks): files missing or open to others, its dictionary (weak passwords, identities it
@@ -222,7 +271,7 @@ def check_router_folder(rfolder: Path, site: Site, name: str) -> list[str]:
     if not (rfolder / "credentials.txt").is_file():
         return [f"{rfolder}/credentials.txt: missing (make the secrets with `lunaris deploy "
                 f"secrets DIR --site {site.source}`, then copy DIR/{name} to this machine)"]
-    problems = open_to_others(rfolder)
+    problems = open_to_others(rfolder) + _unneeded(rfolder, site, spec)
     expected = _dictionary(site, spec)
     dictionary = read_credentials(rfolder / "credentials.txt")
     problems += credentials_problems(rfolder / "credentials.txt", expected)

@@ -152,6 +152,35 @@ def test_nothing_is_left_behind_unnoticed(tmp_path: Path) -> None:
     assert acl.returncode == 1 and "crew/zenohd.json5 is stale" in acl.stderr
 
 
+def test_a_machines_folder_holds_what_it_needs_and_nothing_more(tmp_path: Path) -> None:
+    """The CA's key in the ground's folder, the instructor's client file on the crew's host,
+    another router's key: each refused by the site's check and by the machine's own preflight,
+    named with why (issue 33.5)."""
+    folder = tmp_path / "s"
+    assert run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
+    shutil.copy(folder / "ca" / "ca.key", folder / "ground" / "tls" / "ca.key")
+    shutil.copy(folder / "ground" / "client-instructor.json5", folder / "crew")
+    shutil.copy(folder / "mapp-1" / "tls" / "router.key", folder / "crew" / "mapp-1.key")
+    out = run_lunaris("deploy", "check", str(folder), "--site", str(SITE))
+    assert out.returncode == 1
+    for words in ("ground/tls/ca.key: the site's CA's private key: with it anyone makes a router",
+                  "crew/client-instructor.json5: the identity instructor does not connect to the "
+                  "router crew (it connects to ground): whoever reads this machine would have its "
+                  "password",
+                  "crew/mapp-1.key: a private key this machine does not need"):
+        assert words in out.stderr, out.stderr
+    assert "mapp-1/" not in out.stderr.replace("crew/mapp-1.key", "")  # its folder is as made
+    for router, words in (("ground", "tls/ca.key: the site's CA's private key"),
+                          ("crew", "client-instructor.json5: the identity instructor does not")):
+        alone = run_lunaris("deploy", "check", str(folder / router), "--site", str(SITE),
+                            "--router", router)
+        assert alone.returncode == 1 and words in alone.stderr, alone.stderr
+    for extra in ("ground/tls/ca.key", "crew/client-instructor.json5", "crew/mapp-1.key"):
+        (folder / extra).unlink()
+    out = run_lunaris("deploy", "check", str(folder), "--site", str(SITE))
+    assert out.returncode == 0, out.stderr
+
+
 def _lunaris_in(cwd: Path, *args: str) -> subprocess.CompletedProcess:
     env = {k: v for k, v in os.environ.items() if k != "LUNARIS_ZENOH_CONFIG"}
     return subprocess.run(lunaris_cmd(*args), cwd=cwd, capture_output=True, text=True, timeout=120,
