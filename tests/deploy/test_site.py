@@ -130,6 +130,31 @@ def test_rotating_a_router_renews_its_password_key_and_certificate_everywhere(tm
     assert "mapp-1/zenohd.json5: its password is not the site's for router-mapp-1" in out.stderr
 
 
+def test_a_rotation_says_which_folders_changed_and_what_to_restart_in_order(tmp_path: Path) -> None:
+    """--rotate listed every folder as written even when only the ground's changed (issue 33.6)."""
+    folder = tmp_path / "s"
+    assert run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
+    out = run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE), "--rotate", "instructor")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0] == "changed: ground/ (the client file of instructor, its dictionary)", out.stdout
+    assert lines[1] == "unchanged: mapp-1/, crew/ (nothing to copy there)"
+    assert lines[2:] == ["copy ground/ to its machine, then restart, in this order:",
+                         "  1. the router of ground (ground-router)",
+                         "  2. the tools of instructor on ground (they read it when they start)"]
+    # a router rotated: the ground learns its new password before the rover's router shows it
+    out = run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE), "--rotate", "router-mapp-1")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == [
+        "changed: ground/ (its dictionary); mapp-1/ (its certificate, its key, its configuration)",
+        "unchanged: crew/ (nothing to copy there)",
+        "copy ground/, mapp-1/ to their machines, then restart, in this order:",
+        "  1. the router of ground (ground-router)",
+        "  2. the router of mapp-1 (mapp-1-router)"], out.stdout
+    out = run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE))
+    assert out.stdout.strip() == "nothing changed in the machines' folders: nothing to copy or restart"
+
+
 def test_nothing_is_left_behind_unnoticed(tmp_path: Path) -> None:
     folder = tmp_path / "s"
     assert run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
