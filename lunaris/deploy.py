@@ -153,7 +153,9 @@ def _main_site(args: argparse.Namespace) -> int:
     from lunaris.deploy_routers import (
         check_router_folder,
         check_site_secrets,
+        folder_contents,
         make_site_secrets,
+        site_changes,
         write_router_configs,
     )
     from lunaris.deploy_site import load_site
@@ -183,12 +185,14 @@ def _main_site(args: argparse.Namespace) -> int:
             print(f"{out} is up to date" if current else f"wrote {out}")
             return 0
         if args.action == "secrets":
+            before = folder_contents(Path(args.dir), site)
             written = make_site_secrets(Path(args.dir), site, args.rotate, args.secrets_dir)
-            print(f"wrote {', '.join(written)} in {args.dir} (keep it private; copy each "
-                  "router's folder to its machine only)")
-            if args.rotate:
-                print("copy the rotated folders to their machines, restart their routers and the "
-                      "containers of the rotated identities")
+            if not any(before.values()):  # made now: every folder is new
+                print(f"wrote {', '.join(written)} in {args.dir} (keep it private; copy each "
+                      "router's folder to its machine only)")
+                return 0
+            for line in site_changes(site, before, folder_contents(Path(args.dir), site)):
+                print(line)
             return 0
         folder = Path(args.output or REPO / "deploy" / "secrets")
         stale = write_router_configs(folder, site, args.secrets_dir, check=args.check)

@@ -358,7 +358,7 @@ def render_router_config(mf: MappingFile, fleet: list[RoverNames] | None = None,
     header = _HEADER if site.single else _HEADER.replace(
         "// Zenoh router (zenohd, image eclipse/zenoh) of a Lunaris deployment.",
         f"// Zenoh router {spec.name} (zenohd, image eclipse/zenoh) of the Lunaris site "
-        f"{site.source}.\n// A SECRET when it opens links (its password): keep it with the "
+        f"{site.label}.\n// A SECRET when it opens links (its password): keep it with the "
         "router's other secrets.") + _LINKS
 
     body = _compact(json.dumps(router_config(mf, fleet, secrets_dir, site, spec.name,

@@ -21,7 +21,7 @@ from lunaris.deploy_routers import site_fleet
 from lunaris.deploy_site import SERVICES, RouterSpec, Site
 from services.bridge import LOCAL_MAPPING
 
-__all__ = ["COMPOSE_FILE", "render_site_compose", "write_site_compose"]
+__all__ = ["COMPOSE_FILE", "address_variable", "render_site_compose", "write_site_compose"]
 
 COMPOSE_FILE = REPO / "docker-compose.site.yml"
 APP = "/opt/lunaris"  # the image's working directory (deploy/Dockerfile)
@@ -42,8 +42,13 @@ _HEAD = """\
 # and, where another router opens a link to them, the routers' port on LUNARIS_BIND
 # (default: every address of the machine: the other machines must reach them). Inside a
 # machine, its services reach its router by the machine's name (a network alias), the name
-# on the router's certificate. deploy/README.md §9 has the whole guide; docker-compose.yml
-# is the one-machine case.
+# on the router's certificate. A router reaches the others by their first names in the site:
+# these must resolve inside its container, by DNS (a container does not read its machine's
+# /etc/hosts), or the site gives a machine's address beside its name (hosts: [NAME, ADDRESS])
+# and the routers' extra_hosts pin it (LUNARIS_ADDRESS_<ROUTER> changes it). The console
+# publishes its page on LUNARIS_CONSOLE_BIND (default 127.0.0.1) and answers to its machine's
+# names in the site, or to those of LUNARIS_ALLOW_HOST (comma-separated). deploy/README.md §9
+# has the whole guide; docker-compose.yml is the one-machine case.
 
 x-lunaris: &lunaris
   image: lunaris:${{LUNARIS_TAG:-latest}}
@@ -84,6 +89,35 @@ def _names(hosts: tuple[str, ...]) -> list[str]:
         except ValueError:
             out.append(h)
     return out
+
+
+def _address(hosts: tuple[str, ...]) -> str | None:
+    """The first address among a machine's hosts (None: names only)."""
+    for h in hosts:
+        try:
+            return str(ipaddress.ip_address(h))
+        except ValueError:
+            continue
+    return None
+
+
+def address_variable(name: str) -> str:
+    """The variable that gives the address of router ``name``'s machine: LUNARIS_ADDRESS_<NAME>."""
+    return "LUNARIS_ADDRESS_" + "".join(c if c.isalnum() else "_" for c in name.upper())
+
+
+def _extra_hosts(site: Site, spec: RouterSpec) -> str:
+    """The ``extra_hosts`` of a router that opens links: the name it reaches each other router
+    by, pinned to that machine's address (a container does not read its machine's
+    /etc/hosts). Given where the site names an address beside the name (the variable
+    :func:`address_variable` may change it); otherwise the name must resolve by DNS."""
+    lines = []
+    for target in spec.connect:
+        other = site.router(target)
+        address, names = _address(other.hosts), _names(other.hosts)
+        if address is not None and names and names[0] == other.hosts[0]:
+            lines.append(f'      - "{names[0]}:${{{address_variable(target)}:-{address}}}"\n')
+    return "    extra_hosts:\n" + "".join(lines) if lines else ""
 
 
 def _what(spec: RouterSpec) -> str:
@@ -141,6 +175,7 @@ def render_site_compose(site: Site, site_path: str, secrets: str = "deploy/secre
       default:
         aliases: {_list(aliases, len("        aliases: "))}
 """)
+        out.append(_extra_hosts(site, spec))
         out.append(f"""\
     volumes:
       - {folder}:/etc/zenoh/secrets:ro
@@ -153,13 +188,16 @@ def render_site_compose(site: Site, site_path: str, secrets: str = "deploy/secre
                 command = ["run", what, *rover_args, "--state-dir", STATE]
                 if what == "bridge":
                     command += ["--bridge-config", bridge_config]
-                extra = ""
+                extra = env = ""
             else:  # the console
                 identity = "console"
                 command = ["console", "--http", "0.0.0.0:8080", "--accounts",
                            "/etc/lunaris/console-accounts.json", "--scenarios", "config/scenarios",
                            "--recordings", f"{STATE}/recordings", *rover_args]
                 extra = ("    ports:\n      - \"${LUNARIS_CONSOLE_BIND:-127.0.0.1}:8080:8080\"\n")
+                # the names a browser reaches it by: its machine's (the site's), or the variable's
+                env = (f"      LUNARIS_ALLOW_HOST: "
+                       f"\"${{LUNARIS_ALLOW_HOST:-{','.join(_names(spec.hosts))}}}\"\n")
             out.append(f"""
   {name}-{what}:
     <<: *lunaris
@@ -172,7 +210,7 @@ def render_site_compose(site: Site, site_path: str, secrets: str = "deploy/secre
         condition: service_started
     environment:
       LUNARIS_ZENOH_CONFIG: /etc/lunaris/zenoh.json5
-    command: {_list(command, len("    command: "))}
+{env}    command: {_list(command, len("    command: "))}
 {extra}    volumes:
       - ./config:{APP}/config:ro
       - {folder}/client-{identity}.json5:/etc/lunaris/zenoh.json5:ro

@@ -49,8 +49,9 @@ from lunaris.deploy_secrets import (
 from lunaris.deploy_site import SERVICES, RouterSpec, Site
 from services.bridge import DEFAULT_MAPPING, MappingFile, RoverNames, load_mapping
 
-__all__ = ["check_router_folder", "check_site_secrets", "make_site_secrets", "site_fleet",
-           "site_problems", "write_router_configs"]
+__all__ = ["check_router_folder", "check_site_secrets", "folder_contents", "make_site_secrets",
+           "router_folder_files", "site_changes", "site_fleet", "site_problems",
+           "write_router_configs"]
 
 _LOCAL_HOSTS = ["localhost", "127.0.0.1"]  # on every router's certificate: its own machine
 
@@ -153,6 +154,83 @@ def make_site_secrets(folder: Path, site: Site, rotate: list[str] | None = None,
     return written
 
 
+def folder_contents(folder: Path, site: Site) -> dict[str, dict[str, bytes]]:
+    """Every router's folder of a site's secrets, file by file (what a rerun compares)."""
+    out = {}
+    for spec in site.routers:
+        rfolder = folder / spec.name
+        out[spec.name] = {p.relative_to(rfolder).as_posix(): p.read_bytes()
+                          for p in sorted(rfolder.rglob("*")) if p.is_file()} if rfolder.is_dir() else {}
+    return out
+
+
+_ROUTER_FILES = {"credentials.txt": "its dictionary", "tls/router.crt": "its certificate",
+                 "tls/router.key": "its key", "tls/ca.crt": "the CA's certificate",
+                 "zenohd.json5": "its configuration"}
+
+
+def _what_changed(name: str) -> str:
+    if name in _ROUTER_FILES:
+        return _ROUTER_FILES[name]
+    if name.startswith("client-"):
+        return f"the client file of {name.removeprefix('client-').removesuffix('.json5')}"
+    return name
+
+
+def _containers(spec: RouterSpec, files: list[str]) -> list[str]:
+    """What takes a changed client file: the compose service of the process, or the people's
+    tools (they read it when they start)."""
+    out = []
+    for f in files:
+        if f.startswith("client-"):
+            identity = f.removeprefix("client-").removesuffix(".json5")
+            if identity.startswith("lunaris-") or identity == "console":
+                out.append(f"{spec.name}-{identity.removeprefix('lunaris-')}")
+            else:
+                out.append(f"the tools of {identity} on {spec.name} (they read it when they start)")
+        elif f.startswith("zenoh-bridge-ros2dds-"):
+            out.append(f"{spec.name}-{f.removesuffix('.json5')}")
+        elif f == "rmw-zenoh-dashboard.json5":
+            out.append(f"the dashboard on rmw_zenoh on {spec.name}")
+    return out
+
+
+def site_changes(site: Site, before: dict[str, dict[str, bytes]],
+                 after: dict[str, dict[str, bytes]]) -> list[str]:
+    """In words, after ``deploy secrets --site`` made again or rotated: which machines' folders
+    changed (and what in them), which did not, and what to restart, in order: a router whose
+    dictionary, certificate or configuration changed, those that others link to before those
+    that link to them (a rotated router's new password is known where it is shown before it is
+    shown), then the containers of the changed client files."""
+    changed = {}
+    for spec in site.routers:
+        old, new = before.get(spec.name, {}), after.get(spec.name, {})
+        files = sorted(f for f in set(old) | set(new) if old.get(f) != new.get(f))
+        if files:
+            changed[spec.name] = files
+    if not changed:
+        return ["nothing changed in the machines' folders: nothing to copy or restart"]
+    lines = ["changed: " + "; ".join(
+        f"{n}/ (" + ("made" if not before.get(n) else ", ".join(_what_changed(f) for f in fs)) + ")"
+        for n, fs in changed.items())]
+    same = [f"{r.name}/" for r in site.routers if r.name not in changed]
+    if same:
+        lines.append(f"unchanged: {', '.join(same)} (nothing to copy there)")
+    routers = [n for n, fs in changed.items() if any(f in _ROUTER_FILES for f in fs)]
+    order: list[str] = []
+    while len(order) < len(routers):
+        ready = [n for n in routers if n not in order
+                 and all(t in order or t not in routers for t in site.router(n).connect)]
+        order += ready or [n for n in routers if n not in order]  # a ring of links: site order
+    steps = [f"the router of {n} ({n}-router)" for n in order]
+    steps += [c for n, fs in changed.items() for c in _containers(site.router(n), fs)]
+    machines = "its machine" if len(changed) == 1 else "their machines"
+    lines.append(f"copy {', '.join(f'{n}/' for n in changed)} to {machines}, then restart, in "
+                 "this order:")
+    lines += [f"  {i}. {step}" for i, step in enumerate(steps, 1)]
+    return lines
+
+
 def _config_text(folder: Path, site: Site, spec: RouterSpec, secrets_dir: str | None,
                  mf: MappingFile, fleet: list[RoverNames]) -> str:
     creds = read_credentials(folder / "credentials.txt")
@@ -213,6 +291,55 @@ def _certificate_problems(tls: Path, identity: str) -> list[str]:
     return []
 
 
+def router_folder_files(site: Site, spec: RouterSpec) -> set[str]:
+    """What the folder of router ``spec``'s machine holds (paths in it), and nothing more."""
+    files = {"credentials.txt", "zenohd.json5", "tls/ca.crt", "tls/router.crt", "tls/router.key"}
+    files |= {f"client-{identity}.json5" for identity in spec.clients}
+    if "console" in spec.runs:
+        files.add("console-accounts.json")
+    if "dashboard" in spec.clients:
+        _, fleet = site_fleet(site)
+        files |= {f"zenoh-bridge-ros2dds-{r.id}.json5" for r in fleet} | {"rmw-zenoh-dashboard.json5"}
+    return files
+
+
+def _unneeded(rfolder: Path, site: Site, spec: RouterSpec) -> list[str]:
+    """Each file or folder of a machine's folder that its machine does not need, and why it must
+    go: the CA's key above all (with it anyone makes a router of the site), another machine's
+    or identity's secrets (whoever reads this machine would have them)."""
+    needed = router_folder_files(site, spec)
+    folders = {str(Path(f).parent) for f in needed} - {"."}
+    identities = {i for r in site.routers for i in r.clients}
+    out = []
+    for path in sorted(rfolder.rglob("*")):
+        rel = path.relative_to(rfolder).as_posix()
+        if rel in needed or (path.is_dir() and rel in folders):
+            continue
+        if path.is_dir():
+            if not any(p.is_file() for p in path.rglob("*")):
+                out.append(f"{rel}/: not something this machine needs: remove it")
+            continue
+        text = path.read_bytes()[:100_000] if path.is_file() else b""
+        client = rel.removeprefix("client-").removesuffix(".json5") if rel.startswith("client-") else None
+        if path.name == "ca.key":
+            out.append(f"{rel}: the site's CA's private key: with it anyone makes a router the "
+                       "site trusts; no machine needs it, it stays with whoever makes the secrets "
+                       "(DIR/ca/): remove it from this machine")
+        elif b"PRIVATE KEY" in text:
+            out.append(f"{rel}: a private key this machine does not need (its own is "
+                       "tls/router.key): remove it")
+        elif client is not None and "/" not in rel:
+            where = [r.name for r in site.routers if client in r.clients]
+            out.append(f"{rel}: the identity {client} does not connect to the router {spec.name}"
+                       + (f" (it connects to {', '.join(where)})" if where else
+                          "" if client in identities else " (no machine of the site has it)")
+                       + ": whoever reads this machine would have its password: remove it")
+        else:
+            out.append(f"{rel}: not something the machine of {spec.name} needs (its folder "
+                       f"holds what it needs and nothing more): remove it")
+    return out
+
+
 def check_router_folder(rfolder: Path, site: Site, name: str) -> list[str]:
     """What one machine's folder holds that cannot be trusted (what its ``preflight``
     checks): files missing or open to others, its dictionary (weak passwords, identities it
@@ -222,7 +349,7 @@ def check_router_folder(rfolder: Path, site: Site, name: str) -> list[str]:
     if not (rfolder / "credentials.txt").is_file():
         return [f"{rfolder}/credentials.txt: missing (make the secrets with `lunaris deploy "
                 f"secrets DIR --site {site.source}`, then copy DIR/{name} to this machine)"]
-    problems = open_to_others(rfolder)
+    problems = open_to_others(rfolder) + _unneeded(rfolder, site, spec)
     expected = _dictionary(site, spec)
     dictionary = read_credentials(rfolder / "credentials.txt")
     problems += credentials_problems(rfolder / "credentials.txt", expected)

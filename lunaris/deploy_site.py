@@ -23,7 +23,9 @@ import msgspec
 from common.datafile import ConfigError, Name, Strict, doc, parse_yaml, read_text
 
 __all__ = ["CLIENT_PORT", "DEFAULT_SITE", "IDENTITIES", "PEOPLE", "ROUTER_PORT", "SERVICES",
-           "RouterSpec", "Site", "SiteError", "load_site", "router_identity"]
+           "RouterSpec", "Site", "SiteError", "load_site", "router_identity", "site_label"]
+
+REPO = Path(__file__).resolve().parent.parent  # in a container, its working directory
 
 SERVICES = ("clock", "battery", "loads", "power", "solar", "radio", "drive", "faults", "bridge")
 PEOPLE = {
@@ -104,7 +106,8 @@ class Site:
     rovers: tuple[str, ...]  # rover files, the fleet's order
     routers: tuple[RouterSpec, ...]
     bridge_config: str | None = None
-    source: str = "<default>"
+    source: str = "<default>"  # as it was given: for words to the user
+    label: str = "<default>"  # as the generated files name it (:func:`site_label`)
 
     @property
     def single(self) -> bool:
@@ -140,6 +143,18 @@ DEFAULT_SITE = Site(
     routers=(RouterSpec("router", ("router", "localhost", "127.0.0.1"), (), RUNNABLE,
                         tuple(p for p in PEOPLE if p != "console"), None),),
 )
+
+
+def site_label(path: str | Path) -> str:
+    """How the generated files name a site file, whichever way its path was typed
+    (``deploy/site.yaml``, ``./deploy/site.yaml``, its absolute path): relative to the
+    repository when it is in it (as in the image, whose working directory is the repository),
+    otherwise its name in its own folder."""
+    resolved = Path(path).resolve()
+    try:
+        return resolved.relative_to(REPO).as_posix()
+    except ValueError:
+        return resolved.name
 
 
 def load_site(path: str | Path) -> Site:
@@ -194,6 +209,7 @@ def load_site(path: str | Path) -> Site:
         raise SiteError(source, problems)
     return Site(
         rovers=tuple(f.rovers), bridge_config=f.bridge_config, source=source,
+        label=site_label(path),
         routers=tuple(RouterSpec(r.name, tuple(r.hosts), tuple(r.connect), tuple(r.runs),
                                  tuple(r.people), None if r.rovers is None else tuple(r.rovers),
                                  r.client_port or f.client_port, r.router_port or f.router_port)

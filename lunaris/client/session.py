@@ -5,6 +5,10 @@ blocks in native code where Ctrl-C cannot reach it; so the session is opened on 
 while the main thread waits, with a deadline, and stays interruptible. Before that, a tool that
 means to give up (a finite ``wait_s``) knocks on the router's TCP port: a refused connection
 means no router listens there, and the tool says so at once instead of after its deadline.
+When the deadline passes though a router listens there, the tool asks Zenoh once more, in a
+child process whose Zenoh log it reads: a router that answered the session's opening with a
+close refused its credentials (a wrong or rotated password), which is said so, rather than
+"no router answered".
 """
 
 from __future__ import annotations
@@ -13,11 +17,14 @@ import argparse
 import errno
 import json
 import os
+import re
 import socket
+import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import zenoh
 
@@ -104,6 +111,71 @@ def _all_refused(conf: zenoh.Config, timeout_s: float) -> bool:
     return True
 
 
+# Runs in a child process: opens the session of argv[1:] (connect endpoints as JSON, the
+# configuration file or "") once, failing fast, with Zenoh's transport errors in its output.
+_PROBE = """
+import json, sys
+import zenoh
+from common.connection import make_config
+zenoh.init_log_from_env_or("zenoh_transport=error")
+conf = make_config("client", connect=json.loads(sys.argv[1]) or None, config_file=sys.argv[2] or None)
+conf.insert_json5("connect/timeout_ms", "2000")
+conf.insert_json5("connect/exit_on_failure", "true")
+try:
+    zenoh.open(conf).close()
+    print("OPENED", flush=True)
+except zenoh.ZError as exc:
+    print(f"FAILED {exc}", flush=True)
+"""
+# zenoh 1.10's words when the router answers the session's opening with a close: what its
+# authentication (user and password) does to credentials it refuses
+_REFUSED = re.compile(r"Received a close message .*in response to an? (Init|Open)Syn")
+PROBE_TIMEOUT_S = 10.0
+
+
+def _someone_listens(conf: zenoh.Config) -> bool:
+    """Whether a TCP connection to one of ``conf``'s router endpoints is accepted right now."""
+    try:
+        endpoints = json.loads(conf.get_json("connect/endpoints"))
+    except (zenoh.ZError, ValueError):
+        return False
+    if isinstance(endpoints, dict):
+        endpoints = endpoints.get("client", [])
+    for host, port in (_tcp_addresses(endpoints) if isinstance(endpoints, list) else None) or []:
+        try:
+            with socket.create_connection((host, port), timeout=1.0):
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def refused_credentials(args: argparse.Namespace) -> bool:
+    """Whether the router of ``args`` answers and refuses the session's credentials: one more
+    opening, in a child process (Zenoh logs the router's close to its output, not to Python),
+    that the router closed during the handshake."""
+    root = Path(__file__).resolve().parents[2]  # the source tree: common/, lunaris/
+    env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(root), env.get("PYTHONPATH")]))
+    try:
+        connect = json.dumps(getattr(args, "connect", None) or [])
+        done = subprocess.run([sys.executable, "-c", _PROBE, connect, getattr(args, "config", None) or ""],
+                              capture_output=True, text=True, env=env, timeout=PROBE_TIMEOUT_S,
+                              stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return "OPENED" not in done.stdout and _REFUSED.search(done.stdout + done.stderr) is not None
+
+
+def _who(args: argparse.Namespace, conf: zenoh.Config) -> str:
+    try:
+        user = json.loads(conf.get_json("transport/auth/usrpwd/user"))
+    except (zenoh.ZError, ValueError):
+        user = None
+    config = getattr(args, "config", None) or os.environ.get(CONFIG_ENV)
+    return (f"user {user!r}" if user else "no user") + (f" of {config}" if config else "")
+
+
 def open_session(args: argparse.Namespace, wait_s: float | None = 10.0,
                  on_waiting: Callable[[], None] | None = None,
                  stop: threading.Event | None = None) -> zenoh.Session:
@@ -143,6 +215,11 @@ def open_session(args: argparse.Namespace, wait_s: float | None = 10.0,
             break
         thread.join(0.2 if deadline is None else max(0.0, min(0.2, deadline - time.monotonic())))
     if not box:
+        if _someone_listens(conf) and refused_credentials(args):
+            raise ToolError(f"the router at {describe_endpoint(args)} answered and refused these "
+                            f"credentials ({_who(args, conf)}): the password is wrong or was "
+                            "rotated; use the client configuration of the deployment's current "
+                            "secrets (lunaris deploy secrets DIR makes them)")
         raise ToolError(f"No Zenoh router answered at {describe_endpoint(args)} within {wait_s:g} s; "
                         f"{START_HINT}")
     if isinstance(box[0], Exception):

@@ -24,6 +24,7 @@ import os
 import sys
 import termios
 import threading
+from collections.abc import Mapping
 from pathlib import Path
 
 import zenoh
@@ -34,10 +35,12 @@ from lunaris.client import ToolError, describe_endpoint, open_session
 from lunaris.console.auth import ROLES, Accounts, AccountsError, is_loopback
 from lunaris.console.rovers import RoverFiles
 
-__all__ = ["DEFAULT_HTTP", "add_arguments", "main", "parse_http", "taken"]
+__all__ = ["ALLOW_HOST_ENV", "DEFAULT_HTTP", "add_arguments", "allowed_hosts", "main", "parse_http",
+           "taken"]
 
 DEFAULT_HTTP = "127.0.0.1:8080"
 ACCOUNTS_ENV = "LUNARIS_CONSOLE_ACCOUNTS"
+ALLOW_HOST_ENV = "LUNARIS_ALLOW_HOST"  # more names, comma-separated: a container's published name
 REPO = Path(__file__).resolve().parent.parent.parent
 
 
@@ -64,7 +67,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the page is up meanwhile and says it waits)")
     p.add_argument("--allow-host", action="append", default=[], metavar="NAME",
                    help="another name this computer is reached by (a request's Host header must "
-                        "be one of the console's names: its address, localhost, and these)")
+                        "be one of the console's names: its address, localhost, and these); "
+                        f"repeat, or list them in ${ALLOW_HOST_ENV}, separated by commas (both "
+                        "count: a container's compose file passes the variable)")
     add_connection_args(p)
     sub = p.add_subparsers(dest="action", metavar="ACTION")
     users = sub.add_parser("users", help="add, remove and list the console's users")
@@ -86,6 +91,13 @@ def parse_http(text: str) -> tuple[str, int]:
     if not sep or not port.isdigit() or not 0 < int(port) < 65536:
         raise ToolError(f"--http {text!r}: give HOST:PORT, e.g. {DEFAULT_HTTP}")
     return host.strip("[]") or "127.0.0.1", int(port)
+
+
+def allowed_hosts(given: list[str], environ: Mapping[str, str] | None = None) -> list[str]:
+    """The names given with ``--allow-host`` and those of ``$LUNARIS_ALLOW_HOST`` (comma-separated,
+    blanks around them ignored)."""
+    text = (os.environ if environ is None else environ).get(ALLOW_HOST_ENV, "")
+    return [*given, *(n.strip() for n in text.split(",") if n.strip())]
 
 
 def main(args: argparse.Namespace) -> int:
@@ -173,7 +185,8 @@ def _serve(args: argparse.Namespace) -> int:
     app = make_app(opener, accounts, tls=bool(args.tls_cert), scenarios_dir=Path(args.scenarios),
                    recordings_dir=Path(args.recordings), connection=connection,
                    traverse_dirs=[Path(d) for d in args.traverses], rover_files=rover_files,
-                   hosts=host_names(host, args.allow_host), endpoint=endpoint, give_up=give_up)
+                   hosts=host_names(host, allowed_hosts(args.allow_host)), endpoint=endpoint,
+                   give_up=give_up)
     scheme = "https" if args.tls_cert else "http"
     shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
     print(f"Lunaris console: {scheme}://{shown}:{port}/  (twin at {endpoint})", flush=True)

@@ -3,9 +3,9 @@
 Every request goes through :class:`Gate` (pure ASGI, so the live stream is not buffered):
 
 - its ``Host`` must be one of the console's own names (the address it listens on, this
-  computer's loopback names, and the names given with ``--allow-host``): a page of another
-  site whose name was made to resolve to this computer (DNS rebinding) is refused with 421,
-  in words;
+  computer's loopback names, and the names given with ``--allow-host`` or
+  ``$LUNARIS_ALLOW_HOST``): a page of another site whose name was made to resolve to this
+  computer (DNS rebinding) is refused with 421, in words;
 - a write whose ``Origin`` is another site is refused with 403;
 - every answer says what it is and nothing else (``X-Content-Type-Options: nosniff``: a
   downloaded recording or a JSON answer is never run as a page or a script) and may be
@@ -142,7 +142,8 @@ class Gate:
             shown = ", ".join(sorted(self.hosts))
             await JSONResponse({"message": f"refused: this console is not {host or 'a nameless host'!r}: "
                                            f"it answers to {shown} (give lunaris console "
-                                           "--allow-host NAME for another name of this computer)"},
+                                           "--allow-host NAME, or LUNARIS_ALLOW_HOST=NAME,..., for "
+                                           "another name of this computer)"},
                                status_code=421)(scope, receive, send)
             return
         if scope["method"] in WRITES and "origin" in headers:

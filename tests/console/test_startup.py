@@ -5,6 +5,7 @@ by ``lunaris up`` before it starts anything."""
 
 from __future__ import annotations
 
+import http.client
 import json
 import os
 import socket
@@ -32,12 +33,25 @@ from tests.harness import (
 pytestmark = pytest.mark.timeout(120)
 
 
-def _console(endpoint: str, port: int, log: Path, *extra: str) -> subprocess.Popen:
+def _console(endpoint: str, port: int, log: Path, *extra: str,
+             env: dict[str, str] | None = None) -> subprocess.Popen:
     with open(log, "ab") as out:
         return subprocess.Popen(lunaris_cmd("console", "--http", f"127.0.0.1:{port}", "--connect", endpoint,
                                             "--recordings", str(log.parent / "recordings"), *extra),
                                 stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=ROOT,
-                                env=env_without_zenoh_config())
+                                env={**env_without_zenoh_config(), **(env or {})})
+
+
+def _status_as(port: int, host: str) -> tuple[int, str]:
+    """A plain request to the console on 127.0.0.1 carrying ``Host: host`` (as a browser that
+    reached it by that name sends); its status and body."""
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+    try:
+        conn.request("GET", "/api/about", headers={"Host": host})
+        answer = conn.getresponse()
+        return answer.status, answer.read().decode(errors="replace")
+    finally:
+        conn.close()
 
 
 def _get(url: str) -> tuple[int, dict]:
@@ -116,6 +130,30 @@ def test_the_page_is_up_before_the_twin_and_says_it_waits_for_it(tmp_path):
             rover.close()
         if router is not None:
             router.close()
+
+
+def test_the_names_in_lunaris_allow_host_are_the_consoles_too(tmp_path):
+    """A console in a container is reached by the host's name (``http://<host>:8080/``); the
+    compose files cannot give it --allow-host, so LUNARIS_ALLOW_HOST names them (issue 33)."""
+    port = free_port()
+    log = tmp_path / "console.log"
+    console = _console(free_endpoint(), port, log, "--allow-host", "given.example",
+                       env={"LUNARIS_ALLOW_HOST": "ground.lunaris.example, Ground-2.example,,"})
+    try:
+        def answers() -> bool:
+            assert console.poll() is None, log.read_text()
+            try:
+                return _status_as(port, f"127.0.0.1:{port}")[0] == 200
+            except OSError:
+                return False
+        wait_for(answers, 30, lambda: f"the console (it said: {log.read_text()})", poll_s=0.2)
+        for name in ("ground.lunaris.example", "ground-2.example", "given.example"):
+            status, body = _status_as(port, f"{name}:8080")
+            assert status == 200, (name, body)
+        status, body = _status_as(port, "elsewhere.example:8080")
+        assert status == 421 and "LUNARIS_ALLOW_HOST" in body, body
+    finally:
+        stop_process(console, 10)
 
 
 def test_the_console_gives_up_after_wait_in_words(tmp_path):

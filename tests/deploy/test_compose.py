@@ -201,6 +201,20 @@ def test_the_image_installs_the_dependencies_and_runs_lunaris_from_source() -> N
     assert ["ENV", "PYTHONPATH=/opt/lunaris"] in first
 
 
+def test_every_file_the_dockerfile_names_exists() -> None:
+    """Its comments name files of the repository (deploy/client-service.json5 never existed):
+    each is there, or (deploy/secrets/) one that `lunaris deploy secrets` makes."""
+    import re
+    text = (REPO / "deploy" / "Dockerfile").read_text()
+    named = set(re.findall(r"\b(?:deploy|config)/[\w./<>-]*\w", text))
+    assert "deploy/secrets/client-<identity>.json5" in named
+    for path in named:
+        if path.startswith("deploy/secrets/"):
+            assert re.fullmatch(r"deploy/secrets/client-<identity>\.json5", path), path
+        else:
+            assert (REPO / path).exists(), f"deploy/Dockerfile names {path}, which does not exist"
+
+
 def test_the_image_layout_runs_lunaris(tmp_path: Path) -> None:
     """The image's /opt/lunaris, rebuilt from the Dockerfile's COPY lines, runs `lunaris check`
     with the source on PYTHONPATH (the dependencies are this environment's)."""
@@ -245,6 +259,34 @@ def test_the_console_runs_with_its_own_identity_and_requires_a_sign_in(compose: 
                                 [{"host_ip": "127.0.0.1", "published": "8080", "target": 8080,
                                   "protocol": "tcp", "mode": "ingress"}])
     assert command[command.index("--recordings") + 1].startswith(STATE_DIR)
+
+
+def _resolved(file: str, home: Path, **env: str) -> dict[str, Any]:
+    """``file`` as docker-compose resolves it with only ``env`` set."""
+    result = subprocess.run([DOCKER_COMPOSE or "docker-compose", "-f", file, "config"], cwd=REPO,
+                            capture_output=True, text=True, timeout=60,
+                            env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "HOME": str(home),
+                                 **env})
+    assert result.returncode == 0, result.stderr
+    return yaml.safe_load(result.stdout)
+
+
+@pytest.mark.parametrize(("file", "console", "default"), [
+    ("docker-compose.yml", "console", ""),
+    ("docker-compose.site.yml", "ground-console", "ground.lunaris.example")])
+def test_the_console_is_given_the_names_it_is_reached_by(tmp_path: Path, file: str, console: str,
+                                                         default: str) -> None:
+    """A console in a container refuses a Host it does not know (421): LUNARIS_ALLOW_HOST reaches
+    it from both compose files (the site's: its machine's names by default), as the console
+    reads it (tests/console/test_startup.py)."""
+    if DOCKER_COMPOSE is None:
+        pytest.skip("docker-compose is not installed (apt-get install docker-compose)")
+    env = _resolved(file, tmp_path)["services"][console]["environment"]
+    assert env["LUNARIS_ALLOW_HOST"] == default
+    assert env["LUNARIS_ZENOH_CONFIG"] == "/etc/lunaris/zenoh.json5"
+    given = _resolved(file, tmp_path, LUNARIS_ALLOW_HOST="rover-base.example,10.0.0.5")
+    assert given["services"][console]["environment"]["LUNARIS_ALLOW_HOST"] == \
+        "rover-base.example,10.0.0.5"
 
 
 # -- the three-machine case: docker-compose.site.yml, the site of deploy/site.yaml ------------
@@ -298,6 +340,9 @@ def test_each_machine_of_the_site_is_a_profile_with_its_router_and_its_services(
             elif command[:1] == ["console"]:
                 ran["console"] = service
         assert sorted(ran) == sorted(spec.runs), spec.name
+        if "console" in ran:  # the site's rover files: the map, the drive and the radios' forms
+            command = ran["console"]["command"]
+            assert [command[i + 1] for i, a in enumerate(command) if a == "--rover"] == list(site.rovers)
         for what, service in ran.items():
             identity = f"lunaris-{what}" if what != "console" else "console"
             config = service["environment"]["LUNARIS_ZENOH_CONFIG"]
@@ -373,6 +418,17 @@ def test_a_site_of_ones_own_gets_its_compose_file(tmp_path: Path) -> None:
                           for p in services[f"{name}-router"]["ports"]) for name in ("base", "dash")}
     assert ports == {"base": ["7447", "7448"], "dash": ["7447"]}  # dash opens the link to base
     assert services["base-router"]["networks"]["default"]["aliases"] == ["base.example.org"]
+    # dash's router reaches base by its name: pinned to the address the site gives beside it
+    # (a container does not read its machine's /etc/hosts), which a variable may change
+    assert services["dash-router"]["extra_hosts"] == ["base.example.org:10.0.0.5"]
+    assert "extra_hosts" not in services["base-router"]  # it opens no link
+    moved = subprocess.run([DOCKER_COMPOSE, "-f", str(out), "config"], cwd=tmp_path, capture_output=True,
+                           text=True, timeout=60, env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+                                                       "HOME": str(tmp_path),
+                                                       "LUNARIS_ADDRESS_BASE": "10.0.0.9"})
+    assert moved.returncode == 0, moved.stderr
+    assert yaml.safe_load(moved.stdout)["services"]["dash-router"]["extra_hosts"] == [
+        "base.example.org:10.0.0.9"]
     assert compose("--check").returncode == 0
     site.write_text(OWN_SITE.replace("runs: [bridge]", "runs: [bridge, console]").replace(
         "faults, console,", "faults,"))

@@ -102,6 +102,32 @@ def test_rotating_one_password_leaves_the_others_and_locks_out_the_old(tmp_path:
     assert lunaris("deploy", "secrets", str(folder), "--rotate", "nobody").returncode == 2
 
 
+def test_a_refused_password_is_said_as_refused_not_as_no_router(tmp_path: Path) -> None:
+    """A wrong or rotated password read "No Zenoh router answered ... start the twin with make
+    run" though the router answered and refused it (issue 33.7): said as refused, naming the
+    user; the current file connects; a stopped router is still "no router answered"."""
+    folder = tmp_path / "s"
+    make_secrets(folder, ["localhost", "127.0.0.1"], "tls/127.0.0.1:7447")
+    old = tmp_path / "old-instructor.json5"
+    shutil.copy(folder / "client-instructor.json5", old)
+    assert lunaris("deploy", "secrets", str(folder), "--rotate", "instructor").returncode == 0
+
+    def fault_list(config: Path, endpoint: str) -> subprocess.CompletedProcess:
+        return lunaris("fault", "list", "mapp-1", "--config", str(config), "--connect", endpoint,
+                       "--wait", "2", "--timeout", "0.5")
+    with running_router(folder) as router:
+        refused = fault_list(old, router.endpoint)
+        current = fault_list(folder / "client-instructor.json5", router.endpoint)
+    assert refused.returncode == 2, refused
+    assert (f"the router at {router.endpoint} answered and refused these credentials (user "
+            f"'instructor' of {old})") in refused.stderr, refused.stderr
+    assert "No Zenoh router answered" not in refused.stderr
+    assert "refused these credentials" not in current.stderr and "No Zenoh router" not in current.stderr, \
+        current.stderr
+    gone = fault_list(old, router.endpoint)  # the router stopped: nothing listens there
+    assert "No Zenoh router answered" in gone.stderr and "refused these" not in gone.stderr, gone.stderr
+
+
 def _set_password(folder: Path, user: str, password: str) -> None:
     """The router's dictionary and the user's client file agree on ``password``."""
     creds = read_credentials(folder / "credentials.txt")

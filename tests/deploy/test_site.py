@@ -12,7 +12,9 @@ certificate the CA did not sign makes a router.
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
 import textwrap
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,7 +25,7 @@ import zenoh
 from common import keys
 from lunaris.deploy_secrets import make_ca, make_certificate
 from lunaris.deploy_site import SiteError, load_site
-from lunaris.processes import wait_for
+from lunaris.processes import lunaris_cmd, wait_for
 from testbed.deployment import (
     REPO,
     Processes,
@@ -128,6 +130,31 @@ def test_rotating_a_router_renews_its_password_key_and_certificate_everywhere(tm
     assert "mapp-1/zenohd.json5: its password is not the site's for router-mapp-1" in out.stderr
 
 
+def test_a_rotation_says_which_folders_changed_and_what_to_restart_in_order(tmp_path: Path) -> None:
+    """--rotate listed every folder as written even when only the ground's changed (issue 33.6)."""
+    folder = tmp_path / "s"
+    assert run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
+    out = run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE), "--rotate", "instructor")
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0] == "changed: ground/ (the client file of instructor, its dictionary)", out.stdout
+    assert lines[1] == "unchanged: mapp-1/, crew/ (nothing to copy there)"
+    assert lines[2:] == ["copy ground/ to its machine, then restart, in this order:",
+                         "  1. the router of ground (ground-router)",
+                         "  2. the tools of instructor on ground (they read it when they start)"]
+    # a router rotated: the ground learns its new password before the rover's router shows it
+    out = run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE), "--rotate", "router-mapp-1")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.splitlines() == [
+        "changed: ground/ (its dictionary); mapp-1/ (its certificate, its key, its configuration)",
+        "unchanged: crew/ (nothing to copy there)",
+        "copy ground/, mapp-1/ to their machines, then restart, in this order:",
+        "  1. the router of ground (ground-router)",
+        "  2. the router of mapp-1 (mapp-1-router)"], out.stdout
+    out = run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE))
+    assert out.stdout.strip() == "nothing changed in the machines' folders: nothing to copy or restart"
+
+
 def test_nothing_is_left_behind_unnoticed(tmp_path: Path) -> None:
     folder = tmp_path / "s"
     assert run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
@@ -148,6 +175,64 @@ def test_nothing_is_left_behind_unnoticed(tmp_path: Path) -> None:
         assert words in out.stderr, out.stderr
     acl = run_lunaris("deploy", "acl", "--site", str(SITE), "--output", str(folder), "--check")
     assert acl.returncode == 1 and "crew/zenohd.json5 is stale" in acl.stderr
+
+
+def test_a_machines_folder_holds_what_it_needs_and_nothing_more(tmp_path: Path) -> None:
+    """The CA's key in the ground's folder, the instructor's client file on the crew's host,
+    another router's key: each refused by the site's check and by the machine's own preflight,
+    named with why (issue 33.5)."""
+    folder = tmp_path / "s"
+    assert run_lunaris("deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
+    shutil.copy(folder / "ca" / "ca.key", folder / "ground" / "tls" / "ca.key")
+    shutil.copy(folder / "ground" / "client-instructor.json5", folder / "crew")
+    shutil.copy(folder / "mapp-1" / "tls" / "router.key", folder / "crew" / "mapp-1.key")
+    out = run_lunaris("deploy", "check", str(folder), "--site", str(SITE))
+    assert out.returncode == 1
+    for words in ("ground/tls/ca.key: the site's CA's private key: with it anyone makes a router",
+                  "crew/client-instructor.json5: the identity instructor does not connect to the "
+                  "router crew (it connects to ground): whoever reads this machine would have its "
+                  "password",
+                  "crew/mapp-1.key: a private key this machine does not need"):
+        assert words in out.stderr, out.stderr
+    assert "mapp-1/" not in out.stderr.replace("crew/mapp-1.key", "")  # its folder is as made
+    for router, words in (("ground", "tls/ca.key: the site's CA's private key"),
+                          ("crew", "client-instructor.json5: the identity instructor does not")):
+        alone = run_lunaris("deploy", "check", str(folder / router), "--site", str(SITE),
+                            "--router", router)
+        assert alone.returncode == 1 and words in alone.stderr, alone.stderr
+    for extra in ("ground/tls/ca.key", "crew/client-instructor.json5", "crew/mapp-1.key"):
+        (folder / extra).unlink()
+    out = run_lunaris("deploy", "check", str(folder), "--site", str(SITE))
+    assert out.returncode == 0, out.stderr
+
+
+def _lunaris_in(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "LUNARIS_ZENOH_CONFIG"}
+    return subprocess.run(lunaris_cmd(*args), cwd=cwd, capture_output=True, text=True, timeout=120,
+                          env=env)
+
+
+def test_any_spelling_of_the_site_files_path_checks_the_same(tmp_path: Path) -> None:
+    """The routers' configurations named the site file as it was typed: a site made as
+    deploy/site.yaml and checked as ./deploy/site.yaml or by its absolute path refused every
+    router (issue 33.4). A site of one's own (outside the repository) and the shipped one."""
+    own = tmp_path / "own"
+    (own / "deploy").mkdir(parents=True)
+    (own / "deploy" / "site.yaml").write_text(SITE.read_text().replace("config/rovers/mapp.yaml", str(MAPP)))
+    made = _lunaris_in(own, "deploy", "secrets", "s", "--site", "deploy/site.yaml")
+    assert made.returncode == 0, made.stderr
+    for spelling in ("./deploy/site.yaml", str(own / "deploy" / "site.yaml"), "deploy/../deploy/site.yaml"):
+        out = _lunaris_in(own, "deploy", "check", "s", "--site", spelling)
+        assert out.returncode == 0, (spelling, out.stderr)
+        out = _lunaris_in(own, "deploy", "check", "s/crew", "--site", spelling, "--router", "crew")
+        assert out.returncode == 0, (spelling, out.stderr)
+    # the shipped site, in the repository: made by its absolute path, checked as typed in it
+    folder = tmp_path / "shipped"
+    assert _lunaris_in(tmp_path, "deploy", "secrets", str(folder), "--site", str(SITE)).returncode == 0
+    for spelling in ("deploy/site.yaml", "./deploy/site.yaml"):
+        out = _lunaris_in(REPO, "deploy", "check", str(folder), "--site", spelling)
+        assert out.returncode == 0, (spelling, out.stderr)
+    assert "of the Lunaris site deploy/site.yaml." in (folder / "ground" / "zenohd.json5").read_text()
 
 
 # -- three routers on loopback, linked -------------------------------------------------------
