@@ -131,7 +131,7 @@ class FaultBook:
             verb = "replaced" if previous else "injected"
             first.append(((rover, "warning", "fault_injected", key,
                            f"{verb} {fk.path} {json.dumps(as_dict)}", as_dict), {}))
-        self._save()
+            self._save()  # on the disk before its event answers the write (SPEC 13e)
 
     def _clear(self, rover: str, key: str, fk: FaultKey) -> None:
         active = self.injected[rover]
@@ -146,7 +146,7 @@ class FaultBook:
                 raise
             self._publish(rover)
             first.append(((rover, "info", "fault_cleared", key, f"cleared {fk.path}"), {}))
-        self._save()
+            self._save()  # on the disk before its event answers the write (SPEC 13e)
 
     def clear_all(self, rover: str) -> None:
         """Clear every injected fault of a rover (a session reset), each journalled."""

@@ -39,7 +39,7 @@ import msgspec
 
 from common import keys
 from common.messages import Event, SessionInfo
-from common.state_store import set_aside, write_atomically
+from common.state_store import fsync_folder, set_aside, write_atomically
 from services.faults.ledger import Gap, Ledger
 from services.faults.model import FloodGate, crew_commands
 from services.faults.sessions import SessionIndex
@@ -50,6 +50,12 @@ _RECENT = 4096  # identities of the latest events, to recognise a replayed cache
 HOLD_MAX = 20_000  # events held in memory while the disk refuses them (~0.4 kB each: ~8 MB)
 _ANSWERS = ("mark", "session", "scenario")  # this service's answers to writes (a rejection aside)
 _KEPT = ("session",)  # held beyond HOLD_MAX (a session's trainee must survive), up to twice it
+
+
+def _answers_a_write(ev: Event) -> bool:
+    """Whether ``ev`` is this service's answer to someone's write (a mark, a session control, a
+    scenario's mark): the writer takes it as "recorded"."""
+    return ev.source == "faults" and ev.actor not in ("", "twin") and ev.kind in _ANSWERS
 
 
 def _identity(ev: Event) -> tuple:
@@ -235,8 +241,8 @@ class Journal:
             return events
         if self.disk_error is None:
             lines = [msgspec.json.encode(ev) for ev in events]
-            try:
-                self._append(lines)
+            try:  # an answer to a write is on the disk before it is answered (SPEC 13e)
+                self._append(lines, sync=any(_answers_a_write(ev) for ev in events))
             except OSError as exc:
                 self.disk_error = _said(exc)
             else:
@@ -258,18 +264,21 @@ class Journal:
         """An answer of this service to a write (a mark, a session control), held: it says,
         to whoever wrote, that it is not recorded (SPEC 13e), and keeps saying so in the
         journal once written."""
-        if ev.source != "faults" or ev.actor in ("", "twin") or ev.kind not in _ANSWERS:
+        if not _answers_a_write(ev):
             return ev
         return msgspec.structs.replace(
             ev, message=f"not recorded: the disk is full ({self.disk_error}); {ev.message}; held "
                         "in memory, written to the journal when space returns",
             params={**(ev.params or {}), "recorded": False})
 
-    def _append(self, lines: list[bytes]) -> None:
+    def _append(self, lines: list[bytes], sync: bool = True) -> None:
         """Append whole lines to the file; on an OSError (a full disk) the file is cut back to
-        what it was, so that no torn line is left, and the error raised."""
+        what it was, so that no torn line is left, and the error raised. With ``sync`` the
+        lines are on the disk when it returns (``fsync``; the folder's entry too when the file
+        is new): a power cut loses nothing answered (tests/reliability/test_power_cut.py)."""
         assert self.path is not None
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        new = not os.path.lexists(self.path)
         fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         try:
             size = os.fstat(fd).st_size
@@ -277,11 +286,15 @@ class Journal:
             try:
                 while view:
                     view = view[os.write(fd, view):]
+                if sync or new:
+                    os.fsync(fd)
             except OSError:
                 os.ftruncate(fd, size)
                 raise
         finally:
             os.close(fd)
+        if new:
+            fsync_folder(self.path.parent)
 
     def lines(self, session: str | None = None) -> list[bytes]:
         """Every journalled event as its JSON text, oldest first; of one session only when
