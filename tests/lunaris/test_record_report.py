@@ -13,7 +13,7 @@ import pytest
 from mcap.reader import make_reader
 
 from common import keys
-from tests.harness import ROOT, env_without_zenoh_config, lunaris_cmd
+from tests.harness import ROOT, env_without_zenoh_config, lunaris_cmd, wait_for
 from tests.lunaris.conftest import R, run_tool
 
 pytestmark = pytest.mark.timeout(90)
@@ -148,3 +148,35 @@ def test_clear_errors(tmp_path, live):
     assert done.returncode == 2 and "is not a readable MCAP file" in done.stderr
     done = run_tool("report", str(existing), "-o", str(tmp_path / "out.pdf"))
     assert done.returncode == 2 and "must end in .png or .html" in done.stderr
+
+
+def test_a_recorder_killed_leaves_a_file_that_opens_with_all_but_its_last_second(live, tmp_path):
+    """SPEC 13e: a recording loses at most the last second and always opens. Its chunk is
+    closed and synced once a second: before, a recorder killed with kill -9 left only what
+    filled its 1 MB chunks (minutes of a rover), the rest lost."""
+    from lunaris.record import read_messages
+    p = live.probe
+    path = tmp_path / "killed.mcap"
+    part = path.with_name(path.name + ".part")
+    rec = _start_recorder(path, "--connect", live.endpoint, "--rover", R)
+    try:
+        clock_key = f"lunaris/{R}/clock"
+        t0 = p.wait_value(clock_key)["t_s"]
+        p.wait_value(clock_key, lambda c: c["t_s"] >= t0 + 2.0, timeout_s=30)
+
+        def clock_times() -> list[float]:
+            return [json.loads(bytes(data))["t_s"] for topic, data in read_messages(part)
+                    if topic == clock_key]
+        def flushed() -> bool:  # (an empty file, before the first flush, is no MCAP yet)
+            try:
+                return any(t >= t0 + 2.0 for t in clock_times())
+            except ValueError:
+                return False
+        # the recorder's file holds the clock of 2 s after its start, flushed as it goes
+        wait_for(flushed, 30, "the clock in the file written")
+    finally:
+        rec.kill()
+        rec.wait(20)
+    assert not path.exists() and part.exists()
+    times = clock_times()  # the file as the kill left it: it opens, whole as far as it goes
+    assert times and max(times) >= t0 + 2.0, times
