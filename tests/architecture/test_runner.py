@@ -28,8 +28,10 @@ def test_always_fails():
 def run(folder: Path, *files: tuple[str, str]) -> subprocess.CompletedProcess:
     for name, text in files:
         (folder / name).write_text(text)
-    return subprocess.run([sys.executable, str(RUNNER), "--", str(folder), "-q", "-p", "no:randomly"],
-                          capture_output=True, text=True, timeout=120)
+    # (--rootdir: without a configuration file pytest roots the node ids at the common folder
+    # of the tests and the runner's, /tmp for a clone in /tmp: the ids then named that path)
+    return subprocess.run([sys.executable, str(RUNNER), "--", str(folder), "-q", "-p", "no:randomly",
+                           "--rootdir", str(folder)], capture_output=True, text=True, timeout=120)
 
 
 def test_a_test_that_fails_once_is_run_again_passes_and_is_named_flaky(tmp_path):
@@ -53,8 +55,8 @@ def test_a_test_that_fails_again_on_its_own_fails_the_run(tmp_path):
 def test_more_failures_than_the_reruns_allowed_is_a_broken_build(tmp_path):
     (tmp_path / "test_many.py").write_text("import pytest\n@pytest.mark.parametrize('i', range(3))\n"
                                            "def test_f(i):\n    raise AssertionError(i)\n")
-    done = subprocess.run([sys.executable, str(RUNNER), "--max-reruns", "2", "--", str(tmp_path), "-q"],
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run([sys.executable, str(RUNNER), "--max-reruns", "2", "--", str(tmp_path), "-q",
+                           "--rootdir", str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 1
     assert "3 tests failed, more than 2: not a flake but a broken build" in done.stdout
     assert "running again" not in done.stdout
