@@ -20,18 +20,40 @@ from typing import NamedTuple
 import msgspec
 
 from common import keys
+from common.config import Rover
 from common.datafile import ID_PATTERN, NAME_PATTERN
 from common.faults import parse_fault_key, parse_params
 from common.messages import BARE_FIELD, BadInput, ScenarioMark, SessionStart, TimelineMark, decode_input
 from common.session import parse_control
 
-__all__ = ["DELETABLE", "FAULT_OWNERS", "STANDS_IN", "Write", "answer_of", "check_chunks", "plan_write",
-           "snapshot_name_problem", "stand_in"]
+__all__ = ["DELETABLE", "FAULT_OWNERS", "STANDS_IN", "Write", "answer_of", "check_chunks", "fault_owners",
+           "plan_write", "snapshot_name_problem", "stand_in", "unreachable_words"]
 
 DELETABLE = keys.DELETABLE  # the inputs that take a delete
-# The service that owns (and answers for) each component type of the fault catalogue.
+# The service that owns (and answers for) each component type of the fault catalogue: the
+# services' port tables (each node's ``Owns``) as the tools and the faults service read them
+# without importing the services; tests/architecture/test_owners.py holds the two to one another.
 FAULT_OWNERS = {"battery": "battery", "load": "loads", "rail": "power", "solar": "solar",
                 "umbilical": "solar", "radio": "radio"}
+
+
+def fault_owners(rover: Rover) -> set[str]:
+    """The services that own the faults of a rover's components, as its file implies them:
+    the owner (:data:`FAULT_OWNERS`) of each kind of component it has."""
+    has = {"battery": True, "load": bool(rover.loads), "rail": bool(rover.rails),
+           "solar": bool(rover.solar.panels),
+           "umbilical": rover.umbilical.power_w > 0 or rover.umbilical.connected,
+           "radio": bool(rover.radios)}
+    return {FAULT_OWNERS[component] for component, present in has.items() if present}
+
+
+def unreachable_words(rover: str, owner: str, since: str | None) -> str:
+    """Why a write cannot reach its owner, in the words the bridge's controls and the tools'
+    writer both say: its liveliness token gone (``since``: the time it went, as the user's
+    clock shows it), or never heard (None)."""
+    if since is not None:
+        return f"{rover}'s {owner} service is unreachable since {since} (no liveliness)"
+    return f"{rover}'s {owner} service is not running (no liveliness token)"
 _ACCEPTED = {"cmd": "command", "clock": "clock", "input": "input"}
 # Who answers a control, and with what event kind (the rest: a session event of the faults
 # service): the clock begins a trainee's session and a restore (it checks every part first).

@@ -38,7 +38,7 @@ from common.answers import ANSWER_S, Accepted, Answer, Awaiting, NotApplied, Pen
 from common.answers import answers as _answers  # noqa: F401 - its old name, which tests read
 from common.connection import write as put_or_delete
 from common.messages import Event
-from common.writes import Write
+from common.writes import Write, unreachable_words
 from lunaris.client.link import LINK_TIMEOUT_S, clock_time
 from lunaris.client.mirror import Mirror
 
@@ -86,13 +86,12 @@ class Writer:
         rover, owner = write.rover, write.owner
         token = self.mirror.token(rover, owner)
         if token is not None and not token.alive:
-            return (f"{rover}'s {owner} service is unreachable since {clock_time(token.since)} "
-                    "(no liveliness)")
+            return unreachable_words(rover, owner, clock_time(token.since))
         live = self.mirror.services(rover)
         if token is None and not live:
             return f"no Lunaris service of {rover} is reachable (no liveliness)"
         if token is None and not (sending and "faults" in live):
-            return f"{rover}'s {owner} service is not running (no liveliness token)"
+            return unreachable_words(rover, owner, None)
         link = self.mirror.link(rover)
         if link.state == "lost":
             return f"the link to {rover} is lost: {link.reason}"

@@ -46,7 +46,7 @@ from common.answers import ANSWER_S, Accepted, Answer, Awaiting, NotApplied, Pen
 from common.connection import write
 from common.messages import MAX_INPUT_BYTES, BadInput, Event
 from common.runtime import Runtime
-from common.writes import Write, plan_write
+from common.writes import Write, plan_write, unreachable_words
 from services.bridge.bindings import Binding, open_keyexpr, zenoh_key
 from services.bridge.mapping import service_response
 from services.bridge.outlets import Shared
@@ -182,10 +182,8 @@ class Controls:
             gone = self.gone.get((rover, owner))
         if live is None or owner in live:
             return None
-        if gone is not None:
-            since = time.strftime("%H:%M:%S", time.localtime(gone))
-            return f"{rover}'s {owner} service is unreachable since {since} (no liveliness)"
-        return f"{rover}'s {owner} service is not running (no liveliness token)"
+        return unreachable_words(rover, owner, None if gone is None else
+                                 time.strftime("%H:%M:%S", time.localtime(gone)))
 
     def expire(self) -> None:
         """Answer the calls whose answer did not come in time: not applied."""

@@ -77,10 +77,11 @@ from common.node import Every, Hears, Node, PerRover, Publishes
 from common.reasons import shown
 from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
+from common.writes import fault_owners
 from services.faults.disk import LowSpace, journal_said
 from services.faults.journal import Journal
 
-__all__ = ["NODE", "Desk", "FaultsNode", "fault_owners"]
+__all__ = ["NODE", "Desk", "FaultsNode"]
 
 GATHER_TIMEOUT_S = 2.0  # how long a `get faults` waits for the owners' answers
 LAST_MAX = 1_000_000  # ?last= of the journal query: at most this many events
@@ -93,20 +94,6 @@ SESSION_MESSAGES = {
              "injected faults cleared, the clock at 0",
     "snapshot": "snapshot {name!r} saved",
 }
-
-
-def fault_owners(rover: Rover) -> set[str]:
-    """The services that own the faults of a rover's components, as its file implies them."""
-    owners = {"battery"}
-    if rover.loads:
-        owners.add("loads")
-    if rover.rails:
-        owners.add("power")
-    if rover.solar.panels or rover.umbilical.power_w > 0 or rover.umbilical.connected:
-        owners.add("solar")
-    if rover.radios:
-        owners.add("radio")
-    return owners
 
 
 @dataclass
