@@ -23,6 +23,8 @@ The floors, from the ground up::
    package's; the package ``services/composed`` alone puts the services' models together.
 5. **No circles** among the modules of ``common``, ``services``, ``lunaris``, ``testbed``
    and ``bench``.
+6. **The client imports nothing of the console** (``lunaris.client`` is what every tool and
+   the console share; the console is one of its users).
 
 Known exceptions (:data:`KNOWN_EXCEPTIONS`): none. Issue 30 removed the last five: the
 circle ``runtime -> fault_book / session -> runtime`` (they depend on :mod:`common.host`, a
@@ -187,12 +189,22 @@ def no_circles(g: Graph) -> list[str]:
     return out
 
 
+def client_apart(g: Graph) -> list[str]:
+    """Rule 6: the tools' client (``lunaris.client``: the mirror, the writer, the runner every
+    tool shares) imports nothing of the console, which is one of its users."""
+    return [f"{i.where()}: {i.importer} imports {i.target}: lunaris.client imports nothing of "
+            "lunaris.console (the console uses the client, not the reverse)"
+            for i in g.imports if i.importer.startswith("lunaris.client")
+            and (i.target == "lunaris.console" or i.target.startswith("lunaris.console."))]
+
+
 RULES: dict[str, Callable[[Graph], list[str]]] = {
     "models are pure": pure_models,
     "each floor imports only the floors below it": floors,
     "the CLI imports of the services only their public modules": cli_public_only,
     "the services stand apart": services_apart,
     "no circles": no_circles,
+    "the client imports nothing of the console": client_apart,
 }
 
 
@@ -262,6 +274,8 @@ VIOLATIONS = {
     "no circles, nor for the types alone": (
         "common.session",
         "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from common.runtime import Runtime\n"),
+    "the client imports nothing of the console": ("lunaris.client.writer",
+                                                   "from lunaris.console.auth import User\n"),
     "the services stand apart, the battery's query too": (
         "services.battery.query", "from services.loads.model import LoadsModel\n"),
 }
