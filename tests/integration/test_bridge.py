@@ -29,8 +29,12 @@ from tests.harness import (
     ALL_SERVICES,
     ROOT,
     ROVERS,
+    Probe,
+    Twin,
     json_bridge_extra,
     lunaris_cmd,
+    open_router,
+    router_endpoint,
     stop_process,
     wait_for,
 )
@@ -179,15 +183,85 @@ def close(a: float | None, b: float, rel: float = 2e-6, abs_: float = 1e-5) -> b
     return a is not None and math.isclose(a, b, rel_tol=rel, abs_tol=abs_)
 
 
+class Site(NamedTuple):
+    """A twin and the bridge in every flavour on a router of their own, shared by the tests of
+    one crew's view (issue 30: each test started its own, 163 service processes a run)."""
+
+    probe: Probe
+    twin: Twin
+    tap: Tap
+
+
+def _site(tmp_path_factory, mapp_file: Path, view: str):
+    router = open_router()
+    try:
+        endpoint = router_endpoint(router)
+        folder = tmp_path_factory.mktemp(f"bridge-{view}")
+        with Probe(endpoint) as p:
+            tap = Tap(p.session)  # listening before the bridge starts
+            p.watch(f"lunaris/{R}/**")
+            with Twin(endpoint, [mapp_file], folder / "state", services=SERVICES, extra={
+                    "bridge": ["--bridge-config", str(every_flavour_mapping(folder, view))]}) as twin:
+                p.wait_services(R, SERVICES)
+                yield Site(p, twin, tap)
+    finally:
+        router.close()
+
+
+@pytest.fixture(scope="module")
+def symptoms_site(tmp_path_factory, static_mapp_file):
+    yield from _site(tmp_path_factory, static_mapp_file, "symptoms")
+
+
+@pytest.fixture(scope="module")
+def full_site(tmp_path_factory, static_mapp_file):
+    yield from _site(tmp_path_factory, static_mapp_file, "full")
+
+
+def fresh(site: Site) -> None:
+    """A test of a shared twin starts from the rover file: the twin reset (faults cleared,
+    rails, inputs and the pack as the file says), its clock running at x1, the probe's
+    history forgotten."""
+    p = site.probe
+    epoch = p.wait_value(keys.clock(R))["epoch"]
+    p.put(keys.control_reset(R), b"")
+    p.wait_value(keys.clock(R), lambda c: c["epoch"] > epoch, timeout_s=20)
+    p.put(keys.clock_control(R), {"paused": False, "time_scale": 1})
+    p.wait_value(keys.clock(R), lambda c: not c["paused"] and c["time_scale"] == 1)
+    p.clear_history()
+
+
 @pytest.fixture
-def dashboard(request, probe, twin_factory, mapp_file, tmp_path):
-    """The twin and the bridge in every flavour, with a tap that was listening before the
-    bridge started; the crew's view unless the test asks for ``full`` (indirect param)."""
+def dashboard(request, symptoms_site):
+    """The shared twin and bridge of the crew's view, or of the ``full`` view (indirect param),
+    fresh for this test: (twin, tap)."""
+    site = symptoms_site if getattr(request, "param", "symptoms") == "symptoms" else \
+        request.getfixturevalue("full_site")
+    fresh(site)
+    return site.twin, site.tap
+
+
+@pytest.fixture
+def probe(request):
+    """The shared twin's probe for a test of it (``dashboard``), else one on the test's own
+    router (conftest's)."""
+    if "dashboard" in request.fixturenames:
+        view = getattr(request.node, "callspec", None)
+        view = view.params.get("dashboard", "symptoms") if view is not None else "symptoms"
+        yield request.getfixturevalue(f"{view}_site").probe
+        return
+    with Probe(request.getfixturevalue("router")) as p:
+        yield p
+
+
+@pytest.fixture
+def own_dashboard(probe, twin_factory, mapp_file, tmp_path):
+    """A twin and bridge of this test's own, with a tap listening before the bridge started
+    (a test of the bridge's first samples)."""
     tap = Tap(probe.session)
     probe.watch(f"lunaris/{R}/**")
-    view = getattr(request, "param", "symptoms")
     twin = twin_factory([mapp_file], services=SERVICES, extra={
-        "bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path, view))]})
+        "bridge": ["--bridge-config", str(every_flavour_mapping(tmp_path, "symptoms"))]})
     probe.wait_services(R, SERVICES)
     return twin, tap
 
@@ -299,8 +373,8 @@ def test_every_default_topic_carries_the_twin_values(dashboard, probe, flavour):
         assert raw.payload[:4] == b"\x00\x01\x00\x00" and raw.encoding.startswith("application/cdr")
 
 
-def test_rmw_zenoh_keys_attachments_and_liveliness(dashboard, probe):
-    twin, tap = dashboard
+def test_rmw_zenoh_keys_attachments_and_liveliness(own_dashboard, probe):
+    twin, tap = own_dashboard  # its own: every publisher's sequence from 1
     settle(lambda: [t for t in TOPICS if tap.rmw_key(t) is None], what="every rmw_zenoh topic")
     bool_key = f"0/final_comms_radio_bool/std_msgs::msg::dds_::Bool_/{BOOL_HASH}"
     assert bool_key in tap.keys()
@@ -702,7 +776,8 @@ def test_a_bad_mapping_stops_the_bridge_naming_every_problem(router, tmp_path):
         assert want in proc.stderr, proc.stderr
 
 
-def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, router, tmp_path):
+def test_lunaris_pdm_prints_the_distribution_in_mv_ma_mw(dashboard, probe, tmp_path):
+    router = dashboard[0].endpoint
     pause(probe)
     settle(lambda: [] if all(probe.value(keys.rail_state(R, r)) for r in RAILS) else ["rails"])
     proc = subprocess.run(lunaris_cmd("pdm", "--once", "--rover", R, "--connect", router),
