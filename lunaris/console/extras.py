@@ -42,6 +42,10 @@ from lunaris.console.auth import User
 __all__ = ["Extras", "routes"]
 
 # a recording's name: a plain name, never '..' nor a hidden file ('.x'): it begins with a letter or a digit
+# The debrief page runs nothing and loads nothing but its own inline style and plots (data:);
+# framed by the console's own Recordings view only.
+REPORT_POLICY = ("default-src 'none'; img-src data:; style-src 'unsafe-inline'; base-uri 'none'; "
+                 "form-action 'none'; frame-ancestors 'self'")
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,79}$")
 NAME_WORDS = "letters, digits, '.', '_' and '-', beginning with a letter or a digit"
 LINES = 400
@@ -379,7 +383,7 @@ async def _report(request: Request) -> Response:
                                                               request.query_params.get("session"))
     if out is None:
         return JSONResponse({"message": why}, status_code=status)
-    return FileResponse(out, media_type="text/html")
+    return FileResponse(out, media_type="text/html", headers={"Content-Security-Policy": REPORT_POLICY})
 
 
 async def _recording_sessions(request: Request) -> Response:

@@ -72,6 +72,9 @@ mimetypes.add_type("text/javascript", ".js")  # the page's ES modules (RFC 9239)
 PAGE_POLICY = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
                "img-src 'self' data:; connect-src 'self'; object-src 'none'; base-uri 'none'; "
                "form-action 'self'; frame-ancestors 'none'")
+# The sign-in page: its form posts to itself, its one style sheet is the console's own.
+LOGIN_POLICY = ("default-src 'none'; style-src 'self' 'unsafe-inline'; img-src 'self'; base-uri 'none'; "
+                "form-action 'self'; frame-ancestors 'none'")
 LIVE_PATH = "/api/live"
 PUBLIC = ("/login", "/static/app.css", "/favicon.ico", ABOUT_PATH)
 WRITES = {"PUT", "POST", "DELETE", "PATCH"}
@@ -256,7 +259,7 @@ def _safe_next(nxt: str) -> str:
 def _login_page(error: str, nxt: str, status: int, headers: dict[str, str] | None = None) -> Response:
     shown = f'<p class="error" role="alert">{html.escape(error)}</p>' if error else ""
     return HTMLResponse(_LOGIN.format(error=shown, next=html.escape(nxt)), status_code=status,
-                        headers=headers)
+                        headers={"Content-Security-Policy": LOGIN_POLICY, **(headers or {})})
 
 
 def _wait_words(seconds: float) -> str:

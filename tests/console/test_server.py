@@ -450,6 +450,9 @@ def test_a_recording_is_served_for_download_and_nothing_outside_its_folder(sessi
     app = make_app(session, Accounts(accounts), recordings_dir=folder, connection=["--connect", router])
     with client(app) as c:
         assert c.get("/recordings/drill-1.mcap", follow_redirects=False).status_code == 303  # sign in
+        login = c.get("/login")  # its own policy: no script, never framed (it had none)
+        assert "frame-ancestors 'none'" in login.headers["content-security-policy"]
+        assert "script-src" not in login.headers["content-security-policy"]
         assert c.get("/api/about").json() == {"app": "lunaris console"}  # who it is; nothing more
         assert _sign_in(c, "obi", "lander-side-observer").status_code == 303  # an observer reads
         listed = c.get("/api/recordings").json()["recordings"]
@@ -490,6 +493,10 @@ def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
         first = c.get(f"/recordings/day.mcap/report?session={S1}")
         assert first.status_code == 200 and f"Ada - session {S1} (this report)" in first.text
         assert "nav_camera" in first.text and "isolate the heater" not in first.text
+        # the debrief runs nothing and is framed by the console alone (found by an adversary:
+        # no policy at all on it)
+        policy = last.headers["content-security-policy"]
+        assert "default-src 'none'" in policy and "frame-ancestors 'self'" in policy, policy
         assert c.get("/recordings/day.mcap/report?session=../x").status_code == 422
         none = c.get("/recordings/day.mcap/report?session=20990101-000000")
         assert none.status_code == 404 and f"sessions: {S1}, {S2}" in none.json()["message"]
