@@ -84,7 +84,7 @@ def test_a_conditional_fault_warns_when_its_condition_holds_and_fires_warn_s_lat
     assert p.value(keys.battery_state(R))["soc"] < below
     assert f"battery.soc < {below} holds" in warned["message"]
     fired = p.wait_event(R, lambda e: e["key"] == key and e["kind"] == "fault_fired", timeout_s=30)
-    assert fired["t_s"] - warned["t_s"] == pytest.approx(5, abs=0.2)  # a tick of x10 is 1 s
+    assert 5 <= fired["t_s"] - warned["t_s"] <= 6.01  # at the first tick 5 s on (x10: 1 s a tick)
     fault = keys.fault(R, "radio/lander", "failure")
     p.wait_event(R, lambda e: e["key"] == fault and e["kind"] == "fault_injected")
     p.delete(fault)
@@ -94,7 +94,7 @@ def test_a_conditional_fault_warns_when_its_condition_holds_and_fires_warn_s_lat
 def test_a_fault_cancelled_during_its_warning_never_fires(armed_twin):
     p, _ = armed_twin
     key = armed_key("battery", "heating")
-    armed = arm(p, "battery", "heating", {"value": 30, "in_s": 12, "warn_s": 10})
+    armed = arm(p, "battery", "heating", {"value": 30, "in_s": 40, "warn_s": 35})
     p.wait_event(R, lambda e: e["key"] == key and e["kind"] == "fault_warned", timeout_s=30)
     since = len(p.events(R))
     p.delete(key)
@@ -130,7 +130,7 @@ def test_a_bad_arming_is_rejected_in_words(armed_twin):
 def test_armed_faults_outlive_a_restart_and_end_with_their_session(armed_twin):
     p, t = armed_twin
     key, later = armed_key("umbilical", "disconnect"), armed_key("solar/right", "disconnect")
-    armed = arm(p, "umbilical", "disconnect", {"in_s": 60, "warn_s": 5})
+    armed = arm(p, "umbilical", "disconnect", {"in_s": 80, "warn_s": 5})  # 8 s of wall time
     arm(p, "solar/right", "disconnect", {"in_s": 100000})
     stop_processes([t.procs["faults"]])
     t.start("faults")
