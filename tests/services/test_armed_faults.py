@@ -7,14 +7,19 @@ at 7 and fires at 12.
 
 from __future__ import annotations
 
+from unittest import mock
+
 import msgspec
 import pytest
 
 from common.armed import parse_arm
 from common.config import load_rover
-from common.messages import BadInput
+from common.host import Sample
+from common.messages import ArmFault, BadInput, Clock
+from common.state_store import StateStore
 from common.writes import answer_of, plan_write
 from services.faults.armed import ArmedBook, arm
+from services.faults.arming import Arms
 from testbed.twin import static_rover
 
 R = "mapp-1"
@@ -150,3 +155,101 @@ def test_the_tools_plan_an_arming_as_the_twin_checks_it() -> None:
     assert msgspec.json.decode(w.payload)["value"] == 0.6
     with pytest.raises(BadInput, match="exactly one"):
         plan_write(R, "faults/armed/battery/heating", b'{"value": 40}')
+
+
+# -- the faults service's side, on a manual clock (services.faults.arming) ----------------------
+
+
+class _Runtime:
+    """What :class:`~services.faults.arming.Arms` uses of a runtime: events kept, the state
+    store in a folder, Zenoh a mock (a fired fault's put is read from it)."""
+
+    def __init__(self, folder) -> None:
+        self.t_s = {R: 0.0}
+        self.events: list[dict] = []
+        self.store = StateStore(folder, "faults")
+        self.zenoh_session = mock.MagicMock()
+
+    def event(self, rover, severity, kind, key, message, params=None, *, actor=None, t_s=None,
+              session=None) -> None:
+        self.events.append({"kind": kind, "key": key, "message": message, "params": params,
+                            "actor": actor, "session": session, "t_s": self.t_s[rover]})
+
+    def actor(self, sample: Sample) -> str:
+        return "instructor"
+
+    def save_state(self, what: str, data, durable: bool = True) -> bool:
+        self.store.save(what, data, durable)
+        return True
+
+    def state_damaged(self, rover, message, key=None, params=None, severity="critical") -> None:
+        self.event(rover, severity, "state_damaged", key or "", message)
+
+
+def _tick(arms: Arms, rt: _Runtime, t_s: float, epoch: int = 1, session: str = "s1",
+          cause: str = "") -> None:
+    rt.t_s[R] = t_s
+    arms.on_tick(R, Clock(t_s=t_s, dt_s=0.1, seq=int(t_s * 10), time_scale=1.0, paused=False,
+                          epoch=epoch, cause=cause, session=session))
+
+
+def _put(arms: Arms, tail: str, body: dict | None) -> None:
+    key = f"lunaris/{R}/{tail}"
+    payload = b"" if body is None else msgspec.json.encode(body)
+    msg = None if body is None else msgspec.json.decode(payload, type=ArmFault)
+    arms.on_arm(R, msg, Sample(key, R, tail.split("/"), payload, body is None))
+
+
+def _service(folder) -> tuple[Arms, _Runtime]:
+    rt = _Runtime(folder)
+    arms = Arms(rt, {R: load_rover(static_rover("mapp.yaml"))})  # type: ignore[arg-type]
+    return arms, rt
+
+
+def test_the_service_arms_warns_fires_as_an_injection_and_keeps_them_on_disk(tmp_path) -> None:
+    arms, rt = _service(tmp_path)
+    with pytest.raises(BadInput, match="has not ticked yet"):
+        _put(arms, "faults/armed/battery/heating", {"value": 40, "in_s": 30})
+    _tick(arms, rt, 100.0)
+    _put(arms, "faults/armed/battery/heating", {"value": 40, "in_s": 30})
+    assert [e["kind"] for e in rt.events] == ["fault_armed"]
+    assert "armed battery heating 40 at t=130.0 s, warning 10 s before" in rt.events[0]["message"]
+    again, rt2 = _service(tmp_path)  # a restart: read back from the state folder
+    again.load()
+    _tick(again, rt2, 120.0)
+    assert [e["kind"] for e in rt2.events] == ["fault_warned"]
+    _tick(again, rt2, 130.0)
+    assert [e["kind"] for e in rt2.events] == ["fault_warned", "fault_fired"]
+    rt2.zenoh_session.put.assert_called_once()
+    key, payload = rt2.zenoh_session.put.call_args.args
+    assert (key, payload) == (f"lunaris/{R}/fault/battery/heating", b'{"heat_w":40.0}')
+    assert rt2.zenoh_session.put.call_args.kwargs["attachment"] == b"actor=instructor"
+    with pytest.raises(BadInput, match="nothing to cancel"):
+        _put(again, "faults/armed/battery/heating", None)
+
+
+@pytest.mark.parametrize(("epoch", "session", "cause", "why"), [
+    (2, "s1", "reset", "the twin was reset"),
+    (2, "s1", "restore:before-storm", "the twin was restored to snapshot 'before-storm'"),
+    (2, "s2", "reset", "its session ended (session s2 began)"),
+])
+def test_a_reset_a_restore_or_a_new_session_cancels_them_with_the_reason(
+        tmp_path, epoch: int, session: str, cause: str, why: str) -> None:
+    arms, rt = _service(tmp_path)
+    _tick(arms, rt, 10.0)
+    _put(arms, "faults/armed/umbilical/disconnect", {"in_s": 30})
+    _tick(arms, rt, 0.0, epoch=epoch, session=session, cause=cause)
+    cancelled = rt.events[-1]
+    assert cancelled["kind"] == "fault_cancelled" and cancelled["params"]["reason"] == why
+    assert (cancelled["actor"], cancelled["session"]) == ("twin", "s1")  # journalled in its own
+    _tick(arms, rt, 40.0, epoch=epoch, session=session)
+    assert rt.zenoh_session.put.call_count == 0 and arms.rovers[R].book.listed() == []
+
+
+def test_a_damaged_file_of_armed_faults_is_said_and_set_aside(tmp_path) -> None:
+    (tmp_path / "faults-armed.json").write_text('{"mapp-1": [{"key": 3}]}')
+    arms, rt = _service(tmp_path)
+    arms.load()
+    assert [e["kind"] for e in rt.events] == ["state_damaged"]
+    assert "armed faults of mapp-1 damaged" in rt.events[0]["message"]
+    assert not (tmp_path / "faults-armed.json").exists() and len(arms.rovers[R].book) == 0
