@@ -22,9 +22,10 @@ from common.faults import FaultKey, parse_fault_key, parse_params
 from common.messages import ArmFault, BadInput, decode_input
 from common.scenario import condition_problems, fault_name_problem
 
-__all__ = ["TRIGGERS", "Arming", "parse_arm"]
+__all__ = ["DEFAULT_WARN_S", "TRIGGERS", "Arming", "parse_arm"]
 
 TRIGGERS = ("at_t_s", "in_s", "when")
+DEFAULT_WARN_S = 10.0  # the warning's lead when an arming gives none (or null) [s of sim time]
 
 
 class Arming(NamedTuple):

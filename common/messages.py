@@ -428,7 +428,8 @@ class ArmFault(_Input):
     at_t_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] | None = None
     in_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] | None = None
     when: Annotated[str, msgspec.Meta(max_length=1000)] | None = None
-    warn_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e6)] = 10.0
+    # seconds of sim time between the warning and the firing; null: the default, 10
+    warn_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e6)] | None = 10.0
 
 
 class ClockControl(_Input):

@@ -21,7 +21,7 @@ from typing import Any, Literal
 
 import msgspec
 
-from common.armed import Arming
+from common.armed import DEFAULT_WARN_S, Arming
 from common.conditions import Condition, Lookup, parse_condition
 from common.messages import ArmedFault, BadInput
 
@@ -40,7 +40,7 @@ class Armed(msgspec.Struct, kw_only=True):
     at_t_s: float | None = None
     in_s: float | None = None
     when: str | None = None
-    warn_s: float = 10.0
+    warn_s: float = DEFAULT_WARN_S
     armed_t_s: float = 0.0
     due_t_s: float | None = None  # None: a condition that has not held yet
     warned_t_s: float | None = None
@@ -75,7 +75,8 @@ def arm(key: str, arming: Arming, now_t_s: float, actor: str, epoch: int, sessio
                        "(give a later time, or in_s)")
     return Armed(key=key, fault=arming.fault.path, value=req.value,
                  payload=arming.payload.decode(), at_t_s=req.at_t_s, in_s=req.in_s,
-                 when=req.when, warn_s=req.warn_s, armed_t_s=now_t_s, due_t_s=due, actor=actor,
+                 when=req.when, warn_s=DEFAULT_WARN_S if req.warn_s is None else req.warn_s,
+                 armed_t_s=now_t_s, due_t_s=due, actor=actor,
                  epoch=epoch, session=session)
 
 

@@ -253,3 +253,11 @@ def test_a_damaged_file_of_armed_faults_is_said_and_set_aside(tmp_path) -> None:
     assert [e["kind"] for e in rt.events] == ["state_damaged"]
     assert "armed faults of mapp-1 damaged" in rt.events[0]["message"]
     assert not (tmp_path / "faults-armed.json").exists() and len(arms.rovers[R].book) == 0
+
+
+def test_a_null_or_missing_warning_is_the_default_10_s() -> None:
+    for body in ({"value": 40, "in_s": 30}, {"value": 40, "in_s": 30, "warn_s": None}):
+        book = ArmedBook()
+        book.arm(_armed(body))
+        assert book.tick(119.9, _no_telemetry) == []
+        assert [w for w, _ in book.tick(120.0, _no_telemetry)] == ["warn"]
