@@ -84,7 +84,10 @@ def test_a_conditional_fault_warns_when_its_condition_holds_and_fires_warn_s_lat
     assert p.value(keys.battery_state(R))["soc"] < below
     assert f"battery.soc < {below} holds" in warned["message"]
     fired = p.wait_event(R, lambda e: e["key"] == key and e["kind"] == "fault_fired", timeout_s=30)
-    assert 5 <= fired["t_s"] - warned["t_s"] <= 6.01  # at the first tick 5 s on (x10: 1 s a tick)
+    # due warn_s after it held, fired at a tick from then (the exact tick: the unit tests; here
+    # a busy machine's clock may step more than 1 s of sim time at once)
+    assert warned["params"]["due_t_s"] == pytest.approx(warned["t_s"] + 5)
+    assert fired["t_s"] >= warned["params"]["due_t_s"]
     fault = keys.fault(R, "radio/lander", "failure")
     p.wait_event(R, lambda e: e["key"] == fault and e["kind"] == "fault_injected")
     p.delete(fault)
