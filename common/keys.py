@@ -1,5 +1,7 @@
 """Every Zenoh key expression of SPEC §5, built in one place, and the table of key families.
 
+Longer than 450 lines on purpose: every key of the twin is built in this one module.
+
 All keys live under ``lunaris/<rover>/``. Builders take a rover id (or ``"*"`` for a
 subscription across the fleet) and return a string; :func:`split` parses a received key
 back into its rover and the rest.
@@ -23,7 +25,8 @@ from common.scenario_progress import ScenarioProgress
 
 __all__ = [
     # the families, each a key builder of its own: BATTERY_STATE.key(rover)
-    "BATTERY_STATE", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL", "DRIVE_ROUTE", "DRIVE_STATE", "EVENT",
+    "ARMED_FAULT", "BATTERY_STATE", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL", "DRIVE_ROUTE", "DRIVE_STATE",
+    "EVENT",
     "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION",
     "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY",
     "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE",
@@ -56,6 +59,8 @@ __all__ = [
     "is_write",
     "faults",
     "faults_active",
+    "faults_armed",
+    "faults_armed_of",
     "faults_journal",
     "input_drive_traverse",
     "input_panel_sun_angle",
@@ -196,6 +201,17 @@ def faults_active(rover: str, service: str) -> str:
     return FAULTS_ACTIVE.key(rover, service)
 
 
+def faults_armed(rover: str) -> str:
+    """``get`` lists the rover's armed faults (the faults service's, SPEC 13b)."""
+    return f"{ROOT}/{rover}/faults/armed"
+
+
+def faults_armed_of(rover: str, component: str, kind: str) -> str:
+    """The key a fault is armed on (put) and disarmed (delete): ``component`` as for
+    :func:`fault` (``load/nav_camera``)."""
+    return f"{ROOT}/{rover}/faults/armed/{component}/{kind}"
+
+
 def faults_journal(rover: str) -> str:
     return f"{ROOT}/{rover}/faults/journal"
 
@@ -282,9 +298,10 @@ def service_claims(rover: str, name: str) -> str:
 def is_write(parts: list[str] | tuple[str, ...]) -> bool:
     """Whether a key's chunks after ``lunaris/<rover>/`` are a write to the twin: a fault, an
     input, a command, a clock or session control (what instructors, scenarios and dashboards
-    put)."""
+    put), or a fault armed (``faults/armed/...``)."""
     return bool(parts) and (parts[0] in ("fault", "input", "cmd", "control")
-                            or (parts[0] == "clock" and len(parts) > 1 and parts[1] == "control"))
+                            or (parts[0] == "clock" and len(parts) > 1 and parts[1] == "control")
+                            or (parts[0] == "faults" and len(parts) > 2 and parts[1] == "armed"))
 
 
 def has_wildcard(key: str) -> bool:
@@ -308,8 +325,9 @@ Direction = Literal["out", "in", "query"]  # published, read, or answered to a g
 
 
 class Family(NamedTuple):
-    """A family of keys: chunks after ``lunaris/<rover>/`` (``{load}`` stands for a name),
-    its payload Struct, its direction and the service that owns it."""
+    """A family of keys: chunks after ``lunaris/<rover>/`` (``{load}`` stands for a name; a
+    last chunk ``**`` for one chunk or more: ``faults/armed/**``, whose component takes one
+    or two), its payload Struct, its direction and the service that owns it."""
 
     chunks: tuple[str, ...]
     payload: type[msgspec.Struct]
@@ -339,6 +357,9 @@ class Family(NamedTuple):
         return "/".join([ROOT, rover, *(named if c.startswith("{") else c for c in self.chunks)])
 
     def matches(self, parts: list[str] | tuple[str, ...]) -> bool:
+        if self.chunks[-1] == "**":
+            head = self.chunks[:-1]
+            return len(parts) > len(head) and tuple(parts[:len(head)]) == head
         return len(parts) == len(self.chunks) and all(
             c.startswith("{") or c == p for c, p in zip(self.chunks, parts, strict=True))
 
@@ -370,6 +391,8 @@ INPUT_DRIVE_TRAVERSE = _f("input/drive/traverse", m.DriveTraverse, "drive")
 CMD_RAIL = _f("cmd/rail/{rail}", m.RailCommand, "power")
 CLOCK_CONTROL = _f("clock/control", m.ClockControl, "clock")
 PREDICTION = _f("prediction", m.Prediction, "battery", "query")
+# an instructor arms a fault (SPEC 13b): faults/armed/<component>/<kind>, a delete disarms it
+ARMED_FAULT = _f("faults/armed/**", m.ArmFault, "faults", "in")
 # put by the scenario runner (a tool)
 SCENARIO_PROGRESS = _f("scenario/progress", ScenarioProgress, "*", "out")
 
@@ -396,6 +419,7 @@ FAMILIES: tuple[Family, ...] = (
     CLOCK_CONTROL,
     PREDICTION,
     SCENARIO_PROGRESS,
+    ARMED_FAULT,
 )
 
 
@@ -433,7 +457,9 @@ def family_of_template(template: str) -> tuple[Family, str | None] | None:
         return None
     rest = parts[2:]
     for fam in FAMILIES:
-        if len(fam.chunks) != len(rest):
+        # a family of many shapes (faults/armed/**) is no template's: the crew's bridge never
+        # arms a fault
+        if len(fam.chunks) != len(rest) or fam.chunks[-1] == "**":
             continue
         item: str | None = None
         for want, got in zip(fam.chunks, rest, strict=True):

@@ -29,6 +29,8 @@ __all__ = [
     "COMMANDED_OFF",
     "ActiveFault",
     "ActiveFaults",
+    "ArmFault",
+    "ArmedFault",
     "BadInput",
     "BatteryState",
     "Clock",
@@ -311,7 +313,8 @@ class DriveRoute(_Msg):
 # written, warning when space runs low, info when it is back).
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
-                    "internal_error", "state_damaged", "journal_gap", "mark", "disk_full"]
+                    "internal_error", "state_damaged", "journal_gap", "mark", "disk_full",
+                    "fault_armed", "fault_warned", "fault_fired", "fault_cancelled"]
 
 
 class Event(_Msg):
@@ -357,6 +360,29 @@ class ActiveFaults(_Msg):
     session: str = ""  # the session of t_s: a clock that lost its state learns it back here
 
 
+class ArmedFault(_Msg):
+    """A fault armed to fire later (SPEC 13b), as ``get lunaris/<rover>/faults/armed`` lists it."""
+
+    key: Annotated[str, msgspec.Meta(description=(
+        "the armed key, lunaris/<rover>/faults/armed/<component>/<kind>"))]
+    fault: Annotated[str, msgspec.Meta(description=(
+        "the fault it fires: <component>/<kind> as after fault/ (load/nav_camera/short)"))]
+    value: Annotated[Any, msgspec.Meta(description=(
+        "the fault's parameters, as a put on fault/... takes them; null for none"))]
+    at_t_s: Annotated[float | None, msgspec.Meta(description="armed for this sim time [s]")]
+    in_s: Annotated[float | None, msgspec.Meta(description=(
+        "armed for this long after it was armed [s of sim time]"))]
+    when: Annotated[str | None, msgspec.Meta(description=(
+        "armed for a condition (the scenario language)"))]
+    warn_s: Annotated[float, msgspec.Meta(description="the warning's lead [s of sim time]")]
+    armed_t_s: Annotated[float, msgspec.Meta(description="sim time it was armed [s]")]
+    due_t_s: Annotated[float | None, msgspec.Meta(description=(
+        "sim time it fires [s]; null for a condition that has not held yet"))]
+    warned_t_s: Annotated[float | None, msgspec.Meta(description=(
+        "sim time its warning was given [s]; null before"))]
+    actor: Annotated[str, msgspec.Meta(description="who armed it: the fault is fired as theirs")]
+
+
 class SnapshotInfo(_Msg):
     """One saved snapshot of a rover, as ``get lunaris/<rover>/snapshots`` lists it."""
 
@@ -393,6 +419,19 @@ class SessionInfo(_Msg):
 
 class _Input(msgspec.Struct, forbid_unknown_fields=True):
     pass
+
+
+class ArmFault(_Input):
+    """``faults/armed/<component>/<kind>``: a fault armed for a time or a condition (SPEC 13b);
+    exactly one of ``at_t_s``, ``in_s`` and ``when`` (checked by :func:`common.armed.parse_arm`)."""
+
+    value: Annotated[Any, msgspec.Meta(description=(
+        "the fault's parameters, as a put on fault/<component>/<kind> takes them"))] = None
+    at_t_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] | None = None
+    in_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] | None = None
+    when: Annotated[str, msgspec.Meta(max_length=1000)] | None = None
+    # seconds of sim time between the warning and the firing; null: the default, 10
+    warn_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e6)] | None = 10.0
 
 
 class ClockControl(_Input):

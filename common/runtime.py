@@ -879,7 +879,8 @@ class Runtime:
     # -- events and rejection ---------------------------------------------------------------
 
     def event(self, rover: str, severity: Severity, kind: EventKind, key: str, message: str,
-              params: dict | None = None, *, actor: str | None = None, t_s: float | None = None) -> None:
+              params: dict | None = None, *, actor: str | None = None, t_s: float | None = None,
+              session: str | None = None) -> None:
         """Publish an event of a rover on this service's own key,
         ``lunaris/<rover>/event/<service>`` (the faults service journals it and relays it on
         ``lunaris/<rover>/event``). Events are never dropped under congestion (the journal is
@@ -887,11 +888,13 @@ class Runtime:
         answered a tick after it was applied); by default the rover's time now. ``actor``: by
         default the actor of the write being handled, ``twin`` for the twin's own
         (:data:`TWIN_KINDS`, or no write). ``session``: the trainee session
-        the service is in (:attr:`session_id`). ``(source_id, seq)`` names the event
+        the service is in (:attr:`session_id`), or the one given (an armed fault ended with its
+        session is journalled in it). ``(source_id, seq)`` names the event
         among the rover's. A rover this service does not serve (a rejection of a key naming
         an unknown rover) gets a plain put: no publisher, cache or token is left behind per id."""
         if self._held is not None:  # (events_after)
-            self._held.append(((rover, severity, kind, key, message, params), {"actor": actor, "t_s": t_s}))
+            self._held.append(((rover, severity, kind, key, message, params),
+                               {"actor": actor, "t_s": t_s, "session": session}))
             return
         if keys.has_wildcard(rover) or "/" in rover or not rover:  # never a key naming many
             print(f"{self.name}: no event for rover {rover!r}: {message}", file=sys.stderr, flush=True)
@@ -906,7 +909,8 @@ class Runtime:
         ev = Event(t_s=now if t_s is None or t_s > now else t_s, severity=severity, source=self.name,
                    kind=kind,
                    key=key, message=message, params=params, source_id=self._zid, seq=seq,
-                   actor=actor, session=self._session_of(rover, kind, key) if served else "")
+                   actor=actor, session=(session or self._session_of(rover, kind, key))
+                   if served else "")
         if not served:
             self.zenoh_session.put(ekey, encode(ev), encoding=zenoh.Encoding.APPLICATION_JSON,
                                    congestion_control=zenoh.CongestionControl.BLOCK,

@@ -88,7 +88,9 @@ __all__ = [
     "Scenario",
     "ScenarioError",
     "Step",
+    "condition_problems",
     "describe_start",
+    "fault_name_problem",
     "load_scenario",
     "parse_scenario",
     "rover_id_of",
@@ -337,6 +339,22 @@ def _condition_problems(text: str, path: str, rover: Rover | None, problems: lis
         if c.name is not None:
             kind = {"load": "load", "rail": "rail", "solar": "solar", "radio": "radio"}[c.source]
             _check_name(kind, c.name, rover, path, problems)
+
+
+def condition_problems(text: str, rover: Rover | None = None) -> list[str]:
+    """What is wrong with a ``when:`` condition, in words: its grammar, and the names it uses
+    against the rover's (an armed fault's condition is checked as a step's is)."""
+    problems: list[str] = []
+    _condition_problems(text, "when", rover, problems)
+    return problems
+
+
+def fault_name_problem(fk: FaultKey, rover: Rover) -> str | None:
+    """Why the component a fault key names is not the rover's, in words; None when it is."""
+    problems: list[str] = []
+    if fk.name is not None:
+        _check_name(fk.component, fk.name, rover, "component", problems)
+    return problems[0] if problems else None
 
 
 def _check_drives(rover: Rover | None, path: str, problems: list[str]) -> None:

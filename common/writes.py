@@ -20,6 +20,7 @@ from typing import NamedTuple
 import msgspec
 
 from common import keys
+from common.armed import parse_arm
 from common.config import Rover
 from common.datafile import ID_PATTERN, NAME_PATTERN
 from common.faults import parse_fault_key, parse_params
@@ -156,6 +157,9 @@ def answer_of(parts: list[str] | tuple[str, ...], delete: bool) -> tuple[str, st
         return ("fault_cleared" if delete else "fault_injected"), FAULT_OWNERS[fk.component]
     if head == "control":
         return _CONTROL_ANSWERS.get("/".join(parts[:2]), ("session", "faults"))
+    if keys.ARMED_FAULT.matches(parts):
+        parse_fault_key(list(parts[2:]))
+        return ("fault_cancelled" if delete else "fault_armed"), "faults"
     family = keys.family_of(list(parts))
     if family is None or family.direction != "in" or head not in _ACCEPTED:
         writable = ", ".join(f.name for f in keys.families("in"))
@@ -212,6 +216,11 @@ def _plan(rover: str, parts: list[str], payload: bytes | None) -> Write:
         if payload is None:
             raise BadInput("a session control is a put, not a delete")
         return Write(key, b"", accepted, owner)
+    if keys.ARMED_FAULT.matches(parts):
+        if payload is None:
+            return Write(key, None, accepted, owner)
+        arming = parse_arm(parts[2:], payload)  # the rover's names are the twin's to check
+        return Write(key, msgspec.json.encode(arming.request), accepted, owner)
     family = keys.family_of(parts)
     assert family is not None  # answer_of refused the rest
     if payload is None:

@@ -52,7 +52,8 @@ _ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "reply", "decla
 _READ_IN = ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"]
 _READ_OUT = ["put", "delete", "reply", "liveliness_token", "declare_queryable"]
 _WRITABLE = ["lunaris/*/fault/**", "lunaris/*/cmd/**", "lunaris/*/input/**",
-             "lunaris/*/clock/control", "lunaris/*/control/**"]
+             "lunaris/*/clock/control", "lunaris/*/control/**",
+             keys.ARMED_FAULT.pattern()]  # an instructor arms a fault (SPEC 13b)
 # A scenario's progress: put by the scenario runner of the instructor's tools and of the
 # console (keys.FAMILIES: scenario/progress), with an advanced publisher: its cache answers a
 # late joiner (a queryable on its '@adv' key, replies on the key itself) and its token says it
@@ -88,7 +89,7 @@ def _answered(service: str) -> list[str]:
     out = [f"lunaris/*/faults/active/{service}", f"lunaris/*/snapshots/{service}"]
     if service == "faults":
         out += ["lunaris/*/faults", "lunaris/*/faults/journal", "lunaris/*/snapshots",
-                "lunaris/*/sessions"]
+                "lunaris/*/sessions", "lunaris/*/faults/armed"]
     if service == "battery":
         out += ["lunaris/*/prediction"]
     return out
@@ -189,6 +190,8 @@ def acl(mf: MappingFile, fleet: list[RoverNames], clients: tuple[str, ...] = IDE
             crew_rules = [_rule(f"svc-bridge-crew-{op}", "allow", ["ingress"], [op], writes_)
                           for op, writes_ in (("put", crew_puts), ("delete", crew_deletes)) if writes_]
             rules += crew_rules
+        if service == "faults":  # an armed fault fired: a put on fault/..., as an instructor's
+            extra_pub = ["lunaris/*/fault/**"]
         r = f"svc-{service}"
         rules += [
             _rule(f"{r}-publish", "allow", ["ingress"], ["put", "delete"], pub + extra_pub),

@@ -1,4 +1,5 @@
-"""``lunaris fault inject|clear|list``: fault control with a readable confirmation (SPEC §6, §8).
+"""``lunaris fault inject|clear|arm|disarm|list``: fault control with a readable confirmation
+(SPEC §6, §8, 13b).
 
 ``inject ROVER COMPONENT KIND [VALUE]`` puts ``lunaris/<rover>/fault/<component>/<kind>``,
 ``clear ROVER COMPONENT KIND`` deletes it, through the client's writer
@@ -11,6 +12,14 @@ claim fewer faults.
 Exit status: 0 accepted (listed in full); 1 rejected (by the twin, or refused before sending
 because the input cannot be valid); 2 not applied (no router, unknown rover, the owner out of
 reach, nothing answered within ``--timeout``), or a list with owners missing.
+
+``arm ROVER COMPONENT KIND [VALUE] (--at T | --in S | --when COND) [--warn S]`` puts
+``lunaris/<rover>/faults/armed/<component>/<kind>``: the faults service fires the fault at sim
+time ``T``, ``S`` seconds of sim time from now, or ``--warn`` seconds after ``COND`` (the
+scenario language) first holds, with a warning ``--warn`` seconds before (default 10);
+``disarm`` cancels it. Each is answered by ``fault_armed`` / ``fault_cancelled`` or
+``rejected``. ``list`` shows the armed faults (``get lunaris/<rover>/faults/armed``) after
+the faults in effect.
 """
 
 from __future__ import annotations
@@ -80,7 +89,38 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     clear.add_argument("kind")
     clear.add_argument("--no-check", action="store_true", help="send without checking first")
 
-    ls = sub.add_parser("list", parents=[common], help="list the active faults of a rover")
+    arm = sub.add_parser("arm", parents=[common], help="arm a fault for a time or a condition",
+                         description="Arm a fault (one of those of `inject --help`) to fire at a "
+                                     "sim time, some seconds of sim time from now, or when a "
+                                     "condition holds, with a warning before it fires. The "
+                                     "faults service fires it as your injection; `disarm` "
+                                     "cancels it until then.",
+                         epilog='example: lunaris fault arm mapp-1 battery heating 40 --when '
+                                '"battery.soc < 0.5" --warn 30',
+                         formatter_class=argparse.RawDescriptionHelpFormatter)
+    arm.add_argument("rover", help="rover id, e.g. mapp-1")
+    arm.add_argument("component", help=components)
+    arm.add_argument("kind", help="fault kind")
+    arm.add_argument("value", nargs="?", default=None,
+                     help='a number for one-parameter kinds, or a JSON object ({"heat_w": 40})')
+    trigger = arm.add_mutually_exclusive_group(required=True)
+    trigger.add_argument("--at", type=float, dest="at_t_s", metavar="T",
+                         help="fire at the rover's sim time T [s]")
+    trigger.add_argument("--in", type=float, dest="in_s", metavar="S",
+                         help="fire S seconds of sim time from now")
+    trigger.add_argument("--when", metavar="COND",
+                         help='fire --warn seconds after COND first holds ("battery.soc < 0.5"; '
+                              "the scenario language)")
+    arm.add_argument("--warn", type=float, default=10.0, dest="warn_s", metavar="S",
+                     help="warn S seconds of sim time before it fires (default 10)")
+
+    disarm = sub.add_parser("disarm", parents=[common], help="cancel an armed fault")
+    disarm.add_argument("rover")
+    disarm.add_argument("component", help=components)
+    disarm.add_argument("kind")
+
+    ls = sub.add_parser("list", parents=[common],
+                        help="list the active faults of a rover, and those armed")
     ls.add_argument("rover")
     ls.add_argument("--journal", type=int, nargs="?", const=20, default=0, metavar="N",
                     help="also show the last N events of the journal (default 20)")
@@ -108,7 +148,25 @@ def parse_value(text: str | None) -> bytes:
 
 
 def main(args: argparse.Namespace) -> int:
-    return tool_main("fault", _list if args.action == "list" else _write, args)
+    run = {"list": _list, "arm": _arm, "disarm": _arm}.get(args.action, _write)
+    return tool_main("fault", run, args)
+
+
+def _arm(args: argparse.Namespace) -> int:
+    """``arm`` and ``disarm``: planned as the faults service checks them (the key, the value as
+    ``inject`` takes it, the trigger and its condition), then sent and confirmed."""
+    component = args.component.strip("/")
+    tail = f"faults/armed/{component}/{args.kind}"
+    disarm = plan(args.rover, tail, None)  # the key: a component and kind of the catalogue
+    if args.action == "disarm":
+        return confirm(args, "fault", disarm)
+    body = {"value": None if args.value is None else json.loads(parse_value(args.value)),
+            "at_t_s": args.at_t_s, "in_s": args.in_s, "when": args.when, "warn_s": args.warn_s}
+    try:
+        write = plan(args.rover, tail, json.dumps(body).encode())
+    except ToolError as exc:
+        raise ToolError(f"{component} {args.kind}: {exc}", 1) from None
+    return confirm(args, "fault", write)
 
 
 def _write(args: argparse.Namespace) -> int:
@@ -146,6 +204,7 @@ def _list(args: argparse.Namespace) -> int:
         active, missing = _get_faults(session, keys.faults(args.rover), args.timeout)
         journal, _ = (_get_faults(session, f"{keys.faults_journal(args.rover)}?last={args.journal}",
                                   args.timeout) if args.journal else ([], []))
+        armed, _ = _get_faults(session, keys.faults_armed(args.rover), args.timeout)
         link = mirror.link(args.rover)
     finally:
         mirror.close()
@@ -160,8 +219,8 @@ def _list(args: argparse.Namespace) -> int:
         missing.append(f"the link to {args.rover} is lost ({link.reason}): faults in effect behind "
                        "it may not be listed")
     if args.json:
-        print(json.dumps({"active": active, "journal": (journal or [])[-args.journal:],
-                          "missing": missing}))
+        print(json.dumps({"active": active, "armed": armed or [],
+                          "journal": (journal or [])[-args.journal:], "missing": missing}))
         return 2 if missing else 0
     prefix = keys.rover_prefix(args.rover) + "/"
     if not active and not missing:
@@ -180,6 +239,7 @@ def _list(args: argparse.Namespace) -> int:
                   f"{name:<36} {params}")
     for why in missing:
         print(f"  not listed: {why}")
+    _print_armed(args.rover, armed)
     if args.journal:
         events = (journal or [])[-args.journal:]
         print(f"last {len(events)} event(s):")
@@ -189,6 +249,28 @@ def _list(args: argparse.Namespace) -> int:
             print(f"  {e['t_s']:10.1f}  {e['severity']:<9} {e['kind']:<15} [{e['source']}{by}] "
                   f"{e['message']}")
     return 2 if missing else 0
+
+
+def _print_armed(rover: str, armed: list | None) -> None:
+    """The armed faults, one a line: what fires, when, and its warning."""
+    if armed is None:
+        print(f"{rover}: armed faults unknown (the faults service did not answer)")
+        return
+    if not armed:
+        return
+    print(f"{rover}: {len(armed)} armed fault(s)")
+    print(f"  {'armed t_s':>10}  {'fault':<36} {'fires':<34} warning")
+    for a in armed:
+        value = "" if a.get("value") is None else " " + json.dumps(a["value"])
+        if a.get("when") is not None:
+            fires = (f"at t={a['due_t_s']:.1f} s ({a['when']} held)" if a.get("due_t_s") is not None
+                     else f"when {a['when']}")
+        else:
+            fires = f"at t={a['due_t_s']:.1f} s"
+        warned = (f"given at t={a['warned_t_s']:.1f} s" if a.get("warned_t_s") is not None
+                  else f"{a['warn_s']:g} s before")
+        print(f"  {a['armed_t_s']:10.1f}  {a['fault'] + value:<36} {fires:<34} {warned}"
+              f"  (by the {a.get('actor', 'instructor')})")
 
 
 def _get_faults(session: zenoh.Session, selector: str, timeout_s: float) -> tuple[list | None, list[str]]:

@@ -27,7 +27,14 @@ from common.conditions import SOURCES
 from common.config import Rover
 from common.datafile import ID_PATTERN, struct_fields
 from common.faults import CATALOGUE, DERIVED, FAULT_CODES, NAMED_COMPONENTS, RETIRED_CODES, NoParams
-from common.messages import Prediction, PredictionRequest, SessionInfo, SessionStart, TimelineMark
+from common.messages import (
+    ArmedFault,
+    Prediction,
+    PredictionRequest,
+    SessionInfo,
+    SessionStart,
+    TimelineMark,
+)
 from common.scenario import Scenario
 from common.symptoms import SYMPTOMS, TOLERANCE
 from common.traverse import TraverseFile
@@ -175,7 +182,9 @@ def _payload_fields(cls: type[msgspec.Struct]) -> str:
 
 def keys_page() -> str:
     def example(fam: keys.Family) -> str:
-        return "/".join(c if not c.startswith("{") else f"<{c[1:-1]}>" for c in fam.chunks)
+        # (the one family of many shapes, faults/armed/**, names a fault as fault/... does)
+        return "/".join(c if not c.startswith("{") else f"<{c[1:-1]}>" for c in fam.chunks
+                        ).replace("**", "<component>/<kind>")
 
     out_rows = [(f"`{example(f)}`", f.owner if f.owner != "*" else "every service",
                  f"`{f.payload.__name__}`", _payload_fields(f.payload))
@@ -202,6 +211,18 @@ def keys_page() -> str:
                  "owners at the time of the query: a list of `ActiveFault` (`key, params, "
                  "since_t_s, origin, severity`), and an error reply naming each owner the rover "
                  "file implies that did not answer (its faults are not listed)"),
+                ("`faults/armed/<component>/<kind>`", "`put` arms a fault of "
+                 "[faults.md](faults.md) (`value`: its parameters as on `fault/...`) for a sim "
+                 "time (`at_t_s`), a time from now (`in_s`) or a condition of the scenario "
+                 "language (`when`): exactly one; it warns `warn_s` (default 10) before its "
+                 "time, or when its condition first holds and fires `warn_s` later; fired, it is "
+                 "put on `fault/<component>/<kind>` as the arming actor's injection. `delete` "
+                 "cancels it. Events: `fault_armed`, `fault_warned`, `fault_fired`, "
+                 "`fault_cancelled` (`params`: the request, `due_t_s`, `warned_t_s`, "
+                 "`armed_by`, and for a cancellation its `reason`). Kept by the faults service "
+                 "across its restarts; a reset, a restore or a new session cancels them"),
+                ("`faults/armed` (query)", "`get` lists the armed faults, in the order armed: a "
+                 "list of `ArmedFault`: " + _payload_fields(ArmedFault)),
                 ("`faults/active/<service>` (query and telemetry)", "the faults in effect on the "
                  "components one service owns, published on every change"),
                 ("`faults/journal` (query)", "the journal's events, oldest first: those of the "

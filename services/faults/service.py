@@ -1,5 +1,8 @@
 """Faults service: the session's journal, ``get lunaris/<rover>/faults``, and the gatekeeper.
 
+Longer than 450 lines: one service's journal, queries, gatekeeper and session controls; its
+armed faults are :mod:`services.faults.arming`'s.
+
 - **The journal**: every event of the rover, kept on disk for the whole training day (a flood
   of rejections is summarised, and the summary says so), in one segment per trainee session
   (SPEC §12c: each event says its ``session``), answered to
@@ -33,6 +36,8 @@
   (all or nothing, see ``common.session``).
   A scenario's progress (``control/scenario``) is journalled as ``scenario`` events.
   A trainee's session (``control/session``) is the clock's to answer, as a restore is.
+- **Armed faults** (SPEC 13b): ``faults/armed/<component>/<kind>`` arms a fault for a time or
+  a condition, ``get lunaris/<rover>/faults/armed`` lists them (:mod:`services.faults.arming`).
 - **Marks**: ``control/mark`` ``{"text"}`` is answered with a ``mark`` event (by whoever wrote
   it: its ``actor``), an instructor's note on the timeline.
 - **A full disk** (SPEC 13e) never stops the service: the journal holds its events in memory
@@ -64,6 +69,7 @@ from common.messages import (
     SESSION_ID,
     ActiveFault,
     ActiveFaults,
+    ArmFault,
     BadInput,
     Clock,
     Event,
@@ -73,11 +79,12 @@ from common.messages import (
     decode,
     decode_input,
 )
-from common.node import Every, Hears, Node, PerRover, Publishes
+from common.node import Every, Hears, Node, PerRover, Publishes, Reads
 from common.reasons import shown
 from common.runtime import EVENT_CACHE, Runtime, Sample
 from common.session import parse_control
 from common.writes import fault_owners
+from services.faults.arming import Arms
 from services.faults.disk import LowSpace, journal_said
 from services.faults.journal import Journal
 
@@ -120,6 +127,7 @@ class FaultsNode(Node[Desk]):
         *(Hears(head, "on_instructor_key", any_rover=True, writes="gate") for head in WRITABLE),
         Hears("*", "on_one_chunk", any_rover=True, telemetry=True, writes="gate"),
     )
+    reads = (Reads("faults/armed/**", ArmFault, "on_arm", kind="command"),)
     publishes = (Publishes("event", Event, reliable=True, cache=EVENT_CACHE),)
     timers = (Every(1.0, "end_floods"),)
 
@@ -142,6 +150,7 @@ class FaultsNode(Node[Desk]):
         rt.keep(rt.zenoh_session.liveliness().declare_subscriber(
             keys.service("*", "*"), self.on_token, history=True))
         rt.record_own_events(self.journal_own)
+        self.arms = Arms(rt, self.configs)
         super().attach(rt)
 
     def on_token(self, s: zenoh.Sample) -> None:
@@ -215,6 +224,10 @@ class FaultsNode(Node[Desk]):
     def on_tick(self, desk: Desk, tick: Clock) -> None:
         if desk.unopened:
             self.open_journal(desk)
+        self.arms.on_tick(desk.id, tick)
+
+    def on_arm(self, desk: Desk, msg: ArmFault | None, s: Sample) -> None:
+        self.arms.on_arm(desk.id, msg, s)
 
     def open_journal(self, desk: Desk) -> None:
         """A new journal's first line, in the session the clock's ticks say (once one has come)."""
@@ -391,6 +404,8 @@ class FaultsNode(Node[Desk]):
         rt.queryable(keys.faults_journal("*"), self.on_journal_query)
         rt.queryable(keys.snapshots("*"), self.on_snapshots_query)
         rt.queryable(keys.sessions("*"), self.on_sessions_query)
+        rt.queryable(keys.faults_armed("*"), self.arms.on_query)
+        self.arms.load()
 
 
 class Gathering:

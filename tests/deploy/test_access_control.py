@@ -40,7 +40,8 @@ from tests.deploy.conftest import (
 ROVER = "mapp-1"
 INSTRUCTOR_KEYS = [keys.fault(ROVER, "battery", "heating"), keys.cmd_rail(ROVER, "12V"),
                    keys.input_sun_angle(ROVER), keys.clock_control(ROVER),
-                   keys.control_reset(ROVER), keys.control_session(ROVER), keys.control_mark(ROVER)]
+                   keys.control_reset(ROVER), keys.control_session(ROVER), keys.control_mark(ROVER),
+                   keys.faults_armed_of(ROVER, "battery", "heating")]
 # One key of every family a service publishes, and its owner.
 OWNED = [(f.pattern(ROVER).replace("*", "x"), f.owner) for f in keys.FAMILIES
          if f.direction == "out" and f.owner != "*"]
@@ -91,6 +92,27 @@ def test_only_an_instructor_writes_faults_commands_inputs_time_and_sessions(
                  f"the {writer}'s puts")
     assert b"intruder" not in [p for _, p in _received(got)]
     assert not [k for k, _ in _received(got) if k == "SampleKind.DELETE"]
+
+
+@pytest.mark.timeout(60)
+def test_the_faults_service_fires_an_armed_fault_as_an_injection_and_lists_them(router: Router) -> None:
+    """An armed fault fired is the faults service's put on fault/... (SPEC 13b); its list of
+    armed faults is its own to answer."""
+    battery, faults = router.open("lunaris-battery"), router.open("lunaris-faults")
+    got = Collector()
+    battery.declare_subscriber(keys.fault_prefix(ROVER, "battery"), got)
+    pub = faults.declare_publisher(keys.fault(ROVER, "battery", "heating"))
+    _wait_subscribed(pub, "the faults service to see the battery's subscriber")
+    router.open("lunaris-battery").put(keys.fault(ROVER, "battery", "heating"), b"forged")
+    pub.put(b"40")
+    wait_for(lambda: [p for _, p in _received(got)] == [b"40"], "the fired fault, and no other")
+    listing = faults.declare_queryable(keys.faults_armed(ROVER), lambda q: q.reply(q.key_expr, b"[]"))
+    forged = battery.declare_queryable(keys.faults_armed(ROVER), lambda q: q.reply(q.key_expr, b"[9]"))
+    answers = [r.ok.payload.to_bytes() for r in router.open("instructor").get(
+        keys.faults_armed(ROVER), consolidation=zenoh.ConsolidationMode.NONE, timeout=3.0)
+        if r.ok is not None]
+    assert answers == [b"[]"]
+    del listing, forged
 
 
 @pytest.mark.timeout(90)

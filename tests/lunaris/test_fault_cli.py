@@ -69,6 +69,50 @@ def test_the_twin_rejecting_is_printed_and_exits_1(live):
     assert done.returncode == 1 and "rejected" in done.stdout and "heat_w" in done.stdout
 
 
+def test_arm_list_fire_and_disarm_are_confirmed_by_the_twin(live):
+    """``fault arm`` for a time: listed as armed, then warned and fired by the faults service
+    as the instructor's injection; ``fault disarm`` cancels a conditional one."""
+    p, ep = live.probe, live.endpoint
+    armed_key, fault = keys.faults_armed_of(R, "solar/left", "dust"), keys.fault(R, "solar/left", "dust")
+    since = len(p.events(R))  # (the module's earlier tests inject the same fault)
+
+    def after(kind: str, key: str) -> dict:
+        return p.wait_event(R, lambda e: e["key"] == key and e["kind"] == kind
+                            and p.events(R).index(e) >= since, timeout_s=20)
+    # 12 s of sim time (x1): the two lists below come well before it fires
+    done = run_tool("fault", "arm", R, "solar/left", "dust", "0.4", "--in", "12", "--warn", "3",
+                    "--connect", ep)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("accepted: fault_armed") and armed_key in done.stdout
+    assert "armed solar/left dust 0.4 at t=" in done.stdout and "warning 3 s before" in done.stdout
+    listed = run_tool("fault", "list", R, "--connect", ep)
+    assert listed.returncode == 0, listed.stderr
+    assert "1 armed fault(s)" in listed.stdout
+    row = next(line for line in listed.stdout.splitlines() if "solar/left/dust 0.4" in line)
+    assert "3 s before" in row and "by the instructor" in row
+    as_json = json.loads(run_tool("fault", "list", R, "--json", "--connect", ep).stdout)
+    assert [(a["key"], a["value"], a["in_s"]) for a in as_json["armed"]] == [(armed_key, 0.4, 12.0)]
+    warned, fired = after("fault_warned", armed_key), after("fault_fired", armed_key)
+    injected = after("fault_injected", fault)
+    assert warned["seq"] < fired["seq"] and fired["t_s"] <= injected["t_s"]
+    assert injected["actor"] == "instructor" and injected["params"]["fraction"] == 0.4
+    assert "armed fault" not in run_tool("fault", "list", R, "--connect", ep).stdout
+    assert run_tool("fault", "clear", R, "solar/left", "dust", "--connect", ep).returncode == 0
+
+    done = run_tool("fault", "arm", R, "battery", "heating", '{"heat_w": 40}', "--when",
+                    "battery.soc < 0.01", "--connect", ep)
+    assert done.returncode == 0 and "when battery.soc < 0.01" in done.stdout, done.stdout + done.stderr
+    done = run_tool("fault", "disarm", R, "battery", "heating", "--connect", ep)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("accepted: fault_cancelled")
+    assert "cancelled by the instructor" in done.stdout
+    done = run_tool("fault", "disarm", R, "battery", "heating", "--connect", ep)
+    assert done.returncode == 1 and "nothing to cancel" in done.stdout
+    done = run_tool("fault", "arm", R, "load/ghost", "open", "--in", "5", "--connect", ep)
+    assert done.returncode == 1 and "rejected" in done.stdout and "has no load 'ghost'" in done.stdout
+    assert run_tool("fault", "list", R, "--json", "--connect", ep).stdout.count('"armed": []') == 1
+
+
 @pytest.mark.parametrize("args, code, message", [
     (["inject", R, "battery", "heating", "hot"], 1, "VALUE must be a number or a JSON object, got 'hot'"),
     (["inject", R, "battery", "heating", "[1]"], 1, "VALUE must be a number or a JSON object"),
@@ -81,6 +125,15 @@ def test_the_twin_rejecting_is_printed_and_exits_1(live):
     (["inject", "mars-9", "battery", "heating", "3"], 2,
      "unknown rover 'mars-9': no Lunaris service serves it (live rovers: mapp-1)"),
     (["clear", "mars-9", "battery", "heating"], 2, "unknown rover 'mars-9'"),
+    (["arm", R, "battery", "heating", "40"], 2, "one of the arguments --at --in --when is required"),
+    (["arm", R, "battery", "heating", "40", "--in", "5", "--when", "battery.soc < 1"], 2,
+     "not allowed with argument"),
+    (["arm", R, "battery", "heating", "40", "--when", "battery.sox < 1"], 1,
+     "battery heating: when: unknown field 'sox' of battery"),
+    (["arm", R, "battery", "heating", "-3", "--in", "5"], 1, "value: heat_w must be at least 0"),
+    (["arm", R, "battery", "melt", "--in", "5"], 1, "unknown battery fault kind 'melt'"),
+    (["disarm", R, "wheel", "flat"], 1, "unknown component 'wheel'"),
+    (["arm", "mars-9", "battery", "heating", "3", "--in", "5"], 2, "unknown rover 'mars-9'"),
 ])
 def test_bad_input_is_refused_before_anything_is_sent(live, args, code, message):
     done = run_tool("fault", *args, "--connect", live.endpoint)

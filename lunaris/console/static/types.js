@@ -93,7 +93,7 @@
  * @property {number} t_s
  * @property {"critical" | "info" | "warning"} severity
  * @property {string} source
- * @property {"clock" | "command" | "disk_full" | "fault_cleared" | "fault_injected" | "fault_raised" | "fault_resolved" | "input" | "internal_error" | "journal_gap" | "mark" | "rejected" | "scenario" | "session" | "state_damaged"} kind
+ * @property {"clock" | "command" | "disk_full" | "fault_armed" | "fault_cancelled" | "fault_cleared" | "fault_fired" | "fault_injected" | "fault_raised" | "fault_resolved" | "fault_warned" | "input" | "internal_error" | "journal_gap" | "mark" | "rejected" | "scenario" | "session" | "state_damaged"} kind
  * @property {string} key
  * @property {string} message
  * @property {Record<string, unknown> | null} [params]
