@@ -38,7 +38,8 @@ from common import keys
 from common.response import Response, SessionResponse
 from lunaris.client.events import EventWindow, event_identity
 from lunaris.record import read_messages
-from lunaris.report_draw import draw, html_page, moved, place_labels
+from lunaris.report_draw import draw, moved, place_labels
+from lunaris.report_page import html_page
 from lunaris.report_session import Session
 
 __all__ = ["Recording", "Session", "add_arguments", "add_thresholds", "draw", "load_recording",

@@ -72,8 +72,7 @@ mimetypes.add_type("text/javascript", ".js")  # the page's ES modules (RFC 9239)
 PAGE_POLICY = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
                "img-src 'self' data:; connect-src 'self'; object-src 'none'; base-uri 'none'; "
                "form-action 'self'; frame-ancestors 'none'")
-# The sign-in page: its form posts to itself, its one style sheet is the console's own.
-LOGIN_POLICY = ("default-src 'none'; style-src 'self' 'unsafe-inline'; img-src 'self'; base-uri 'none'; "
+LOGIN_POLICY = ("default-src 'none'; style-src 'self'; base-uri 'none'; "
                 "form-action 'self'; frame-ancestors 'none'")
 LIVE_PATH = "/api/live"
 PUBLIC = ("/login", "/static/app.css", "/favicon.ico", ABOUT_PATH)
@@ -251,8 +250,7 @@ _LOGIN = """<!doctype html><html lang="en"><head><meta charset="utf-8">
 
 
 def _safe_next(nxt: str) -> str:
-    """A path of this console to go back to after signing in, never another site: browsers
-    read ``//host`` and ``/\\host`` as another host."""
+    """A path of this console to go back to after signing in, never ``//host`` nor ``/\\host``."""
     return nxt if nxt.startswith("/") and not nxt.startswith(("//", "/\\")) else "/"
 
 

@@ -10,7 +10,8 @@ import re
 import pytest
 
 from lunaris.report import load_recording
-from lunaris.report_draw import draw, drawn_counts, html_page
+from lunaris.report_draw import draw
+from lunaris.report_page import drawn_counts, html_page
 from lunaris.report_words import condition_words, event_words, key_words, params_words, plain
 from tests.lunaris.test_report_response import S2, R, Tape, two_trainees
 
