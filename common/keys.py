@@ -23,11 +23,11 @@ from common.scenario_progress import ScenarioProgress
 
 __all__ = [
     # the families, each a key builder of its own: BATTERY_STATE.key(rover)
-    "BATTERY_STATE", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL", "DRIVE_ROUTE", "DRIVE_STATE", "EVENT",
-    "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION",
-    "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY",
-    "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE",
-    "DELETABLE",
+    "BATTERY_STATE", "BRIDGE_DELIVERY", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL", "DRIVE_ROUTE",
+    "DRIVE_STATE", "EVENT", "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE",
+    "INPUT_RADIO_POSITION", "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER",
+    "POWER_SUMMARY", "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER",
+    "UMBILICAL_STATE", "DELETABLE",
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
@@ -370,6 +370,7 @@ INPUT_DRIVE_TRAVERSE = _f("input/drive/traverse", m.DriveTraverse, "drive")
 CMD_RAIL = _f("cmd/rail/{rail}", m.RailCommand, "power")
 CLOCK_CONTROL = _f("clock/control", m.ClockControl, "clock")
 PREDICTION = _f("prediction", m.Prediction, "battery", "query")
+BRIDGE_DELIVERY = _f("bridge/delivery", m.BridgeDelivery, "bridge")
 # put by the scenario runner (a tool)
 SCENARIO_PROGRESS = _f("scenario/progress", ScenarioProgress, "*", "out")
 
@@ -396,6 +397,7 @@ FAMILIES: tuple[Family, ...] = (
     CLOCK_CONTROL,
     PREDICTION,
     SCENARIO_PROGRESS,
+    BRIDGE_DELIVERY,
 )
 
 
