@@ -160,11 +160,16 @@ def _mapped_anywhere() -> set[str]:
         if not proc.name.isdigit():
             continue
         try:
-            used |= {line.split(maxsplit=5)[5] for line in (proc / "maps").read_text().splitlines()
+            used |= {line.split(maxsplit=5)[-1] for line in (proc / "maps").read_text().splitlines()
                      if "/dev/shm/" in line}
-            used |= {os.readlink(fd) for fd in (proc / "fd").iterdir()}
-        except (OSError, IndexError):
+            fds = list((proc / "fd").iterdir())
+        except OSError:  # gone, or not ours to look at
             continue
+        for fd in fds:
+            try:
+                used.add(os.readlink(fd))
+            except OSError:  # closed meanwhile
+                continue
     return used
 
 
