@@ -25,12 +25,11 @@ from common.scenario_progress import ScenarioProgress
 
 __all__ = [
     # the families, each a key builder of its own: BATTERY_STATE.key(rover)
-    "ARMED_FAULT", "BATTERY_STATE", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL", "DRIVE_ROUTE", "DRIVE_STATE",
-    "EVENT",
-    "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE", "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION",
-    "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE", "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY",
-    "PREDICTION", "RADIO_LINK", "RAIL_STATE", "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE",
-    "DELETABLE",
+    "ARMED_FAULT", "BATTERY_STATE", "BRIDGE_DELIVERY", "CLOCK", "CLOCK_CONTROL", "CMD_RAIL",
+    "DRIVE_ROUTE", "DRIVE_STATE", "EVENT", "FAULTS_ACTIVE", "INPUT_DRIVE_TRAVERSE",
+    "INPUT_PANEL_SUN_ANGLE", "INPUT_RADIO_POSITION", "INPUT_SOLAR_DUST", "INPUT_SUN_ANGLE",
+    "INPUT_UMBILICAL", "LOAD_POWER", "POWER_SUMMARY", "PREDICTION", "RADIO_LINK", "RAIL_STATE",
+    "SCENARIO_PROGRESS", "SOLAR_POWER", "UMBILICAL_STATE", "DELETABLE",
     "FAMILIES",
     "PLACEHOLDERS",
     "ROOT",
@@ -393,6 +392,7 @@ CLOCK_CONTROL = _f("clock/control", m.ClockControl, "clock")
 PREDICTION = _f("prediction", m.Prediction, "battery", "query")
 # an instructor arms a fault (SPEC 13b): faults/armed/<component>/<kind>, a delete disarms it
 ARMED_FAULT = _f("faults/armed/**", m.ArmFault, "faults", "in")
+BRIDGE_DELIVERY = _f("bridge/delivery", m.BridgeDelivery, "bridge")
 # put by the scenario runner (a tool)
 SCENARIO_PROGRESS = _f("scenario/progress", ScenarioProgress, "*", "out")
 
@@ -420,6 +420,7 @@ FAMILIES: tuple[Family, ...] = (
     PREDICTION,
     SCENARIO_PROGRESS,
     ARMED_FAULT,
+    BRIDGE_DELIVERY,
 )
 
 

@@ -33,6 +33,7 @@ __all__ = [
     "ArmedFault",
     "BadInput",
     "BatteryState",
+    "BridgeDelivery",
     "Clock",
     "ClockControl",
     "DriveRoute",
@@ -42,6 +43,7 @@ __all__ = [
     "DustInput",
     "Event",
     "EventKind",
+    "FlavourDelivery",
     "ExpectationMark",
     "Severity",
     "SessionInfo",
@@ -307,6 +309,47 @@ class DriveRoute(_Msg):
         "after the last waypoint the rover comes back through them to start"))]
 
 
+class FlavourDelivery(_Msg):
+    """What one output flavour of the bridge delivers of one rover (SPEC §13d)."""
+
+    flavour: Annotated[str, msgspec.Meta(description=(
+        "ros2dds, rmw_zenoh, json or ros2 (the rclpy node)"))]
+    readers: Annotated[int | None, msgspec.Meta(description=(
+        "ros2: the most subscriptions matched by one of the rover's topics; the Zenoh "
+        "flavours: 1 when some subscriber matches the rover's watched topic, else 0 (Zenoh "
+        "tells whether, not how many); null: nothing to watch yet"))]
+    topics: Annotated[int, msgspec.Meta(description="the rover's topics watched in this flavour")]
+    topics_read: Annotated[int, msgspec.Meta(description="of them, those with a reader")]
+    sent: Annotated[int, msgspec.Meta(description="messages sent since the bridge started")]
+    last_send_t_s: Annotated[float | None, msgspec.Meta(description=(
+        "the rover's sim time of the last message sent [s]; null: none yet"))]
+    last_send_wall_s: Annotated[float | None, msgspec.Meta(description=(
+        "wall time of the last message sent [s since 1970]; null: none yet"))]
+    errors: Annotated[int, msgspec.Meta(description="sends that failed since the bridge started")]
+    last_error: Annotated[str, msgspec.Meta(description="the last failure, in words")]
+    receiving: Annotated[bool, msgspec.Meta(description="some reader sees the rover's topics")]
+    silent_since_wall_s: Annotated[float | None, msgspec.Meta(description=(
+        "wall time the last reader went away [s since 1970], when the flavour had readers "
+        "and has none now; else null"))]
+
+
+class BridgeDelivery(_Msg):
+    """``bridge/delivery``: what the bridge delivers of a rover to the crew's dashboard, about
+    once a second (SPEC §13d): per output flavour, its readers, messages sent, the last send,
+    errors. ``receiving``: some flavour has a reader now; ``silent_since_wall_s``: when the
+    dashboard that was receiving lost its last reader (null while receiving, or before any
+    dashboard was ever seen)."""
+
+    t_s: float
+    wall_s: Annotated[float, msgspec.Meta(description=(
+        "the bridge's wall time of this record [s since 1970]"))]
+    receiving: bool
+    silent_since_wall_s: float | None
+    ever_received: Annotated[bool, msgspec.Meta(description=(
+        "some flavour has had a reader since the bridge started"))]
+    flavours: list[FlavourDelivery]
+
+
 # What an event says happened: a refused input, a fault's life, an accepted command or
 # input, a change of the clock, a bug in a service, events the journal never received, the
 # state folder's disk full or nearly (``disk_full``: critical when the journal cannot be
@@ -314,7 +357,8 @@ class DriveRoute(_Msg):
 EventKind = Literal["rejected", "fault_injected", "fault_cleared", "fault_raised",
                     "fault_resolved", "command", "input", "clock", "session", "scenario",
                     "internal_error", "state_damaged", "journal_gap", "mark", "disk_full",
-                    "fault_armed", "fault_warned", "fault_fired", "fault_cancelled"]
+                    "fault_armed", "fault_warned", "fault_fired", "fault_cancelled",
+                    "delivery"]
 
 
 class Event(_Msg):

@@ -11,6 +11,7 @@ silence goes at once; a change of a discrete field goes at once.
 from __future__ import annotations
 
 import heapq
+import sys
 import time
 from collections.abc import Callable
 from operator import attrgetter
@@ -22,6 +23,7 @@ import zenoh
 from common.runtime import Runtime
 from services.bridge.bindings import Binding, domain_of, zenoh_key
 from services.bridge.cdr import encode_cdr
+from services.bridge.delivery import Delivery
 from services.bridge.mapping import BridgeOptions
 from services.bridge.rmw_zenoh import HEARTBEAT_S, attachment, entity_token, gid_of, qos_keyexpr
 from services.bridge.ros2_node import Ros2Graph, env_domain
@@ -35,15 +37,19 @@ JSON = zenoh.Encoding.APPLICATION_JSON
 
 class Shared:
     """What every outlet of one bridge process shares; ``clock`` (monotonic seconds) times the
-    rates."""
+    rates, ``wall`` (seconds since 1970) stamps the delivery record."""
 
     def __init__(self, rt: Runtime, opts: BridgeOptions, zid: str, graph: Ros2Graph | None,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 wall: Callable[[], float] = time.time):
         self.rt, self.opts, self.zid, self.graph, self.clock = rt, opts, zid, graph, clock
+        self.wall = wall
         self.ros2_base = (opts.outputs.ros2.domain_id if opts.outputs.ros2.domain_id is not None
                           else env_domain())
         self.due: list[tuple[float, int, Outlet]] = []  # outlets waiting for their rate
         self.seq = 0
+        self.delivery = Delivery()  # what each rover's flavours sent (SPEC §13d)
+        self.outlets_of: dict[str, list[Outlet]] = {}  # rover -> its outbound topics
 
     def rmw_domain(self, b: Binding) -> int:
         return domain_of(self.opts, self.opts.outputs.rmw_zenoh.domain_id, b.rover, b.place)
@@ -95,13 +101,14 @@ class Outlet:
         self.urgent = b.mapping.convert == "diagnostics"
         self.gid = b""
         self.sequence = 0
-        self._ros2_publish: Callable[[bytes], None] | None = None
+        self.ros2_publisher: Any = None  # the rclpy Publisher, with the first sample
         rate = b.mapping.rate_hz
         self.period_s = 1.0 / rate if rate else 0.0
         self.next_s = 0.0  # monotonic time of its next slot on the grid
         self.idle = bool(rate)  # off the rate timer (no sample since it last sent)
         self.sent_seq = 0  # its feed's sample it last sent
         self.last: tuple[Any, bytes] | None = None  # what a restamped message repeats
+        shared.outlets_of.setdefault(b.rover, []).append(self)
 
     def _declare_rmw(self) -> None:
         sh, b = self.shared, self.binding
@@ -113,29 +120,45 @@ class Outlet:
         self.gid = gid_of(token)
 
     def publish(self, msg: dict, cdr: bytes | None = None) -> None:
-        """Publish a message (``cdr``: already encoded) in every enabled flavour."""
+        """Publish a message (``cdr``: already encoded) in every enabled flavour, each send
+        counted in :attr:`Shared.delivery` (a failed one too, and the other flavours still
+        get the message)."""
         rt, distro = self.shared.rt, self.shared.opts.ros_distro
         if self.encodes:
             if cdr is None:
                 cdr = encode_cdr(self.type, msg, distro)
             if self.dds_key:
-                rt.publish_bytes(self.dds_key, cdr, CDR, reliable=self.urgent)
+                self._send("ros2dds", rt.publish_bytes, self.dds_key, cdr, CDR,
+                           reliable=self.urgent)
             if self.rmw_key:
                 if not self.gid:
                     self._declare_rmw()
                 self.sequence += 1
-                rt.publish_bytes(self.rmw_key, cdr, CDR,
-                                 attachment(self.sequence, time.time_ns(), self.gid),
-                                 reliable=self.urgent, heartbeat_s=HEARTBEAT_S)
+                self._send("rmw_zenoh", rt.publish_bytes, self.rmw_key, cdr, CDR,
+                           attachment(self.sequence, time.time_ns(), self.gid),
+                           reliable=self.urgent, heartbeat_s=HEARTBEAT_S)
             if self.ros2:
-                if self._ros2_publish is None:
+                if self.ros2_publisher is None:
                     graph = self.shared.graph
                     assert graph is not None, "the ros2 flavour has its graph"
-                    self._ros2_publish = graph.publisher(self.shared.ros2_domain(self.binding),
-                                                         self.binding.topic, self.type)
-                self._ros2_publish(cdr)
+                    self.ros2_publisher = graph.publisher(self.shared.ros2_domain(self.binding),
+                                                          self.binding.topic, self.type)
+                self._send("ros2", self.ros2_publisher.publish, cdr)
         if self.json_key:
-            rt.publish_bytes(self.json_key, msgspec.json.encode(msg), JSON, reliable=self.urgent)
+            self._send("json", rt.publish_bytes, self.json_key, msgspec.json.encode(msg), JSON,
+                       reliable=self.urgent)
+
+    def _send(self, flavour: str, publish: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+        sh, rover = self.shared, self.binding.rover
+        try:
+            publish(*args, **kwargs)
+        except Exception as exc:  # counted and said: the delivery record carries it
+            sh.delivery.failed(rover, flavour, f"{self.binding.topic}: {exc}")
+            if sh.delivery.tally(rover, flavour).errors == 1:
+                print(f"bridge: {rover} {flavour} {self.binding.topic}: send failed: {exc}",
+                      file=sys.stderr, flush=True)
+            return
+        sh.delivery.sent(rover, flavour, sh.rt.t_s.get(rover, 0.0), sh.wall())
 
     def send(self, build: Callable[[Outlet, Any], dict | None]) -> None:
         """Publish the feed's newest sample."""

@@ -104,11 +104,12 @@ class Ros2Graph:
         except self._executors.ExternalShutdownException:
             pass  # the node is going away
 
-    def publisher(self, domain: int, topic: str, typename: str) -> Callable[[bytes], None]:
-        """A function that publishes CDR bytes (with their encapsulation header) on a topic."""
-        pub = self.node(domain).create_publisher(self.message_class(typename), topic,
-                                                 self.publisher_qos)
-        return pub.publish
+    def publisher(self, domain: int, topic: str, typename: str) -> Any:
+        """An rclpy publisher on a topic: its ``publish`` takes CDR bytes (with their
+        encapsulation header), its ``get_subscription_count()`` says how many subscriptions
+        it has matched."""
+        return self.node(domain).create_publisher(self.message_class(typename), topic,
+                                                  self.publisher_qos)
 
     def subscribe(self, domain: int, topic: str, typename: str,
                   callback: Callable[[bytes], None]) -> None:

@@ -59,6 +59,7 @@ from services.bridge.mapping import MappingFile, load_mapping, resolve_mapping
 from services.bridge.outlets import Feed, Outlet, Shared
 from services.bridge.rmw_zenoh import entity_token, node_token, qos_keyexpr
 from services.bridge.ros2_node import Ros2Graph, Ros2Unavailable
+from services.bridge.watch import DELIVERY_S, DeliveryWatch
 
 __all__ = ["Bridge", "serve"]
 
@@ -122,11 +123,11 @@ class Bridge:
 
     def __init__(self, rt: Runtime, rovers: list[Rover], mf: MappingFile, bindings: list[Binding],
                  fleet_size: int, graph: Ros2Graph | None,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time):
         self.rt, self.opts, self.bindings, self.graph = rt, mf.bridge, bindings, graph
         self.rovers = {r.id: r for r in rovers}
         self.whole_fleet = len(rovers) == fleet_size  # else a shard: its own rovers only
-        self.shared = Shared(rt, self.opts, str(rt.zenoh_session.info.zid()), graph, clock)
+        self.shared = Shared(rt, self.opts, str(rt.zenoh_session.info.zid()), graph, clock, wall)
         self.controls = Controls(rt, self.shared, sorted(self.rovers), self.whole_fleet)
         self.feeds: dict[str, Feed] = {}  # twin key -> its feed
         self.diagnostics: dict[str, RoverDiagnostics] = {}  # rover -> its /diagnostics
@@ -191,6 +192,8 @@ class Bridge:
             rt.every(self.opts.diagnostics_period_s / slots, self.periodic_diagnostics)
         if any(o.period_s for feed in self.feeds.values() for o in feed.outlets):
             rt.every(RATE_TIMER_S, self.flush_due)
+        if self.shared.outlets_of:  # what reaches the crew's dashboard (SPEC §13d)
+            rt.every(DELIVERY_S, DeliveryWatch(rt, self.shared).report)
         rt.after_batch(self.flush)
         self.diag_dirty |= set(self.diagnostics)
 
@@ -422,9 +425,10 @@ class Bridge:
 
 def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
           mapping_file: str | None = None, fleet: list[str] | None = None,
-          clock: Callable[[], float] = time.monotonic) -> None:
+          clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time) -> None:
     """Serve ``rovers``, members of ``fleet`` (the ids of every rover of the deployment, in
-    order, whichever bridge serves each; default: these rovers). ``clock`` times the rates."""
+    order, whichever bridge serves each; default: these rovers). ``clock`` times the rates,
+    ``wall`` stamps the delivery records."""
     path = resolve_mapping(mapping_file)
     try:
         mf = load_mapping(path)
@@ -443,4 +447,4 @@ def serve(rt: Runtime, rovers: list[Rover], seed: int | None = None,
             raise SystemExit(2) from None
         rt.on_exit(graph.close)
     Bridge(rt, rovers, mf, bindings, len(fleet) if fleet is not None else len(rovers), graph,
-           clock).start()
+           clock, wall).start()

@@ -59,14 +59,17 @@ class Live:
 @contextmanager
 def console_site(folder: Path, *console_args: str, rover: Path = MAPP,
                  services: tuple[str, ...] = ALL_SERVICES,
-                 ready: Callable[[Probe], object] | None = None) -> Iterator[Live]:
-    """A router on a free port, a twin of ``rover`` with ``services``, a probe watching the rover,
-    and a console started with ``console_args`` once the twin is ``ready`` (default: the
-    battery publishes); everything stopped, and the console's log printed, at the end."""
+                 ready: Callable[[Probe], object] | None = None,
+                 extra: dict[str, list[str]] | None = None) -> Iterator[Live]:
+    """A router on a free port, a twin of ``rover`` with ``services`` (``extra``: more
+    arguments per service), a probe watching the rover, and a console started with
+    ``console_args`` once the twin is ``ready`` (default: the battery publishes); everything
+    stopped, and the console's log printed, at the end."""
     endpoint = free_endpoint()
     router = open_router(endpoint)
     try:
-        with Twin(endpoint, [rover], folder / "state", services=services) as twin, Probe(endpoint) as p:
+        with Twin(endpoint, [rover], folder / "state", services=services, extra=extra) as twin, \
+                Probe(endpoint) as p:
             p.watch(f"{keys.ROOT}/{R}/**")
             p.wait_services(R, services)
             if ready is None:

@@ -118,16 +118,72 @@ class Dashboard:
         assert got is not None, f"{service}: no answer within 10 s"
         return got
 
+    def subscribe(self, on: bool) -> None:
+        """Make (``on``) or destroy the dashboard's subscriptions, and wait until it has."""
+        assert self.proc.stdin is not None
+        sent = time.monotonic()
+        self.proc.stdin.write(json.dumps({"subscribe": on}) + "\n")
+        self.proc.stdin.flush()
+        wait_for(lambda: (m := self.latest("subscribed", sent)) is not None and m is on, 10,
+                 f"the dashboard's subscriptions {'made' if on else 'destroyed'}")
+
     def publish(self, topic: str, typename: str, msg: dict) -> None:
         assert self.proc.stdin is not None
         self.proc.stdin.write(json.dumps({"topic": topic, "type": typename, "msg": msg}) + "\n")
         self.proc.stdin.flush()
 
     def stop(self) -> str:
-        if self.proc.stdin:
+        """Its stdin closed, the dashboard shuts its executor and rclpy down and exits (a
+        clean exit: an rclpy node killed is an unclean death to Fast DDS, see
+        /work/shared/tools/fastdds-shm); SIGINT only if it has not gone within 10 s."""
+        if self.proc.stdin and not self.proc.stdin.closed:
             self.proc.stdin.close()
-        stop_process(self.proc)
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            stop_process(self.proc)
         return self.proc.stderr.read() if self.proc.stderr else ""
+
+
+SHM = Path("/dev/shm")
+FASTDDS_SHM = ("fastdds_*", "fast_datasharing_*", "sem.fastdds_*")
+
+
+def _fastdds_files() -> set[Path]:
+    return {p for pattern in FASTDDS_SHM for p in SHM.glob(pattern)}
+
+
+def _mapped_anywhere() -> set[str]:
+    """The /dev/shm files some process of this machine we may look at has open or mapped."""
+    used: set[str] = set()
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            used |= {line.split(maxsplit=5)[-1] for line in (proc / "maps").read_text().splitlines()
+                     if "/dev/shm/" in line}
+            fds = list((proc / "fd").iterdir())
+        except OSError:  # gone, or not ours to look at
+            continue
+        for fd in fds:
+            try:
+                used.add(os.readlink(fd))
+            except OSError:  # closed meanwhile
+                continue
+    return used
+
+
+@pytest.fixture(autouse=True)
+def fastdds_shm_cleaned():
+    """Remove the Fast DDS shared-memory files this test left in /dev/shm: those that appeared
+    during it and that no process holds when it ends (another user's participants, on this
+    shared machine, keep theirs)."""
+    before = _fastdds_files()
+    yield
+    used = _mapped_anywhere()
+    for path in sorted(_fastdds_files() - before):
+        if str(path) not in used:
+            path.unlink(missing_ok=True)
 
 
 def milli(x: float) -> int:
@@ -247,3 +303,43 @@ def test_an_rclpy_dashboard_sees_the_twin_and_moves_the_radio(ros2_twin):
 
     pids = [dash.proc.pid] + [p.pid for p in twin.procs.values()]
     assert udp_sockets(pids) == {}, "a process opened a UDP socket"
+
+
+def test_the_delivery_key_says_when_the_crews_dashboard_stops_hearing_the_bridge(ros2_twin):
+    """SPEC §13d: ``bridge/delivery`` says the rclpy dashboard is receiving (the subscriptions
+    the bridge's publishers matched); its subscriptions destroyed (the crew's dashboard gone
+    from the DDS graph, as when Fast DDS' shared-memory discovery fails), the key says silent
+    within 4 s, then an event says "not discovered"; subscribed again, receiving again, the
+    messages flowing. Every rclpy process exits cleanly."""
+    probe, twin, dash = ros2_twin
+    key = keys.BRIDGE_DELIVERY.key(R)
+
+    def ros2(v: dict) -> dict:
+        return next(f for f in v["flavours"] if f["flavour"] == "ros2")
+    wait_for(lambda: dash.latest("/diagnostics"), 20, "/diagnostics at the dashboard")
+    first = probe.wait_value(key, lambda v: v["receiving"] and ros2(v)["readers"] >= 1
+                             and ros2(v)["topics_read"] >= len(TOPICS), timeout_s=20)
+    assert ros2(first)["sent"] > 0 and ros2(first)["errors"] == 0
+    assert first["silent_since_wall_s"] is None and first["ever_received"]
+
+    dash.subscribe(False)
+    probe.clear_history()
+    silent = probe.wait_sample(key, lambda v: not v["receiving"], timeout_s=4.0)
+    assert silent["silent_since_wall_s"] is not None and ros2(silent)["readers"] == 0
+    lost = probe.wait_event(R, lambda e: e["kind"] == "delivery" and e["severity"] == "warning",
+                            timeout_s=10)
+    assert "not discovered" in lost["message"] and lost["source"] == "bridge", lost
+    assert ros2(probe.value(key))["sent"] > ros2(silent)["sent"]  # the bridge sent on, unread
+
+    back = time.monotonic()
+    dash.subscribe(True)
+    again = probe.wait_value(key, lambda v: v["receiving"] and ros2(v)["readers"] >= 1,
+                             timeout_s=10)
+    assert again["silent_since_wall_s"] is None
+    probe.wait_event(R, lambda e: e["kind"] == "delivery" and e["severity"] == "info")
+    wait_for(lambda: dash.latest("/diagnostics", back), 10, "/diagnostics at the dashboard again")
+
+    err = dash.stop()
+    assert dash.proc.returncode == 0 and "terminate called" not in err, err[-2000:]
+    twin.stop()
+    assert "terminate called" not in twin.log("bridge"), twin.log("bridge")[-2000:]

@@ -7,7 +7,9 @@ read on stdin, ``{"topic": ..., "type": "pkg/msg/Type", "msg": {...}}``, is publ
 topic (reliable, volatile); a line ``{"call": "/service", "type": "pkg/srv/Type", "request":
 {...}}`` calls that service (waiting up to 10 s for it) and prints ``{"topic": "/service",
 "t": ..., "msg": {...response fields}}``, or ``"msg": null`` when no answer came within
-10 s. The ROS 2 environment (``ROS_DOMAIN_ID``,
+10 s. A line ``{"subscribe": false}`` destroys every subscription (the crew's dashboard gone
+from the graph), ``{"subscribe": true}`` makes them again; each prints
+``{"topic": "subscribed", "t": ..., "msg": true|false}`` when done. The ROS 2 environment (``ROS_DOMAIN_ID``,
 ``FASTDDS_BUILTIN_TRANSPORTS``) is the caller's. Prints ``ready`` once its entities exist.
 """
 
@@ -85,9 +87,8 @@ def call(node: Node, clients: dict[str, Any], cmd: dict) -> None:
         print(line, flush=True)
 
 
-def main() -> None:
-    rclpy.init()
-    node = Node("crew_dashboard")
+def subscribe(node: Node) -> list[Any]:
+    subs = []
     for arg in sys.argv[1:]:
         topic, typename = arg.split("=")
 
@@ -95,16 +96,32 @@ def main() -> None:
             line = json.dumps({"topic": topic, "t": time.monotonic(), "msg": as_plain(msg)})
             with _out:
                 print(line, flush=True)
-        node.create_subscription(message_class(typename), topic, show, LATCHED)
+        subs.append(node.create_subscription(message_class(typename), topic, show, LATCHED))
+    return subs
+
+
+def main() -> None:
+    rclpy.init()
+    node = Node("crew_dashboard")
+    subs = subscribe(node)
     publishers: dict[str, Any] = {}
     clients: dict[str, Any] = {}
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    threading.Thread(target=executor.spin, daemon=True).start()
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
     with _out:
         print("ready", flush=True)
     for line in sys.stdin:
         cmd = json.loads(line)
+        if "subscribe" in cmd:
+            for sub in subs:
+                node.destroy_subscription(sub)
+            subs = subscribe(node) if cmd["subscribe"] else []
+            with _out:
+                print(json.dumps({"topic": "subscribed", "t": time.monotonic(),
+                                  "msg": bool(subs)}), flush=True)
+            continue
         if "call" in cmd:
             call(node, clients, cmd)
             continue
@@ -116,7 +133,12 @@ def main() -> None:
             while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
                 time.sleep(0.02)
         pub.publish(fill(cls(), cmd["msg"]))
+    # A clean exit: the executor stopped and its thread gone before rclpy shuts down (a
+    # thread still spinning at exit ends in "terminate called without an active exception",
+    # an unclean death to Fast DDS' shared memory).
     executor.shutdown()
+    spinner.join(timeout=5.0)
+    node.destroy_node()
     rclpy.shutdown()
 
 

@@ -28,6 +28,7 @@ from tests.harness import ROVERS
 R = "mapp-1"
 MAPP = load_rover(ROVERS / "mapp.yaml")
 SLOT = RATE_TIMER_S + 1e-9  # a send due at t goes out at the rate timer's next step at the latest
+WALL0 = 1.7e9  # the wall clock when the bridge starts
 T0 = 100.0  # the clock when the bridge starts (a monotonic clock has run since the machine started)
 
 MAPPING = """\
@@ -56,7 +57,11 @@ class Bridge:
         self.timers: list[list[Any]] = []  # [next time, period, fn]
         self.hooks: list[Callable[[], None]] = []
         self.sent: dict[str, list[tuple[float, Any]]] = {}
-        self.zenoh_session = SimpleNamespace(info=SimpleNamespace(zid=lambda: "0" * 32))
+        self.published: dict[str, list[tuple[float, Any]]] = {}  # the bridge's own keys
+        self.events: list[tuple[float, str, str, str]] = []  # (time, severity, kind, message)
+        self.subscribed: set[str] = set()  # the keys some Zenoh subscriber reads
+        self.zenoh_session = SimpleNamespace(info=SimpleNamespace(zid=lambda: "0" * 32),
+                                             declare_publisher=self._watcher)
         self.t_s = {R: 0.0}
         self.battery = BatteryState(t_s=0.0, energy_j=2.65e5, capacity_j=5.3e5, soc=0.5, ocv_v=15.4,
                                     voltage_v=15.0, current_a=3.0, power_w=45.0, temperature_c=20.0,
@@ -65,7 +70,8 @@ class Bridge:
                               current_limit_a=5.0, state="on")
         mapping = folder / "rates.yaml"
         mapping.write_text(MAPPING)
-        serve(self, [MAPP], mapping_file=str(mapping), clock=lambda: self.now)  # type: ignore[arg-type]
+        serve(self, [MAPP], mapping_file=str(mapping), clock=lambda: self.now,  # type: ignore[arg-type]
+              wall=lambda: WALL0 + self.now - T0)
 
     # -- what serve() asks of its runtime -------------------------------------------------------
 
@@ -86,6 +92,23 @@ class Bridge:
 
     def publish_bytes(self, key: str, payload: bytes, *_: Any, **__: Any) -> None:
         self.sent.setdefault(key, []).append((self.now, json.loads(payload)["data"]))
+
+    def publish(self, key: str, msg: Any, **_: Any) -> None:
+        self.published.setdefault(key, []).append((self.now - T0, msg))
+
+    def event(self, rover: str, severity: str, kind: str, key: str, message: str,
+              *_: Any, **__: Any) -> None:
+        self.events.append((self.now - T0, severity, kind, message))
+
+    def _watcher(self, key: str) -> Any:
+        """A Zenoh publisher that only says whether a subscriber matches its key."""
+        owner = self
+
+        class Watcher:
+            @property
+            def matching_status(self) -> Any:
+                return SimpleNamespace(matching=key in owner.subscribed)
+        return Watcher()
 
     # -- the test's hands ---------------------------------------------------------------------
 
@@ -210,3 +233,35 @@ def test_a_late_timer_starts_the_grid_again_from_when_it_ran(bridge):
     bridge.put(1.4, voltage_v=15.3)
     bridge.run_until(2.0)
     assert bridge.times("pdm_mv")[2:] == pytest.approx([1.8], abs=SLOT)
+
+
+def test_the_delivery_record_counts_the_sends_and_says_when_the_dashboard_stops_reading(bridge):
+    """SPEC §13d: once a second the rover's ``bridge/delivery`` (the json flavour here): the
+    messages sent and the last send; receiving while a subscriber reads the rover's watched
+    topic, silent since the moment none does, and "not discovered" in the log's event after
+    3 s of that; receiving again, and said so, when one is back."""
+    bridge.subscribed.add("json/every_mv")  # the rover's first topic (no /diagnostics here)
+    for k in range(30):
+        bridge.put(0.05 + 0.1 * k, voltage_v=15.0 - 0.001 * k)
+    bridge.run_until(3.0)
+    records = bridge.published[keys.BRIDGE_DELIVERY.key(R)]
+    assert [round(t, 6) for t, _ in records] == [1.0, 2.0, 3.0]
+    last = records[-1][1]
+    (flavour,) = last.flavours
+    assert flavour.flavour == "json" and flavour.readers == 1 and last.receiving
+    assert flavour.sent == sum(len(v) for v in bridge.sent.values())
+    assert flavour.last_send_wall_s == pytest.approx(WALL0 + 2.95)
+    bridge.subscribed.clear()  # the dashboard goes away
+    bridge.run_until(4.0)
+    last = bridge.published[keys.BRIDGE_DELIVERY.key(R)][-1][1]
+    assert not last.receiving and last.silent_since_wall_s == pytest.approx(WALL0 + 4.0)
+    assert bridge.events == []
+    bridge.run_until(7.0)
+    assert [(t, sev, kind) for t, sev, kind, _ in bridge.events] == [(pytest.approx(7.0), "warning",
+                                                                       "delivery")]
+    assert "not discovered" in bridge.events[0][3]
+    bridge.subscribed.add("json/every_mv")
+    bridge.run_until(8.0)
+    last = bridge.published[keys.BRIDGE_DELIVERY.key(R)][-1][1]
+    assert last.receiving and last.silent_since_wall_s is None
+    assert bridge.events[-1][1:3] == ("info", "delivery")

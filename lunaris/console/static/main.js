@@ -17,7 +17,7 @@ import {clockBar, linkState, roverTabs, traineeBar, viewTabs, who} from "./heade
 import {changed, followAddress, fromAddress, onChange, parts, store} from "./state.js";
 import {connect} from "./stream.js";
 import {VIEWS} from "./views/index.js";
-import {linkBanner, routerBanner} from "./widgets.js";
+import {dashboardBanners, linkBanner, routerBanner} from "./widgets.js";
 
 /** @typedef {import("./views/index.js").View} View */
 /** @typedef {import("./views/index.js").ViewContext} ViewContext */
@@ -57,7 +57,7 @@ function draw() {
     view.enter?.(ctx);
   }
   main.dataset.rover = ctx.rover;
-  render(html`${routerBanner()}${linkBanner(ctx.rover)}${keyed(which, view.render(ctx))}`, main);
+  render(html`${routerBanner()}${linkBanner(ctx.rover)}${dashboardBanners()}${keyed(which, view.render(ctx))}`, main);
   view.after?.(ctx);
   syncCharts(document.getElementById("charts"), ctx.rover);
 }
@@ -73,6 +73,7 @@ function waitingWords() {
 
 function everySecond() {
   updateCharts();
+  changed();  // what time alone changes: how long the crew's dashboard has been silent
   const now = current();
   now?.view.tick?.(now.ctx);
 }

@@ -212,6 +212,50 @@ export function activeFaults(rover) {
 /** @param {string} rover @returns {Session | undefined} its running trainee session */
 export const runningSession = (rover) => store.sessions[rover];
 
+/** A crew's dashboard silent this long, after it was receiving, is an alarm (SPEC 13d), s. */
+export const DASHBOARD_SILENT_S = 3;
+/** The bridge's delivery record arrives about once a second: none for this long, it stopped, s. */
+const DELIVERY_STALE_S = 3;
+/** Each rover's last delivery record's wall_s and when the page saw it arrive (ms, its own clock). */
+const deliverySeen = /** @type {Record<string, {wall_s: number, at_ms: number}>} */ ({});
+
+/**
+ * Whether the crew's dashboard hears the bridge (SPEC 13d), from `bridge/delivery`:
+ * `receiving` (some flavour has a reader), `silent` (it had one and has none, or the record
+ * stopped coming: the bridge is gone or stuck), `none` (no dashboard seen yet) or `unknown` (no
+ * record: no bridge). `since` is the wall time it went silent (the bridge's clock); `for_s`
+ * how long, measured on the bridge's clock and then on the page's (no skew between the two).
+ * @param {string} rover
+ * @returns {{state: "receiving" | "silent" | "none" | "unknown", since: number | null, for_s: number, why: string}}
+ */
+export function dashboardHearing(rover) {
+  const rec = val(rover, "bridge/delivery");
+  if (!rec) return {state: "unknown", since: null, for_s: 0, why: ""};
+  const now = Date.now();
+  let seen = deliverySeen[rover];
+  if (!seen || seen.wall_s !== rec.wall_s) seen = deliverySeen[rover] = {wall_s: rec.wall_s, at_ms: now};
+  const aged_s = (now - seen.at_ms) / 1000;
+  if (aged_s > DELIVERY_STALE_S && (rec.receiving || rec.ever_received)) {
+    const since = rec.receiving ? rec.wall_s : rec.silent_since_wall_s ?? rec.wall_s;
+    return {state: "silent", since, for_s: rec.wall_s - since + aged_s,
+            why: "the bridge's delivery report stopped coming (the bridge is gone or stuck)"};
+  }
+  if (rec.receiving) return {state: "receiving", since: null, for_s: 0, why: ""};
+  if (!rec.ever_received) return {state: "none", since: null, for_s: 0, why: ""};
+  const since = rec.silent_since_wall_s ?? rec.wall_s;
+  return {state: "silent", since, for_s: rec.wall_s - since + aged_s, why: "no reader of its topics in any flavour"};
+}
+
+/**
+ * Whether to alarm the instructor: a dashboard that was receiving has heard nothing for
+ * DASHBOARD_SILENT_S during a trainee session.
+ * @param {string} rover
+ */
+export function dashboardAlarm(rover) {
+  const h = dashboardHearing(rover);
+  return h.state === "silent" && h.for_s >= DASHBOARD_SILENT_S && !!store.sessions[rover]?.id;
+}
+
 /** @param {string} rover @returns {boolean} the console says the rover's link is lost */
 export const linkLost = (rover) => store.links[rover]?.state === "lost";
 

@@ -42,6 +42,20 @@
  * @property {number | null} [cutoff_v] - the BMS cut-off [V] (cells_series * cutoff_cell_v): when the terminal voltage under load falls below it the pack stops supplying, which a heavy draw can bring before depleted_soc; null when the rover file sets none
  */
 /**
+ * ``bridge/delivery``: what the bridge delivers of a rover to the crew's dashboard, about
+ * once a second (SPEC §13d): per output flavour, its readers, messages sent, the last send,
+ * errors. ``receiving``: some flavour has a reader now; ``silent_since_wall_s``: when the
+ * dashboard that was receiving lost its last reader (null while receiving, or before any
+ * dashboard was ever seen).
+ * @typedef {Object} BridgeDelivery
+ * @property {number} t_s
+ * @property {number} wall_s - the bridge's wall time of this record [s since 1970]
+ * @property {boolean} receiving
+ * @property {number | null} silent_since_wall_s
+ * @property {boolean} ever_received - some flavour has had a reader since the bridge started
+ * @property {Array<FlavourDelivery>} flavours
+ */
+/**
  * @typedef {Object} Clock
  * @property {number} t_s
  * @property {number} dt_s
@@ -93,7 +107,7 @@
  * @property {number} t_s
  * @property {"critical" | "info" | "warning"} severity
  * @property {string} source
- * @property {"clock" | "command" | "disk_full" | "fault_armed" | "fault_cancelled" | "fault_cleared" | "fault_fired" | "fault_injected" | "fault_raised" | "fault_resolved" | "fault_warned" | "input" | "internal_error" | "journal_gap" | "mark" | "rejected" | "scenario" | "session" | "state_damaged"} kind
+ * @property {"clock" | "command" | "delivery" | "disk_full" | "fault_armed" | "fault_cancelled" | "fault_cleared" | "fault_fired" | "fault_injected" | "fault_raised" | "fault_resolved" | "fault_warned" | "input" | "internal_error" | "journal_gap" | "mark" | "rejected" | "scenario" | "session" | "state_damaged"} kind
  * @property {string} key
  * @property {string} message
  * @property {Record<string, unknown> | null} [params]
@@ -111,6 +125,21 @@
  * @property {boolean | null} [met]
  * @property {number | null} [met_t_s]
  * @property {number | null} [deadline_t_s]
+ */
+/**
+ * What one output flavour of the bridge delivers of one rover (SPEC §13d).
+ * @typedef {Object} FlavourDelivery
+ * @property {string} flavour - ros2dds, rmw_zenoh, json or ros2 (the rclpy node)
+ * @property {number | null} readers - ros2: the most subscriptions matched by one of the rover's topics; the Zenoh flavours: 1 when some subscriber matches the rover's watched topic, else 0 (Zenoh tells whether, not how many); null: nothing to watch yet
+ * @property {number} topics - the rover's topics watched in this flavour
+ * @property {number} topics_read - of them, those with a reader
+ * @property {number} sent - messages sent since the bridge started
+ * @property {number | null} last_send_t_s - the rover's sim time of the last message sent [s]; null: none yet
+ * @property {number | null} last_send_wall_s - wall time of the last message sent [s since 1970]; null: none yet
+ * @property {number} errors - sends that failed since the bridge started
+ * @property {string} last_error - the last failure, in words
+ * @property {boolean} receiving - some reader sees the rover's topics
+ * @property {number | null} silent_since_wall_s - wall time the last reader went away [s since 1970], when the flavour had readers and has none now; else null
  */
 /**
  * @typedef {Object} LoadPower
@@ -286,6 +315,7 @@
  *   K extends `event` ? Event :
  *   K extends `faults/active/${string}` ? ActiveFaults :
  *   K extends `scenario/progress` ? ScenarioProgress :
+ *   K extends `bridge/delivery` ? BridgeDelivery :
  *   never)} Payload
  */
 

@@ -3,8 +3,8 @@
 
 import {html, nothing} from "./vendor/lit-html/lit-html.js";
 import {act, answer, query, send} from "./api.js";
-import {clockText, faultName, fmt, paramsText, partName, plainMessage, words} from "./format.js";
-import {activeFaults, changed, linkLost, mayAct, store, val} from "./state.js";
+import {clockText, dur, faultName, fmt, num, paramsText, partName, plainMessage, words} from "./format.js";
+import {activeFaults, changed, dashboardAlarm, dashboardHearing, linkLost, mayAct, rovers, store, val} from "./state.js";
 
 /** @typedef {import("./format.js").Format} Format */
 
@@ -133,7 +133,8 @@ export function faultsCard(rover, clear) {
 const KIND = /** @type {Record<string, string>} */ ({
   rejected: "refused", fault_injected: "fault injected", fault_cleared: "fault cleared", fault_raised: "alarm",
   fault_resolved: "alarm ended", command: "command", input: "input", clock: "clock", session: "session",
-  scenario: "drill", internal_error: "twin error", mark: "mark", disk_full: "disk"});
+  scenario: "drill", internal_error: "twin error", mark: "mark", disk_full: "disk",
+  delivery: "crew's dashboard"});
 
 /** @param {import("./state.js").TwinEvent} e its message, in plain words, without repeating its kind */
 const said = (e) => {
@@ -214,4 +215,43 @@ export function routerBanner() {
   if (router?.state !== "lost") return nothing;
   return html`<div class="link-lost" role="alert" data-router="lost">Connection to the twin lost: ${router.message}.
     The values below are the last received; nothing can be sent until it is back.</div>`;
+}
+
+/** @param {number} t a wall time (s since 1970) as the time of day, e.g. 14:03:27 */
+const timeOfDay = (t) => new Date(t * 1000).toLocaleTimeString("en-GB", {hour12: false});
+
+/** The output flavours in the crew's words. */
+const FLAVOUR = /** @type {Record<string, string>} */ ({ros2: "ROS 2 (DDS)", ros2dds: "ROS 2 via zenoh-bridge-ros2dds",
+  rmw_zenoh: "ROS 2 on rmw_zenoh", json: "JSON"});
+
+/**
+ * Whether the crew's dashboard is receiving (SPEC 13d), from the bridge's `bridge/delivery`:
+ * "receiving", "silent since …" and why, per flavour its readers, messages sent and failures.
+ * @param {string} rover
+ */
+export function dashboardCard(rover) {
+  const h = dashboardHearing(rover), rec = val(rover, "bridge/delivery");
+  const said = h.state === "receiving" ? "receiving"
+    : h.state === "silent" ? `silent since ${timeOfDay(h.since ?? 0)} (${dur(h.for_s)}): ${h.why}`
+    : h.state === "none" ? "no dashboard has read the topics yet" : "no report from the bridge";
+  const rows = (rec?.flavours ?? []).map((f) => html`<tr data-flavour=${f.flavour}><td>${FLAVOUR[f.flavour] ?? f.flavour}</td>
+    <td class="num">${f.readers ?? "–"}</td><td class="num">${f.topics_read} of ${f.topics}</td><td class="num">${num(f.sent)}</td>
+    <td class="num">${f.last_send_t_s === null ? "–" : clockText(f.last_send_t_s)}</td>
+    <td class="num" title=${f.last_error || nothing}>${num(f.errors)}</td></tr>`);
+  return html`<section class="card"><h2>Crew's dashboard</h2>
+    <p class=${h.state === "silent" ? "sev-critical" : ""} data-key="bridge/delivery" data-field="receiving"
+      data-dashboard=${h.state}>crew's dashboard: ${said}</p>
+    ${rows.length ? html`<table><tr><th>output</th><th class="num">readers</th><th class="num">topics read</th>
+      <th class="num">messages sent</th><th class="num">last sent (sim time)</th><th class="num">failed</th></tr>${rows}</table>`
+    : nothing}</section>`;
+}
+
+/** An alarm for each rover whose crew's dashboard, receiving before, has heard nothing for 3 s in a session. */
+export function dashboardBanners() {
+  return rovers().filter(dashboardAlarm).map((rover) => {
+    const h = dashboardHearing(rover);
+    return html`<div class="link-lost" role="alert" data-dashboard-alarm=${rover}>The crew's dashboard on ${rover} has heard
+      nothing since ${timeOfDay(h.since ?? 0)} (${dur(h.for_s)}): ${h.why}. The crew sees no new value or alarm; the
+      values here are the twin's.</div>`;
+  });
 }

@@ -1,4 +1,5 @@
-// The crew: what it sees (SPEC 12b), the crew's dashboard as the bridge renders it now
+// The crew: what it sees (SPEC 12b), whether its dashboard is receiving at all (SPEC 13d, from
+// the bridge's bridge/delivery), the crew's dashboard as the bridge renders it now
 // (`GET /api/rovers/<rover>/crew`): its alarms (/diagnostics), its readings (every topic the
 // mapping publishes) and the controls it may call; how it responds (SPEC 12d, `GET
 // /api/rovers/<rover>/response`): each fault of the session with its first symptom, the
@@ -12,7 +13,7 @@ import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {query} from "../api.js";
 import {clockText, dur, faultName, fieldLabel, num, partName, plainMessage, words} from "../format.js";
 import {changed, store} from "../state.js";
-import {checkFaults, faultsCard, markRow} from "../widgets.js";
+import {checkFaults, dashboardCard, faultsCard, markRow} from "../widgets.js";
 import {clearFault} from "./live.js";
 
 /**
@@ -228,7 +229,7 @@ export const crew = {
     if (asked[rover] !== undefined && newest(rover) !== heard[rover]) load(rover);  // an event came
     const res = seen[rover];
     return html`<div class="grid two">
-      <div class="col">${markCard(rover)}${alarmsCard(res)}${responseCard(responses[rover])}${faultsCard(rover, clearFault)}</div>
+      <div class="col">${markCard(rover)}${dashboardCard(rover)}${alarmsCard(res)}${responseCard(responses[rover])}${faultsCard(rover, clearFault)}</div>
       <div class="col"><section class="card" id="crew-readings"><h2>The crew's readings</h2>
         <p class="help">Every topic the crew's dashboard receives, as it reads now.</p>
         ${res?.ok ? readings(res.data.topics) : nothing}</section>

@@ -1,11 +1,12 @@
 // Live: the battery, power, solar panels, umbilical, radio links, drive, the PDM table (each
-// rail's On / Off / Reset), plots of the last minutes, the active faults and the event log.
+// rail's On / Off / Reset), plots of the last minutes, whether the crew's dashboard is
+// receiving (SPEC 13d), the active faults and the event log.
 
 import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
 import {SPANS, battery, load, mayAct, powerSummary, rail, redraw, store} from "../state.js";
 import {emptyWords} from "../format.js";
-import {actionButton, checkFaults, eventsCard, faultsCard, field} from "../widgets.js";
+import {actionButton, checkFaults, dashboardCard, eventsCard, faultsCard, field} from "../widgets.js";
 import {loadRovers, railInfo} from "./map.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
@@ -165,7 +166,7 @@ export const live = {
   render: ({rover: r, parts: p}) => html`<div class="grid live">
     <div class="col">${batteryCard(r)}${powerCard(r, p)}${radioCard(r, p)}${driveCard(r, p)}</div>
     <div class="col">${pdmCard(r, p)}${plotsCard()}</div>
-    <div class="col">${faultsCard(r, clearFault)}${eventsCard(r)}</div></div>`,
+    <div class="col">${dashboardCard(r)}${faultsCard(r, clearFault)}${eventsCard(r)}</div></div>`,
   /** @param {{rover: string}} ctx */
   enter: ({rover}) => {
     checkFaults(rover, true);
