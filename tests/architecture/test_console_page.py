@@ -46,6 +46,23 @@ def test_every_import_of_the_page_is_one_of_its_own_files():
     assert re.findall(r"<script[^>]*>", html) == ['<script type="module" src="/static/main.js">']
 
 
+def _imports(path) -> set:
+    return {(path.parent / (f.group(1) or f.group(2))).resolve() for f in IMPORT.finditer(path.read_text())}
+
+
+def test_a_view_imports_no_other_view():
+    """A view (a module views/index.js registers) uses the page's shared modules, never another
+    view's internals (issue 30: the Crew and Faults views took clearFault from the Live view,
+    the Live and Inputs views the rover files' descriptions from the Map view)."""
+    index = STATIC / "views" / "index.js"
+    views = {p for p in _imports(index) if p.parent == index.parent}  # (not a type of state.js)
+    assert len(views) >= 8
+    for view in sorted(views):
+        crossing = sorted(p.name for p in _imports(view) & views)
+        assert not crossing, f"the view {view.name} imports the view(s) {crossing}: move what they share " \
+            "to a module of the page (widgets.js, rovers.js, state.js)"
+
+
 def test_the_vendored_libraries_are_the_versions_package_json_names():
     dev = json.loads((ROOT / "package.json").read_text())["devDependencies"]
     lock = json.loads((ROOT / "package-lock.json").read_text())["packages"]

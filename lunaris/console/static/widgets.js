@@ -100,6 +100,9 @@ function missingNote(c) {
   return nothing;
 }
 
+/** Clear an injected fault (the faults card's Clear, on the views that show it). @param {string} component @param {string} kind */
+export const clearFault = (component, kind) => send("DELETE", `fault/${component}/${kind}`);
+
 /**
  * The active faults of a rover; each injected one with its Clear button. Times are sim time.
  * A fault whose service does not answer is marked as the last known; the owners that did not

@@ -13,8 +13,7 @@ import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {query} from "../api.js";
 import {clockText, dur, faultName, fieldLabel, num, partName, plainMessage, words} from "../format.js";
 import {changed, store} from "../state.js";
-import {checkFaults, dashboardCard, faultsCard, markRow} from "../widgets.js";
-import {clearFault} from "./live.js";
+import {checkFaults, clearFault, dashboardCard, faultsCard, markRow} from "../widgets.js";
 
 /**
  * What `GET /api/rovers/<rover>/crew` answers (lunaris/console/api.py, services.bridge.crew_view).

@@ -7,8 +7,7 @@ import {keyed} from "../vendor/lit-html/directives/keyed.js";
 import {answer, send} from "../api.js";
 import {faultEffect, faultName, paramWords, partName, plainNumber, PART_WORDS, words} from "../format.js";
 import {redraw, store} from "../state.js";
-import {actionButton, checkFaults, eventsCard, faultsCard} from "../widgets.js";
-import {clearFault} from "./live.js";
+import {actionButton, checkFaults, clearFault, eventsCard, faultsCard} from "../widgets.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 /** @typedef {import("../state.js").Catalogue} Catalogue */

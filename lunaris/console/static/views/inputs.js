@@ -6,7 +6,7 @@ import {html} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
 import {panel, pickView, radio} from "../state.js";
 import {actionButton, field} from "../widgets.js";
-import {loadRovers, radioInfo} from "./map.js";
+import {loadRovers, radioInfo} from "../rovers.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 

@@ -6,13 +6,10 @@ import {html, nothing} from "../vendor/lit-html/lit-html.js";
 import {send} from "../api.js";
 import {SPANS, battery, load, mayAct, powerSummary, rail, redraw, store} from "../state.js";
 import {emptyWords} from "../format.js";
-import {actionButton, checkFaults, dashboardCard, eventsCard, faultsCard, field} from "../widgets.js";
-import {loadRovers, railInfo} from "./map.js";
+import {actionButton, checkFaults, clearFault, dashboardCard, eventsCard, faultsCard, field} from "../widgets.js";
+import {loadRovers, railInfo} from "../rovers.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
-
-/** @param {string} component @param {string} kind */
-export const clearFault = (component, kind) => send("DELETE", `fault/${component}/${kind}`);
 
 /** Below this, a current or a power is as good as none. */
 const IDLE_A = 0.005, IDLE_W = 0.05;

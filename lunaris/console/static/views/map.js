@@ -12,43 +12,17 @@
 // `data-x-m`, `data-y-m`, `data-heading-deg`.
 
 import {html, nothing, svg} from "../vendor/lit-html/lit-html.js";
-import {query} from "../api.js";
 import {num} from "../format.js";
 import {changed, drive, radio, redraw, route, umbilical} from "../state.js";
 import {field} from "../widgets.js";
+import {loadRovers, radioInfo} from "../rovers.js";
 import {addWaypoint, clicksAddWaypoints, drivePanel, loadTraverses, metres, pathOf, preview} from "./drive.js";
 
 /** @typedef {import("../state.js").Parts} Parts */
 /** @typedef {{x_m: number, y_m: number}} XY */
 /** @typedef {{x_m: number, y_m: number, z_m?: number}} XYZ */
 
-/**
- * A radio as `GET /api/rovers` gives it (from the rover file).
- * @typedef {{name: string, follows_drive: boolean | null, why: string, site?: XY | null, a_m?: number,
- *   b_m?: number, offset_x_m?: number, offset_y_m?: number}} RadioInfo
- * A switchable rail as `GET /api/rovers` gives it (from the rover file).
- * @typedef {{name: string, essential: boolean, loads: string[]}} RailInfo
- * @typedef {{id: string, live: boolean, drives: boolean | null, drives_why: string, radios: RadioInfo[],
- *   rails: RailInfo[]}} RoverInfo
- */
-
-/** `GET /api/rovers`, as last asked. */
-let described = /** @type {Record<string, RoverInfo>} */ ({});
-
-/** @returns {Promise<void>} what the console knows of every rover's radios and rails (rover files) */
-export async function loadRovers() {
-  const res = await query("/api/rovers");
-  if (res.ok) {
-    described = Object.fromEntries(/** @type {{rovers: RoverInfo[]}} */ (res.data).rovers.map((r) => [r.id, r]));
-    changed();
-  }
-}
-
-/** @param {string} rover @param {string} name @returns {RadioInfo | undefined} */
-export const radioInfo = (rover, name) => described[rover]?.radios.find((r) => r.name === name);
-
-/** @param {string} rover @param {string} name @returns {RailInfo | undefined} */
-export const railInfo = (rover, name) => described[rover]?.rails?.find((r) => r.name === name);
+/** @typedef {import("../rovers.js").RoverInfo} RoverInfo */
 
 /**
  * Where a radio stands and its footprint: the telemetry's own numbers, else the rover file's.
