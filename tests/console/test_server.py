@@ -476,17 +476,23 @@ def test_a_recording_is_served_for_download_and_nothing_outside_its_folder(sessi
         assert c.post("/api/recordings", json={"name": "live"}).status_code == 403  # reads only
 
 
-def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
-    """A day's recording of two trainees: the report of each, the last by default (found by an
-    instructor: ``?session=`` was ignored, the first trainee's debrief out of reach)."""
-    from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
+def _two_trainees_app(session, tmp_path, router):
+    """A console whose recordings folder holds a day of two trainees (``day.mcap``)."""
+    from tests.lunaris.test_report_response import Tape, two_trainees
 
     folder = tmp_path / "recordings"
     folder.mkdir()
     tape = Tape()
     two_trainees(tape)
     tape.write(folder / "day.mcap")
-    app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
+    return make_app(session, None, recordings_dir=folder, connection=["--connect", router]), folder
+
+
+def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
+    """A day's recording of two trainees: the report of each, the last by default (found by an
+    instructor: ``?session=`` was ignored, the first trainee's debrief out of reach)."""
+    from tests.lunaris.test_report_response import S1, S2
+    app, folder = _two_trainees_app(session, tmp_path, router)
     with client(app) as c:
         last = c.get("/recordings/day.mcap/report")
         assert last.status_code == 200 and f"Bob - session {S2} (this report)" in last.text
@@ -505,14 +511,8 @@ def test_each_session_of_a_recording_has_its_report(session, tmp_path, router):
 def test_a_recording_lists_its_trainees_sessions(session, tmp_path, router):
     """The Recordings view names each recording's trainees: the sessions of a recording, read
     once and kept beside it (the list carries them from then on), read again once it is newer."""
-    from tests.lunaris.test_report_response import S1, S2, Tape, two_trainees
-
-    folder = tmp_path / "recordings"
-    folder.mkdir()
-    tape = Tape()
-    two_trainees(tape)
-    tape.write(folder / "day.mcap")
-    app = make_app(session, None, recordings_dir=folder, connection=["--connect", router])
+    from tests.lunaris.test_report_response import S1, S2
+    app, folder = _two_trainees_app(session, tmp_path, router)
     with client(app) as c:
         (entry,) = c.get("/api/recordings").json()["recordings"]
         assert entry["sessions"] is None  # not read yet
