@@ -71,8 +71,9 @@ def battery(soc: float) -> bytes:
 
 def test_a_session_id_is_its_utc_second_and_always_later_than_the_previous_one():
     assert session_id(1736884392.7) == "20250114-195312"
-    assert session_id(1736884392.7, after="20250114-195312") == "20250114-195313"
-    assert session_id(1736884392.7, after="20250114-195359") == "20250114-195400"
+    # within the second of the one before, or behind it: counted, never a second ahead (issue 32)
+    assert session_id(1736884392.7, after="20250114-195312") == "20250114-195312.001"
+    assert session_id(1736884392.7, after="20250114-195359") == "20250114-195359.001"
     assert session_id(1736884400.0, after="20250114-195312") == "20250114-195320"
     assert session_id(1736884392.0, after="not an id") == "20250114-195312"
 
