@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from selenium.webdriver.support.ui import WebDriverWait
+from selenium.common.exceptions import TimeoutException
 
 from common import keys
 from common.connection import make_config
@@ -92,7 +92,12 @@ def console_page(site: Live, ready: str = SOC_SHOWN) -> Iterator:
     something truthy) says the page shows the twin."""
     with open_browser(1280, 800) as driver:
         driver.get(site.console.url + "/")
-        WebDriverWait(driver, 20).until(lambda d: d.execute_script(ready))
+        from tests.console.pages import WebDriverWait as SayingWait  # (pages imports this module)
+        try:  # (the wait of tests.console.pages says what the page showed)
+            SayingWait(driver, 30).until(lambda d: d.execute_script(ready), "the page showing the twin")
+        except TimeoutException as exc:  # and the console: running or not, its log (a full run
+            # failed here twice in a row, for a reason its log would have said)
+            raise TimeoutException(f"{exc.msg}\n{site.console.why_down()}") from None
         yield driver
 
 
