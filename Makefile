@@ -41,6 +41,8 @@ $(NODE_STAMP): package.json package-lock.json
 
 # docker-compose (v1, Debian) validates docker-compose.yml in the tests; no engine needed.
 # chromium and chromium-driver (Debian) are the real browser the console's tests drive.
+# docker.io (dockerd, containerd, runc) and debootstrap (the image's base, made locally) let
+# tests/deploy/test_containers.py run the deployment in containers of an engine of its own.
 system-deps:
 	@command -v docker-compose >/dev/null 2>&1 || { \
 	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
@@ -52,6 +54,11 @@ system-deps:
 	    echo "installing chromium and chromium-driver (Debian packages) for the console's browser tests"; \
 	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null; \
 	  else echo "warning: chromium or chromedriver missing and cannot be installed; console browser tests will skip"; fi; }
+	@{ command -v dockerd >/dev/null 2>&1 && command -v debootstrap >/dev/null 2>&1; } || { \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	    echo "installing docker.io and debootstrap (Debian packages) for the container test"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq docker.io debootstrap >/dev/null; \
+	  else echo "warning: dockerd or debootstrap missing and cannot be installed; the container test will skip"; fi; }
 
 # The twin of ROVER and the instructor console on 127.0.0.1:PORT (open the address it prints).
 # The state (batteries, faults, snapshots) persists in STATE between runs: rm -rf var/state

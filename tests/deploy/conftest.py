@@ -1,6 +1,6 @@
 """Shared helpers for the deployment tests: the router of deploy/zenohd.json5 on loopback.
 
-No Docker engine runs here (SPEC §11), so the router's configuration is exercised by an
+No Docker engine is needed (SPEC §11): the router's configuration is exercised by an
 embedded Zenoh router (a Python session in router mode) that reads the same JSON5 file,
 in a subprocess, on a free port of 127.0.0.1, over TLS, with the secrets that
 ``lunaris deploy secrets`` makes (a fresh set per test module, never the repository's).

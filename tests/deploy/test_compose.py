@@ -1,8 +1,9 @@
 """docker-compose.yml as docker-compose itself resolves it (`docker-compose config`).
 
-No Docker engine runs here (SPEC §11): the file is validated and its services, profile
+No Docker engine is needed (SPEC §11): the file is validated and its services, profile
 and mounts are checked, with every mounted file looked up in the repository, or among the
 secrets `lunaris deploy secrets` makes (deploy/secrets/ is never in the repository).
+test_containers.py runs it in an engine of its own, where one can start.
 """
 
 from __future__ import annotations
