@@ -78,13 +78,14 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """Each test's kinds; on parallel workers (``--dist loadgroup``) the tests of a module that
     share a fixture of a wider scope than the test's (a module's twin) go to one worker, which
     starts it once; the rest are handed out one by one, in the order of :data:`FIRST`."""
+    grouped = config.pluginmanager.hasplugin("xdist")  # (its mark is unknown without it)
     for item in items:
         if not any(item.get_closest_marker(k) for k in KIND_MARKS):
             for kind in kinds_of(item.path):
                 item.add_marker(kind)
         info = getattr(item, "_fixtureinfo", None)
         defs = info.name2fixturedefs.values() if info is not None else ()
-        if any(d.scope in ("class", "module", "package") for fds in defs for d in fds):
+        if grouped and any(d.scope in ("class", "module", "package") for fds in defs for d in fds):
             item.add_marker(pytest.mark.xdist_group(_under_tests(item.path)))
     items.sort(key=_rank)  # stable: a module's tests stay together, in their order
 

@@ -47,7 +47,9 @@ def read_outcomes(path: Path) -> tuple[Path, dict[str, str]]:
 
 def rerun(pytest: list[str], root: Path, nodeid: str) -> bool:
     """Whether ``nodeid`` passes, run alone in a pytest of its own (no workers, no coverage)."""
-    cmd = [*pytest, nodeid, "-p", "no:cacheprovider", "-p", "no:xdist", "--no-cov", "-q", "-rfE"]
+    # (-n 0: pytest-xdist loaded, its marks known, no workers; -p no:xdist failed every module
+    # whose tests it groups at collection, 'xdist_group' not found)
+    cmd = [*pytest, nodeid, "-p", "no:cacheprovider", "-n", "0", "--no-cov", "-q", "-rfE"]
     print(f"\n--- running again on its own: {nodeid}", flush=True)
     t0 = time.monotonic()
     try:

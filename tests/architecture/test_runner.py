@@ -60,3 +60,18 @@ def test_more_failures_than_the_reruns_allowed_is_a_broken_build(tmp_path):
     assert done.returncode == 1
     assert "3 tests failed, more than 2: not a flake but a broken build" in done.stdout
     assert "running again" not in done.stdout
+
+
+def test_a_test_of_a_group_is_run_again_with_the_groups_mark_known(tmp_path):
+    """Found in a full run: the rerun disabled pytest-xdist, whose ``xdist_group`` mark (which
+    tests/conftest.py gives the tests of a module sharing a twin) was then unknown, and every
+    such test failed again at collection, however well it would have run."""
+    (tmp_path / "test_grouped.py").write_text(
+        "import os, pytest\n@pytest.mark.xdist_group('shared')\ndef test_once():\n"
+        "    flag = os.path.join(os.path.dirname(__file__), 'ran')\n"
+        "    if not os.path.exists(flag):\n        open(flag, 'w').close()\n        raise AssertionError\n")
+    (tmp_path / "pytest.ini").write_text("[pytest]\naddopts = --strict-markers\n")  # as ours has
+    done = subprocess.run([sys.executable, str(RUNNER), "--", str(tmp_path), "-q"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert done.stdout.splitlines()[-1] == "tests: 1 passed, 0 failed, 0 skipped"
